@@ -1,0 +1,1 @@
+"""Pytest root configuration: tests import the package from this checkout."""

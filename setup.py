@@ -1,0 +1,42 @@
+"""Packaging of the pentapod testbed (ament_python: builds with colcon and installs with pip)."""
+from glob import glob
+import os
+
+from setuptools import find_packages, setup
+
+PACKAGE = 'pentapod_testbed'
+
+# One table for every executable: `ros2 run pentapod_testbed <name>`.
+# Each entry is also shipped as the launcher `scripts/<name>` into lib/<package>/, because pip
+# ignores setup.cfg's script_dir and `ros2 run` looks only there (test/test_packaging.py checks
+# that both agree).
+EXECUTABLES = {
+}
+
+
+def _files(pattern: str) -> list:
+    return sorted(p for p in glob(pattern) if os.path.isfile(p))
+
+
+setup(
+    name=PACKAGE,
+    version='0.1.0',
+    packages=find_packages(exclude=['test', 'test.*', 'bench', 'bench.*']),
+    data_files=[
+        ('share/ament_index/resource_index/packages', ['resource/' + PACKAGE]),
+        ('share/' + PACKAGE, ['package.xml']),
+        ('share/' + PACKAGE + '/config', _files('config/*.yaml')),
+        ('share/' + PACKAGE + '/launch', _files('launch/*.launch.py')),
+        ('lib/' + PACKAGE, ['scripts/' + name for name in EXECUTABLES]),
+    ],
+    install_requires=['setuptools'],
+    zip_safe=True,
+    maintainer='Pentapod testbed maintainers',
+    maintainer_email='maintainers@pentapod-testbed.invalid',
+    description='Virtual pentapod machine-tool testbed: FE model, modal plant, dampers, MCAP.',
+    license='Apache-2.0',
+    tests_require=['pytest'],
+    entry_points={
+        'console_scripts': [f'{name} = {target}' for name, target in EXECUTABLES.items()],
+    },
+)
