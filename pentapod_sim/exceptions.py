@@ -26,3 +26,7 @@ class BagError(ValueError):
 
 class RunError(RuntimeError):
     """A testbed run had to stop (silent force source, unstable loop, ...)."""
+
+
+class ModalError(ArithmeticError):
+    """An eigenvalue solve failed or its result contradicts the Sturm count."""
