@@ -1,0 +1,251 @@
+"""
+Write rosbag2-compatible MCAP bags (a folder with metadata.yaml and ``<name>_0.mcap``) ROS-free.
+
+The file uses MCAP profile ``ros2``, ``ros2msg`` schemas with the full message definition and
+``cdr`` channels whose ``offered_qos_profiles`` metadata is the very string (re-parsed) that
+metadata.yaml holds, because rosbags matches connections on it (a mismatch reads 0 messages).
+
+Crash safety: messages go into small chunks; :meth:`BagWriter.flush` (called every
+``flush_period_s`` of wall time by :meth:`BagWriter.write`) closes the chunk, flushes it to
+the file and rewrites metadata.yaml, so after a SIGKILL everything up to the last flush is
+readable by :mod:`pentapod_sim.analysis.bag_reader` (which tolerates a missing summary).
+Run information (model hash, pose, scenario, version) is stored in ``custom_data`` of
+metadata.yaml and as an MCAP metadata record named ``pentapod_run`` at the start of the file.
+"""
+import dataclasses
+import logging
+import os
+import time
+from pathlib import Path
+from typing import Mapping, Optional
+
+from mcap.writer import CompressionType, Writer
+import yaml
+
+from pentapod_sim import __version__
+from pentapod_sim.exceptions import BagError
+from pentapod_sim.recording.msgdefs import message_definition
+
+LOGGER = logging.getLogger(__name__)
+ROSBAG2_VERSION = 9
+RUN_METADATA_NAME = 'pentapod_run'
+
+
+def _qos(reliability: str, depth: int) -> dict:
+    """One rosbag2 v9 QoS profile entry (durations 0 = infinite in rosbag2's convention)."""
+    zero = {'sec': 0, 'nsec': 0}
+    return {
+        'history': 'keep_last', 'depth': depth, 'reliability': reliability,
+        'durability': 'volatile', 'deadline': dict(zero), 'lifespan': dict(zero),
+        'liveliness': 'automatic', 'liveliness_lease_duration': dict(zero),
+        'avoid_ros_namespace_conventions': False,
+    }
+
+
+QOS_RELIABLE = _qos('reliable', 1000)
+QOS_BEST_EFFORT = _qos('best_effort', 10)
+
+
+@dataclasses.dataclass
+class _Topic:
+    name: str
+    msg_type: str
+    channel_id: int
+    qos_profiles: list
+    count: int = 0
+
+
+class BagWriter:
+    """
+    Write one rosbag2 MCAP bag folder.
+
+    Parameters
+    ----------
+    path : str or Path
+        Bag folder to create (must not exist or be empty).
+    run_info : mapping, optional
+        Reproducibility data (model content hash, pose, scenario parameters, ...); values are
+        converted to str. ``package_version`` is added.
+    chunk_size : int
+        MCAP chunk size [bytes]; small chunks lose less on a crash.
+    flush_period_s : float
+        Wall-time period [s] of automatic :meth:`flush` calls from :meth:`write`; 0 disables.
+    compression : str
+        ``''`` (none, rosbag2's default), ``'zstd'`` or ``'lz4'``.
+    """
+
+    def __init__(self, path, run_info: Optional[Mapping] = None, chunk_size: int = 64 * 1024,
+                 flush_period_s: float = 0.5, compression: str = '') -> None:
+        self.path = Path(path)
+        if self.path.exists() and any(self.path.iterdir()):
+            raise BagError(f'bag folder {self.path} exists and is not empty')
+        self.path.mkdir(parents=True, exist_ok=True)
+        self.mcap_name = f'{self.path.name}_0.mcap'
+        self.custom_data = {str(k): str(v) for k, v in (run_info or {}).items()}
+        self.custom_data.setdefault('package_version', __version__)
+        self.flush_period_s = float(flush_period_s)
+        self._topics: dict = {}
+        self._schemas: dict = {}
+        self._start_ns: Optional[int] = None
+        self._end_ns: Optional[int] = None
+        self._last_flush = time.monotonic()
+        self._closed = False
+        self._stream = open(self.path / self.mcap_name, 'wb')
+        compressions = {'': CompressionType.NONE, 'zstd': CompressionType.ZSTD,
+                        'lz4': CompressionType.LZ4}
+        if compression not in compressions:
+            raise BagError(f'unknown compression {compression!r}; use one of {list(compressions)}')
+        self._writer = Writer(self._stream, chunk_size=chunk_size,
+                              compression=compressions[compression])
+        self._writer.start(profile='ros2', library=f'pentapod_testbed {__version__}')
+        self._writer.add_metadata(RUN_METADATA_NAME, dict(self.custom_data))
+        self.flush()
+
+    @property
+    def message_count(self) -> int:
+        """Messages written so far (all topics)."""
+        return sum(t.count for t in self._topics.values())
+
+    def topic_counts(self) -> dict:
+        """Return ``{topic: messages written}``."""
+        return {name: t.count for name, t in self._topics.items()}
+
+    def add_topic(self, topic: str, msg_type: str,
+                  qos_profiles: Optional[list] = None) -> None:
+        """
+        Register a topic (once) with its type ``pkg/msg/Type`` and offered QoS profiles.
+
+        Parameters
+        ----------
+        topic : str
+            Topic name.
+        msg_type : str
+            Message type, e.g. ``'sensor_msgs/msg/JointState'``.
+        qos_profiles : list of dict, optional
+            rosbag2 v9 QoS dicts (see :data:`QOS_RELIABLE`); default one reliable profile.
+        """
+        if topic in self._topics:
+            if self._topics[topic].msg_type != msg_type:
+                raise BagError(f'topic {topic!r} already registered with type '
+                               f'{self._topics[topic].msg_type!r}, not {msg_type!r}')
+            return
+        if msg_type not in self._schemas:
+            text = message_definition(msg_type)
+            self._schemas[msg_type] = self._writer.register_schema(
+                name=msg_type, encoding='ros2msg', data=text.encode('utf-8'))
+        profiles = [dict(p) for p in (qos_profiles or [QOS_RELIABLE])]
+        channel_id = self._writer.register_channel(
+            topic=topic, message_encoding='cdr', schema_id=self._schemas[msg_type],
+            metadata={'offered_qos_profiles': _dump_qos(profiles)})
+        self._topics[topic] = _Topic(topic, msg_type, channel_id, profiles)
+        self.write_metadata_yaml()
+
+    def write(self, topic: str, data: bytes, log_time_ns: int,
+              publish_time_ns: Optional[int] = None) -> None:
+        """
+        Append one CDR-serialised message.
+
+        Parameters
+        ----------
+        topic : str
+            A topic registered with :meth:`add_topic`.
+        data : bytes
+            CDR bytes including the 4-byte encapsulation header.
+        log_time_ns : int
+            Log time [ns] (sim time of the message when it has a stamp).
+        publish_time_ns : int, optional
+            Publish/receive time [ns]; defaults to the log time.
+        """
+        entry = self._topics.get(topic)
+        if entry is None:
+            raise BagError(f'topic {topic!r} was not added to bag {self.path}')
+        log_time_ns = int(log_time_ns)
+        self._writer.add_message(
+            channel_id=entry.channel_id, log_time=log_time_ns, data=data,
+            publish_time=log_time_ns if publish_time_ns is None else int(publish_time_ns),
+            sequence=entry.count)
+        entry.count += 1
+        if self._start_ns is None or log_time_ns < self._start_ns:
+            self._start_ns = log_time_ns
+        if self._end_ns is None or log_time_ns > self._end_ns:
+            self._end_ns = log_time_ns
+        if self.flush_period_s > 0 and time.monotonic() - self._last_flush > self.flush_period_s:
+            self.flush()
+
+    def flush(self) -> None:
+        """Close the open chunk, push it to disk and rewrite metadata.yaml."""
+        self._writer.flush()
+        self._stream.flush()
+        os.fsync(self._stream.fileno())
+        self.write_metadata_yaml()
+        self._last_flush = time.monotonic()
+
+    def metadata(self) -> dict:
+        """Return the rosbag2 ``rosbag2_bagfile_information`` dict for the current state."""
+        start = self._start_ns or 0
+        duration = (self._end_ns - start) if self._end_ns is not None else 0
+        count = self.message_count
+        return {
+            'version': ROSBAG2_VERSION,
+            'storage_identifier': 'mcap',
+            'relative_file_paths': [self.mcap_name],
+            'duration': {'nanoseconds': duration},
+            'starting_time': {'nanoseconds_since_epoch': start},
+            'message_count': count,
+            'topics_with_message_count': [
+                {'topic_metadata': {'name': t.name, 'type': t.msg_type,
+                                    'serialization_format': 'cdr',
+                                    'offered_qos_profiles': t.qos_profiles,
+                                    'type_description_hash': ''},
+                 'message_count': t.count}
+                for t in self._topics.values()],
+            'compression_format': '',
+            'compression_mode': '',
+            'files': [{'path': self.mcap_name,
+                       'starting_time': {'nanoseconds_since_epoch': start},
+                       'duration': {'nanoseconds': duration}, 'message_count': count}],
+            'custom_data': dict(self.custom_data),
+            'ros_distro': 'jazzy',
+        }
+
+    def write_metadata_yaml(self) -> None:
+        """Atomically (write + rename) replace metadata.yaml with the current state."""
+        info = self.metadata()
+        text = yaml.dump({'rosbag2_bagfile_information': info}, Dumper=_NoAliasDumper,
+                         sort_keys=False)
+        tmp = self.path / 'metadata.yaml.tmp'
+        tmp.write_text(text, encoding='utf-8')
+        os.replace(tmp, self.path / 'metadata.yaml')
+
+    def close(self) -> None:
+        """Finish the MCAP (summary, footer, rosbag2 metadata record) and metadata.yaml."""
+        if self._closed:
+            return
+        self._closed = True
+        info = self.metadata()
+        self._writer.add_metadata('rosbag2', {
+            'serialized_metadata': yaml.dump(info, Dumper=_NoAliasDumper,
+                                             sort_keys=False).strip()})
+        self._writer.finish()
+        self._stream.close()
+        self.write_metadata_yaml()
+        LOGGER.info('closed bag %s: %d messages on %d topics', self.path,
+                    self.message_count, len(self._topics))
+
+    def __enter__(self) -> 'BagWriter':
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+class _NoAliasDumper(yaml.SafeDumper):
+    """Safe YAML dumper that writes repeated objects in full (no &id anchors)."""
+
+    def ignore_aliases(self, data) -> bool:
+        return True
+
+
+def _dump_qos(profiles: list) -> str:
+    """Serialise QoS profiles as YAML text for the MCAP channel metadata."""
+    return yaml.dump(profiles, Dumper=_NoAliasDumper, sort_keys=False).strip()
