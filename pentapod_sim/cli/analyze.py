@@ -1,0 +1,189 @@
+"""
+`analyze`: inspect recorded bags, estimate FRFs, identify peaks, export PNG/CSV/UFF58.
+
+Examples::
+
+    analyze info BAG
+    analyze frf BAG --input /pentapod/excitation.force.x \\
+        --output /pentapod/tcp_state.position.tcp_x [--compare BAG2] [--out DIR]
+    analyze peaks BAG --input ... --output ... [--compare BAG2]
+    analyze time BAG /pentapod/tcp_state.position.tcp_x /pentapod/excitation.force.x
+    analyze amplitudes BAG [--topic /pentapod/pma/state]
+"""
+import argparse
+import csv
+import logging
+from pathlib import Path
+import re
+import sys
+
+import numpy as np
+
+from pentapod_sim.analysis.bag_reader import open_bag
+from pentapod_sim.analysis.export import write_csv, write_uff58
+from pentapod_sim.analysis.frf import EXCITATIONS, amplitude_spectrum, frf_from_series
+from pentapod_sim.analysis.peaks import find_resonances, peak_reductions
+from pentapod_sim.analysis import plots
+from pentapod_sim.exceptions import BagError
+
+LOGGER = logging.getLogger('analyze')
+DEFAULT_OUT = Path('out') / 'analysis'
+
+
+def _slug(text: str) -> str:
+    return re.sub(r'[^A-Za-z0-9]+', '_', text).strip('_')
+
+
+def cmd_info(args) -> int:
+    """Print topics, types, counts, duration and run information of a bag."""
+    bag = open_bag(args.bag)
+    print(f'bag: {bag.path}{"  (TRUNCATED: readable part only)" if bag.truncated else ""}')
+    for name, data in sorted(bag.topics.items()):
+        times = bag.times_ns(name) if data.count else np.zeros(1, dtype=np.int64)
+        span = (times.max() - times.min()) * 1e-9
+        print(f'  {name:40s} {data.msg_type:34s} {data.count:9d} msgs  {span:10.3f} s')
+        for field in bag.fields(name):
+            print(f'      {name}.{field}')
+    for key, value in sorted(bag.custom_data.items()):
+        print(f'  run: {key} = {value}')
+    return 0
+
+
+def _frfs(bag_path, args) -> list:
+    bag = open_bag(bag_path)
+    u = bag.series(args.input)
+    return [frf_from_series(u, bag.series(out), args.excitation, args.nperseg)
+            for out in args.output]
+
+
+def _peak_rows(res, args) -> list:
+    return find_resonances(res, args.fmin, args.fmax, args.prominence_db)
+
+
+def _write_peaks(path: Path, peaks: list, unit: str) -> None:
+    with open(path, 'w', newline='', encoding='utf-8') as handle:
+        writer = csv.writer(handle)
+        writer.writerow(['freq_Hz', f'magnitude_{unit}', 'damping_ratio', 'coherence'])
+        writer.writerows([[p.freq, p.magnitude, p.damping_ratio, p.coherence] for p in peaks])
+
+
+def cmd_frf(args, plot: bool = True) -> int:
+    """Estimate FRFs (and peaks, and reductions with --compare); write PNG, CSV, UFF58."""
+    out_dir = Path(args.out)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    results = _frfs(args.bag, args)
+    compared = _frfs(args.compare, args) if args.compare else [None] * len(results)
+    for res, cmp in zip(results, compared):
+        tag = _slug(f'{Path(args.bag).name}_{res.label}')
+        peaks = _peak_rows(res, args)
+        print(f'FRF {res.label} [{res.unit}], {res.n_averages} averages')
+        for p in peaks:
+            print(f'  peak {p.freq:9.3f} Hz  |H| {p.magnitude:.4g} {res.unit}  '
+                  f'zeta {p.damping_ratio:.4%}  coherence {p.coherence:.3f}')
+        _write_peaks(out_dir / f'{tag}_peaks.csv', peaks, res.unit)
+        shown = [res]
+        if cmp is not None:
+            cmp.label = f'{Path(args.compare).name}: {cmp.label}'
+            res.label = f'{Path(args.bag).name}: {res.label}'
+            shown.append(cmp)
+            for row in peak_reductions(peaks, _peak_rows(cmp, args)):
+                print(f'  reduction {row.freq_ref:9.3f} Hz -> {row.freq_cmp:9.3f} Hz: '
+                      f'{row.reduction_db:6.2f} dB  (zeta {row.damping_ref:.3%} -> '
+                      f'{row.damping_cmp:.3%})')
+        if plot:
+            png = plots.frf_plot(shown, out_dir / f'{tag}.png', resonances=peaks,
+                                 fmin=args.fmin, fmax=args.fmax, title=tag)
+            print(f'  wrote {png}')
+        write_csv(out_dir / f'{tag}.csv', [res])
+        write_uff58(out_dir / f'{tag}.uff', shown)
+    return 0
+
+
+def cmd_time(args) -> int:
+    """Plot recorded series over time."""
+    bag = open_bag(args.bag)
+    png = plots.time_plot([bag.series(s) for s in args.specs],
+                          Path(args.out) / f'{_slug(Path(args.bag).name)}_time.png',
+                          title=str(args.bag))
+    print(f'wrote {png}')
+    return 0
+
+
+def cmd_amplitudes(args) -> int:
+    """Stroke [m] and force [N] amplitude spectra of every axis of a PMA state topic."""
+    bag = open_bag(args.bag)
+    amps, units, freq = {}, {}, None
+    for spec in bag.fields(args.topic):
+        field, _, name = spec.partition('.')
+        if field == 'velocity':
+            continue
+        ser = bag.series(f'{args.topic}.{spec}')
+        fs = 1e9 / np.median(np.diff(ser.time_ns))
+        freq, amp = amplitude_spectrum(ser.values, fs, args.nperseg)
+        label = f'{name} {"stroke" if field == "position" else "force"}'
+        amps[label], units[label] = amp, ser.unit
+    if not amps:
+        raise BagError(f'{args.topic} carries no position/effort fields')
+    tag = _slug(f'{Path(args.bag).name}_{args.topic}')
+    out_dir = Path(args.out)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    png = plots.amplitude_plot(freq, amps, units, out_dir / f'{tag}_amplitudes.png', tag)
+    with open(out_dir / f'{tag}_amplitudes.csv', 'w', newline='', encoding='utf-8') as handle:
+        writer = csv.writer(handle)
+        writer.writerow(['freq_Hz'] + [f'{k} [{units[k]}]' for k in amps])
+        writer.writerows(np.column_stack([freq] + list(amps.values())).tolist())
+    for label, amp in amps.items():
+        k = int(np.argmax(amp[1:])) + 1
+        print(f'  {label}: largest amplitude {amp[k]:.4g} {units[label]} at {freq[k]:.2f} Hz')
+    print(f'wrote {png}')
+    return 0
+
+
+def _frf_arguments(sub) -> None:
+    sub.add_argument('bag', help='bag folder or .mcap file')
+    sub.add_argument('--input', required=True, help='TOPIC.FIELD of the excitation [N]')
+    sub.add_argument('--output', required=True, action='append', help='TOPIC.FIELD (repeat)')
+    sub.add_argument('--compare', help='second bag (e.g. with damping) for peak reductions')
+    sub.add_argument('--excitation', choices=EXCITATIONS, default='random')
+    sub.add_argument('--nperseg', type=int, default=None, help='segment length [samples]')
+    sub.add_argument('--fmin', type=float, default=1.0, help='lowest frequency [Hz]')
+    sub.add_argument('--fmax', type=float, default=None, help='highest frequency [Hz]')
+    sub.add_argument('--prominence-db', type=float, default=6.0, help='peak prominence [dB]')
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """Return the command-line parser."""
+    parser = argparse.ArgumentParser(prog='analyze', description=__doc__.split('\n')[1])
+    parser.add_argument('--out', default=str(DEFAULT_OUT), help='output folder')
+    parser.add_argument('-v', '--verbose', action='store_true')
+    subs = parser.add_subparsers(dest='command', required=True)
+    subs.add_parser('info', help='topics, counts, run info').add_argument('bag')
+    _frf_arguments(subs.add_parser('frf', help='FRF estimation, plots, CSV, UFF58'))
+    _frf_arguments(subs.add_parser('peaks', help='resonance table (no plot)'))
+    time_parser = subs.add_parser('time', help='time plot of TOPIC.FIELD series')
+    time_parser.add_argument('bag')
+    time_parser.add_argument('specs', nargs='+')
+    amp = subs.add_parser('amplitudes', help='actuator stroke/force amplitude spectra')
+    amp.add_argument('bag')
+    amp.add_argument('--topic', default='/pentapod/pma/state')
+    amp.add_argument('--nperseg', type=int, default=None)
+    return parser
+
+
+def main(argv=None) -> int:
+    """Run the `analyze` command line; return the exit code."""
+    args = build_parser().parse_args(argv)
+    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
+                        format='%(levelname)s %(name)s: %(message)s')
+    commands = {'info': cmd_info, 'frf': cmd_frf, 'time': cmd_time,
+                'amplitudes': cmd_amplitudes,
+                'peaks': lambda a: cmd_frf(a, plot=False)}
+    try:
+        return commands[args.command](args)
+    except (BagError, ValueError) as err:
+        print(f'analyze: error: {err}', file=sys.stderr)
+        return 2
+
+
+if __name__ == '__main__':
+    sys.exit(main())
