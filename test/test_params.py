@@ -1,0 +1,89 @@
+"""Tests of the machine parameter schema and loaders (pentapod_sim.params)."""
+import copy
+import math
+
+import pytest
+import yaml
+
+from pentapod_sim.exceptions import ConfigError
+from pentapod_sim.params import config_dir, load_machine, load_positions, machine_from_dict
+
+
+@pytest.fixture(scope='module')
+def raw():
+    with open(config_dir() / 'machine.yaml', encoding='utf-8') as stream:
+        return yaml.safe_load(stream)
+
+
+def _set(data, path, value):
+    out = copy.deepcopy(data)
+    node = out
+    keys = path.split('.')
+    for key in keys[:-1]:
+        node = node[key]
+    if value is _DELETE:
+        del node[keys[-1]]
+    else:
+        node[keys[-1]] = value
+    return out
+
+
+_DELETE = object()
+
+
+def test_default_file_loads_and_converts_degrees(raw):
+    machine = load_machine()
+    assert machine.source.endswith('machine.yaml')
+    bp_deg = raw['bp_joints']['angles_deg'][0]
+    assert machine.bp_joints.angles[0] == pytest.approx(math.radians(bp_deg))
+    wp_deg = raw['wp_joints']['angle_max_deg']
+    assert machine.wp_joints.angle_max == pytest.approx(math.radians(wp_deg))
+    assert machine.installation.foot_stiffness_z == raw['installation']['foot_stiffness_z']
+
+
+@pytest.mark.parametrize(('path', 'value', 'expected'), [
+    ('installation.foot_stiffness_x', -1.0e8, r'installation\.foot_stiffness_x: value -1'),
+    ('feed_drives.nut_axial_stiffness', 'stiff',
+     r'feed_drives\.nut_axial_stiffness: expected a number'),
+    ('frame.bed_inertia', [1.0, 2.0], r'frame\.bed_inertia: expected a list of 3'),
+    ('mesh.min_elements_per_member', 2.5, r'mesh\.min_elements_per_member: expected an integer'),
+    ('struts.section.thickness', 0.2, r'struts\.section\.thickness 0\.2 is too large'),
+    ('struts.stroke_min', 2.0, r'struts\.stroke_min 2\.0 must be < struts\.stroke_max'),
+    ('platform.mass', True, r'platform\.mass: expected a number, got True'),
+])
+def test_bad_values_name_key_and_value(raw, path, value, expected):
+    with pytest.raises(ConfigError, match=expected):
+        machine_from_dict(_set(raw, path, value))
+
+
+def test_missing_and_unknown_keys(raw):
+    with pytest.raises(ConfigError, match=r'wp_joints\.axial_stiffness: missing key'):
+        machine_from_dict(_set(raw, 'wp_joints.axial_stiffness', _DELETE))
+    with pytest.raises(ConfigError, match=r'unknown key\(s\): struts\.colour'):
+        machine_from_dict(_set(raw, 'struts.colour', 'red'))
+    both = _set(raw, 'wp_joints.angle_max', 0.5)
+    with pytest.raises(ConfigError, match='either angle_max or angle_max_deg'):
+        machine_from_dict(both)
+
+
+def test_config_error_is_value_error_and_unreadable_file(tmp_path):
+    assert issubclass(ConfigError, ValueError)
+    with pytest.raises(ConfigError, match='cannot read'):
+        load_machine(tmp_path / 'absent.yaml')
+    bad = tmp_path / 'bad.yaml'
+    bad.write_text('mesh: [unclosed\n')
+    with pytest.raises(ConfigError, match='not valid YAML'):
+        load_machine(bad)
+
+
+def test_positions_degrees_and_radians(tmp_path):
+    positions = load_positions()
+    assert {'P1', 'P2'} <= set(positions)
+    assert positions['P1'].shape == (5,)
+    path = tmp_path / 'pos.yaml'
+    path.write_text('positions:\n  A: {x: 0.1, y: 0, z: 0.8, a_deg: 90, b: 0.5}\n')
+    pose = load_positions(path)['A']
+    assert pose == pytest.approx([0.1, 0.0, 0.8, math.pi / 2, 0.5])
+    path.write_text('positions:\n  A: {x: 0.1, y: 0, z: 0.8, a_deg: 90}\n')
+    with pytest.raises(ConfigError, match=r'positions\.A\.b: missing key'):
+        load_positions(path)
