@@ -11,6 +11,8 @@ PACKAGE = 'pentapod_testbed'
 # ignores setup.cfg's script_dir and `ros2 run` looks only there (test/test_packaging.py checks
 # that both agree).
 EXECUTABLES = {
+    'recorder': 'pentapod_sim.nodes.recorder_node:main',
+    'analyze': 'pentapod_sim.cli.analyze:main',
 }
 
 

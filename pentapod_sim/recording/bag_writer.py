@@ -31,19 +31,34 @@ ROSBAG2_VERSION = 9
 RUN_METADATA_NAME = 'pentapod_run'
 
 
-def _qos(reliability: str, depth: int) -> dict:
-    """One rosbag2 v9 QoS profile entry (durations 0 = infinite in rosbag2's convention)."""
+def qos_profile(reliability: str, depth: int, durability: str = 'volatile') -> dict:
+    """
+    Build one rosbag2 v9 QoS profile entry (durations 0 = infinite, rosbag2's convention).
+
+    Parameters
+    ----------
+    reliability : str
+        ``'reliable'`` or ``'best_effort'``.
+    depth : int
+        History depth [messages].
+    durability : str
+        ``'volatile'`` or ``'transient_local'``.
+
+    Returns
+    -------
+    dict
+    """
     zero = {'sec': 0, 'nsec': 0}
     return {
-        'history': 'keep_last', 'depth': depth, 'reliability': reliability,
-        'durability': 'volatile', 'deadline': dict(zero), 'lifespan': dict(zero),
+        'history': 'keep_last', 'depth': int(depth), 'reliability': reliability,
+        'durability': durability, 'deadline': dict(zero), 'lifespan': dict(zero),
         'liveliness': 'automatic', 'liveliness_lease_duration': dict(zero),
         'avoid_ros_namespace_conventions': False,
     }
 
 
-QOS_RELIABLE = _qos('reliable', 1000)
-QOS_BEST_EFFORT = _qos('best_effort', 10)
+QOS_RELIABLE = qos_profile('reliable', 1000)
+QOS_BEST_EFFORT = qos_profile('best_effort', 10)
 
 
 @dataclasses.dataclass

@@ -1,0 +1,144 @@
+"""
+Recorder node: writes chosen topics (default every /pentapod/* topic and /clock) to a bag.
+
+Subscriptions are raw (CDR bytes, no deserialisation) and reliable with a deep queue unless a
+publisher only offers best effort; the bag is written by the ROS-free
+:class:`pentapod_sim.recording.BagWriter`. The log time of a message is its header stamp (sim
+time) when its type starts with a std_msgs/Header or a builtin Time (Clock), else the
+receive time of the node clock. SIGINT/SIGTERM close the bag completely; after a SIGKILL the
+bag is readable up to the last periodic flush. The node publishes nothing.
+
+Parameters: ``topics`` (string array; empty = discover), ``output_dir``, ``bag_name`` (empty =
+``run_<UTC time>``), ``run_info`` (YAML mapping stored as custom_data), ``queue_depth``,
+``discovery_period`` [s], ``flush_period`` [s].
+"""
+import datetime
+import importlib
+from pathlib import Path
+import struct
+
+import rclpy
+from rclpy.clock import Clock, ClockType
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rcl_interfaces.msg import ParameterDescriptor, ParameterType
+import yaml
+
+from pentapod_sim.recording import BagWriter, qos_profile
+from pentapod_sim.recording.msgdefs import has_header_stamp
+
+DEFAULT_PREFIX = '/pentapod/'
+
+
+def message_class(msg_type: str):
+    """Import the rclpy message class of ``pkg/msg/Type``."""
+    pkg, _, name = msg_type.split('/')
+    return getattr(importlib.import_module(f'{pkg}.msg'), name)
+
+
+class RecorderNode(Node):
+    """Record topics to a rosbag2-compatible MCAP bag."""
+
+    def __init__(self, **kwargs):
+        super().__init__('recorder', **kwargs)
+        desc = ParameterDescriptor
+        self.declare_parameter('topics', [], desc(
+            type=ParameterType.PARAMETER_STRING_ARRAY,
+            description='topics to record; empty: every /pentapod/* topic and /clock'))
+        self.declare_parameter('output_dir', 'out/bags', desc(description='folder of bags'))
+        self.declare_parameter('bag_name', '', desc(description='bag folder name'))
+        self.declare_parameter('run_info', '', desc(
+            description='YAML mapping stored in custom_data (model hash, pose, scenario)'))
+        self.declare_parameter('queue_depth', 1000, desc(description='subscription depth'))
+        self.declare_parameter('discovery_period', 1.0, desc(description='[s], wall time'))
+        self.declare_parameter('flush_period', 0.5, desc(description='[s], wall time'))
+        param = self.get_parameter
+        self.wanted = list(param('topics').value or [])
+        name = param('bag_name').value or datetime.datetime.now(
+            datetime.timezone.utc).strftime('run_%Y%m%d_%H%M%S')
+        run_info = yaml.safe_load(param('run_info').value or '{}') or {}
+        if not isinstance(run_info, dict):
+            raise ValueError(f'run_info must be a YAML mapping, got {run_info!r}')
+        self.depth = int(param('queue_depth').value)
+        self.writer = BagWriter(Path(param('output_dir').value) / name, run_info=run_info,
+                                flush_period_s=0.0)
+        self.subs = {}
+        steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self.create_timer(float(param('discovery_period').value), self.discover, clock=steady)
+        self.create_timer(float(param('flush_period').value), self.flush, clock=steady)
+        self.discover()
+        self.get_logger().info(f'recording to {self.writer.path}')
+
+    def _selected(self, topic: str) -> bool:
+        if self.wanted:
+            return topic in self.wanted
+        return topic.startswith(DEFAULT_PREFIX) or topic == '/clock'
+
+    def discover(self) -> None:
+        """Subscribe to newly appeared topics that are selected and have a publisher."""
+        for topic, types in self.get_topic_names_and_types():
+            if topic in self.subs or not self._selected(topic):
+                continue
+            publishers = self.get_publishers_info_by_topic(topic)
+            if not publishers:
+                continue
+            self._subscribe(topic, types[0], publishers)
+
+    def _subscribe(self, topic: str, msg_type: str, publishers) -> None:
+        best_effort = any(p.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT
+                          for p in publishers)
+        qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=self.depth,
+                         reliability=(ReliabilityPolicy.BEST_EFFORT if best_effort
+                                      else ReliabilityPolicy.RELIABLE),
+                         durability=DurabilityPolicy.VOLATILE)
+        offered = [qos_profile(p.qos_profile.reliability.name.lower(), self.depth,
+                               p.qos_profile.durability.name.lower()) for p in publishers]
+        self.writer.add_topic(topic, msg_type, offered)
+        stamped = has_header_stamp(msg_type)
+        self.subs[topic] = self.create_subscription(
+            message_class(msg_type), topic, self._callback(topic, stamped), qos, raw=True)
+        self.get_logger().info(f'subscribed {topic} [{msg_type}]'
+                               f'{" best effort" if best_effort else ""}')
+
+    def _callback(self, topic: str, stamped: bool):
+        clock, write = self.get_clock(), self.writer.write
+
+        def on_message(data: bytes) -> None:
+            received = clock.now().nanoseconds
+            if stamped:
+                sec, nanosec = struct.unpack_from('<iI', data, 4)
+                write(topic, data, sec * 1_000_000_000 + nanosec, received)
+            else:
+                write(topic, data, received, received)
+        return on_message
+
+    def flush(self) -> None:
+        """Push the open chunk to disk and rewrite metadata.yaml."""
+        self.writer.flush()
+
+    def close(self) -> None:
+        """Finish the bag (summary, footer, metadata.yaml)."""
+        self.writer.close()
+        if self.context.ok():  # after a signal the rosout publisher is gone
+            self.get_logger().info(f'closed {self.writer.path}: {self.writer.topic_counts()}')
+
+
+def main(argv=None) -> int:
+    """Run the recorder until SIGINT/SIGTERM; the bag is closed on the way out."""
+    rclpy.init(args=argv)
+    node = RecorderNode()
+    try:
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        node.close()
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == '__main__':
+    import sys
+    sys.exit(main())

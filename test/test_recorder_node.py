@@ -1,0 +1,148 @@
+"""
+Recorder node end to end: a real rclpy publisher process -> recorder process -> bag files.
+
+DDS runs on localhost with a per-test-run ROS_DOMAIN_ID. The bag is read back by rosbags
+(AnyReader, independent of our code) and by our reader.
+"""
+import os
+from pathlib import Path
+import signal
+import subprocess
+import sys
+import time
+import warnings
+
+import numpy as np
+from numpy.testing import assert_allclose
+import pytest
+
+from pentapod_sim.analysis.bag_reader import open_bag
+
+N_STEPS = 300
+DT_NS = 1_000_000  # 1 ms sim-time step
+
+PUBLISHER = r'''
+import sys, time
+import rclpy
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from geometry_msgs.msg import WrenchStamped
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+n, dt = int(sys.argv[1]), int(sys.argv[2])
+rclpy.init()
+node = rclpy.create_node('test_publisher')
+qos = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+pubs = [node.create_publisher(JointState, '/pentapod/tcp_state', qos),
+        node.create_publisher(WrenchStamped, '/pentapod/excitation', qos),
+        node.create_publisher(Clock, '/clock', qos),
+        node.create_publisher(JointState, '/other/ignored', qos)]
+deadline = time.monotonic() + 30
+while any(p.get_subscription_count() == 0 for p in pubs[:3]):
+    if time.monotonic() > deadline:
+        sys.exit('recorder did not subscribe')
+    rclpy.spin_once(node, timeout_sec=0.05)
+time.sleep(0.3)
+for k in range(n):
+    t = k * dt
+    js = JointState()
+    js.header.stamp.sec, js.header.stamp.nanosec = divmod(t, 10**9)
+    js.name = ['tcp_x', 'tcp_y', 'tcp_z']
+    js.position = [1e-6 * k, -2e-6 * k, 0.5]
+    js.velocity = [float(k), 0.0, -1.0]
+    w = WrenchStamped()
+    w.header.stamp = js.header.stamp
+    w.wrench.force.x = 3.0 * k
+    c = Clock()
+    c.clock = js.header.stamp
+    pubs[2].publish(c)
+    pubs[0].publish(js)
+    pubs[1].publish(w)
+    pubs[3].publish(js)
+    time.sleep(0.002)
+time.sleep(0.5)
+node.destroy_node()
+rclpy.shutdown()
+'''
+
+
+@pytest.fixture()
+def ros_env():
+    env = dict(os.environ)
+    env['ROS_DOMAIN_ID'] = str(120 + (os.getpid() + int(time.time())) % 90)
+    env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    return env
+
+
+def start_recorder(env, out_dir: Path, name: str) -> subprocess.Popen:
+    cmd = [sys.executable, '-m', 'pentapod_sim.nodes.recorder_node', '--ros-args',
+           '-p', f'output_dir:={out_dir}', '-p', f'bag_name:={name}',
+           '-p', 'discovery_period:=0.2', '-p', 'flush_period:=0.3',
+           '-p', "run_info:='{model_hash: 0123abcd, scenario: random}'"]
+    return subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                            text=True)
+
+
+def publish(env) -> None:
+    done = subprocess.run([sys.executable, '-c', PUBLISHER, str(N_STEPS), str(DT_NS)],
+                          env=env, capture_output=True, text=True, timeout=90)
+    assert done.returncode == 0, done.stderr + done.stdout
+
+
+def stop(proc: subprocess.Popen, sig: int) -> str:
+    proc.send_signal(sig)
+    out, _ = proc.communicate(timeout=30)
+    return out
+
+
+@pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM])
+def test_recorded_bag_is_read_by_rosbags_with_all_messages(tmp_path, ros_env, sig):
+    from rosbags.highlevel import AnyReader
+    from rosbags.typesys import Stores, get_typestore
+    recorder = start_recorder(ros_env, tmp_path, 'run')
+    try:
+        publish(ros_env)
+    finally:
+        log = stop(recorder, sig)
+    assert recorder.returncode == 0, log
+    bag_dir = tmp_path / 'run'
+    with AnyReader([bag_dir], default_typestore=get_typestore(Stores.ROS2_JAZZY)) as reader:
+        types = {c.topic: c.msgtype for c in reader.connections}
+        assert types == {'/pentapod/tcp_state': 'sensor_msgs/msg/JointState',
+                         '/pentapod/excitation': 'geometry_msgs/msg/WrenchStamped',
+                         '/clock': 'rosgraph_msgs/msg/Clock'}
+        seen = {topic: [] for topic in types}
+        for conn, log_time, raw in reader.messages():
+            seen[conn.topic].append((log_time, reader.deserialize(raw, conn.msgtype)))
+    assert {t: len(v) for t, v in seen.items()} == {t: N_STEPS for t in types}
+    states = sorted(seen['/pentapod/tcp_state'], key=lambda item: item[0])
+    k = np.arange(N_STEPS)
+    assert_allclose([s.position[0] for _, s in states], 1e-6 * k)
+    assert_allclose([s.velocity[0] for _, s in states], k)
+    assert [list(s.name) for _, s in states[:1]] == [['tcp_x', 'tcp_y', 'tcp_z']]
+    # log time = header stamp (sim time), not the receive time
+    assert [t for t, _ in states] == list(k * DT_NS)
+    wrenches = sorted(seen['/pentapod/excitation'], key=lambda item: item[0])
+    assert_allclose([w.wrench.force.x for _, w in wrenches], 3.0 * k)
+    bag = open_bag(bag_dir)
+    assert bag.custom_data['model_hash'] == '0123abcd'
+    assert not bag.truncated
+
+
+def test_sigkill_leaves_a_readable_bag(tmp_path, ros_env):
+    recorder = start_recorder(ros_env, tmp_path, 'crash')
+    try:
+        publish(ros_env)
+        time.sleep(1.0)  # > flush period: everything received is on disk
+    finally:
+        stop(recorder, signal.SIGKILL)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter('always')
+        bag = open_bag(tmp_path / 'crash')
+    assert bag.truncated
+    assert any('ends early' in str(w.message) for w in caught)
+    series = bag.series('/pentapod/tcp_state.position.tcp_y')
+    assert len(series.values) == N_STEPS
+    assert_allclose(series.values, -2e-6 * np.arange(N_STEPS))
+    assert_allclose(series.time, np.arange(N_STEPS) * DT_NS * 1e-9)
+    meta = (tmp_path / 'crash' / 'metadata.yaml').read_text()
+    assert f'message_count: {3 * N_STEPS}' in meta
