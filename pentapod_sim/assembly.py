@@ -183,24 +183,28 @@ def _platform(mesh: _Mesh, state: StrutState) -> None:
 
 def _dofs(nodes: Array) -> Array:
     """(n,) node ids -> (n, 6) global DOF indices."""
-    return 6 * np.asarray(nodes)[:, None] + np.arange(6)
+    return (6 * np.asarray(nodes, dtype=np.int64)[:, None] + np.arange(6)).astype(np.int32)
 
 
-def _coo(blocks: Array, dofs: Array, n: int) -> sp.csr_matrix:
-    """Sum element blocks (e, d, d) at DOF indices (e, d) into an (n, n) CSR matrix."""
+def _triplets(blocks: Array, dofs: Array) -> tuple[Array, Array, Array]:
+    """Element blocks (e, d, d) at DOF indices (e, d) -> COO rows, cols, values."""
     d = dofs.shape[1]
-    rows = np.repeat(dofs, d, axis=1).ravel()
-    cols = np.tile(dofs, (1, d)).ravel()
-    return sp.coo_matrix((blocks.ravel(), (rows, cols)), shape=(n, n)).tocsr()
+    return (np.repeat(dofs, d, axis=1).ravel(), np.tile(dofs, (1, d)).ravel(), blocks.ravel())
 
 
-def _beam_matrices(mesh: _Mesh, n: int, chunk: int = 20000) -> tuple[dict, sp.csr_matrix]:
-    """Assemble beam stiffness per group and the beam mass matrix (vectorised, chunked)."""
+def _to_csr(parts: list, n: int) -> sp.csr_matrix:
+    """One COO -> CSR conversion (duplicates summed) of all collected triplets."""
+    if not parts:
+        return sp.csr_matrix((n, n))
+    rows, cols, vals = (np.concatenate(x) for x in zip(*parts))
+    return sp.coo_matrix((vals, (rows, cols)), shape=(n, n)).tocsr()
+
+
+def _beam_triplets(mesh: _Mesh, k_parts: dict, m_parts: list, chunk: int = 20000) -> None:
+    """Beam stiffness (per group) and mass triplets (vectorised over elements, chunked)."""
     xyz = mesh.positions()
     mat = mesh.machine.materials.steel
     kappa = mesh.machine.struts.shear_factor
-    k_groups: dict[str, list] = {}
-    m_parts = []
     for bm in mesh.beams:
         for lo in range(0, len(bm['n1']), chunk):
             n1, n2 = bm['n1'][lo:lo + chunk], bm['n2'][lo:lo + chunk]
@@ -210,15 +214,13 @@ def _beam_matrices(mesh: _Mesh, n: int, chunk: int = 20000) -> tuple[dict, sp.cs
                                                mat.density, sec.area, sec.iy, sec.iz,
                                                sec.torsion, kappa, bm['nsm'])
             dofs = np.concatenate([_dofs(n1), _dofs(n2)], axis=1)
-            k_groups.setdefault(bm['group'], []).append(
-                _coo(beam.to_global(k_loc, axes), dofs, n))
-            m_parts.append(_coo(beam.to_global(m_loc, axes), dofs, n))
-    return {g: sum(v) for g, v in k_groups.items()}, sum(m_parts)
+            k_parts.setdefault(bm['group'], []).append(
+                _triplets(beam.to_global(k_loc, axes), dofs))
+            m_parts.append(_triplets(beam.to_global(m_loc, axes), dofs))
 
 
-def _spring_matrices(mesh: _Mesh, n: int) -> dict:
-    """Assemble zero-length springs (two-node and to-ground) per group."""
-    out: dict[str, sp.csr_matrix] = {}
+def _spring_triplets(mesh: _Mesh, k_parts: dict) -> None:
+    """Zero-length springs (two-node and to-ground) triplets per group."""
     for a, b, frame, k_diag, group in mesh.springs:
         big = np.kron(np.eye(2), frame)            # 6x6 rotation for translations, rotations
         k6 = big.T @ np.diag(k_diag) @ big
@@ -227,20 +229,15 @@ def _spring_matrices(mesh: _Mesh, n: int) -> dict:
         else:
             blk = np.block([[k6, -k6], [-k6, k6]])[None]
             dofs = np.concatenate([_dofs([a]), _dofs([b])], axis=1)
-        mat = _coo(blk, dofs, n)
-        out[group] = out[group] + mat if group in out else mat
-    return out
+        k_parts.setdefault(group, []).append(_triplets(blk, dofs))
 
 
-def _lumped_mass(mesh: _Mesh, n: int) -> sp.csr_matrix:
-    blocks, dofs = [], []
+def _lumped_mass_triplets(mesh: _Mesh, m_parts: list) -> None:
     for a, m, inertia in mesh.masses:
         blk = np.zeros((6, 6))
         blk[:3, :3] = m * np.eye(3)
         blk[3:, 3:] = inertia
-        blocks.append(blk)
-        dofs.append(_dofs([a])[0])
-    return _coo(np.array(blocks), np.array(dofs), n)
+        m_parts.append(_triplets(blk[None], _dofs([a])))
 
 
 def _rigid_elimination(mesh: _Mesh) -> sp.csr_matrix:
@@ -319,10 +316,13 @@ def build_model(machine: MachineParams, pose: npt.ArrayLike | str,
     _struts_and_joints(mesh, state, bracket_col)
     _platform(mesh, state)
     n_full = 6 * mesh.n_nodes
-    k_full, m_full = _beam_matrices(mesh, n_full)
-    for group, mat in _spring_matrices(mesh, n_full).items():
-        k_full[group] = k_full[group] + mat if group in k_full else mat
-    m_full = m_full + _lumped_mass(mesh, n_full)
+    k_parts: dict[str, list] = {}
+    m_parts: list = []
+    _beam_triplets(mesh, k_parts, m_parts)
+    _spring_triplets(mesh, k_parts)
+    _lumped_mass_triplets(mesh, m_parts)
+    k_full = {g: _to_csr(parts, n_full) for g, parts in k_parts.items()}
+    m_full = _to_csr(m_parts, n_full)
     t_mat = _rigid_elimination(mesh)
     t_t = t_mat.T.tocsr()
     groups = {g: (t_t @ k_full[g] @ t_mat).tocsr() if g in k_full

@@ -218,7 +218,7 @@ def to_global(k_local: Array, axes: Array) -> Array:
         Rows = local axes in global coordinates (R maps global to local components).
     """
     n = len(axes)
-    t = np.zeros((n, 12, 12))
-    for b in range(4):
-        t[:, 3 * b:3 * b + 3, 3 * b:3 * b + 3] = axes
-    return np.einsum('nji,njk,nkl->nil', t, k_local, t, optimize=True)
+    blocks = k_local.reshape(n, 4, 3, 4, 3)
+    # the same 3x3 rotation acts on each of the 4x4 blocks: R^T k_ab R
+    out = np.einsum('nji,najbk,nkl->naibl', axes, blocks, axes, optimize=True)
+    return out.reshape(n, 12, 12)
