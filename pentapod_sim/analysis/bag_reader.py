@@ -23,12 +23,13 @@ from typing import Optional
 import warnings
 
 from mcap.exceptions import McapError
-from mcap.records import Channel, Message, Metadata, Schema
+from mcap.records import Channel, Chunk, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
 import numpy as np
 import yaml
 
 from pentapod_sim.analysis import cdr_arrays
+from pentapod_sim.analysis.mcap_chunks import split_chunk
 from pentapod_sim.exceptions import BagError
 
 LOGGER = logging.getLogger(__name__)
@@ -144,7 +145,8 @@ class Bag:
         schemas, channels, n_before = {}, {}, self.message_count
         with open(file, 'rb') as stream:
             try:
-                for record in StreamReader(stream, record_size_limit=2**31).records:
+                for record in StreamReader(stream, emit_chunks=True,
+                                           record_size_limit=2**31).records:
                     self._take(record, schemas, channels)
             except McapError as err:
                 if self.message_count == n_before and not channels:
@@ -162,7 +164,16 @@ class Bag:
                       f'{self.message_count} messages')
 
     def _take(self, record, schemas: dict, channels: dict) -> None:
-        if isinstance(record, Message):
+        if isinstance(record, Chunk):
+            messages, others = split_chunk(record)
+            for other in others:
+                self._take(other, schemas, channels)
+            for channel_id, log_time, data in messages:
+                topic = channels.get(channel_id)
+                if topic is not None:
+                    topic.log_time_ns.append(log_time)
+                    topic.payloads.append(data)
+        elif isinstance(record, Message):
             topic = channels.get(record.channel_id)
             if topic is not None:
                 topic.log_time_ns.append(record.log_time)
