@@ -193,3 +193,38 @@ def test_bad_arguments_raise_value_error(bad):
         kwargs['y'] = np.ones(len(kwargs['u']))
     with pytest.raises(ValueError):
         estimate_frf(**kwargs)
+
+
+def test_analyze_cli_end_to_end(tmp_path, random_record, capsys):
+    import csv
+
+    from pentapod_sim.cli.analyze import main
+    from pentapod_sim.recording import BagWriter, encode_joint_state, encode_wrench_stamped
+    force, x1 = random_record
+    n = 16384 * 4
+    with BagWriter(tmp_path / 'run', run_info={'scenario': 'random'}) as writer:
+        writer.add_topic('/pentapod/excitation', 'geometry_msgs/msg/WrenchStamped')
+        writer.add_topic('/pentapod/tcp_state', 'sensor_msgs/msg/JointState')
+        for k in range(n):
+            t_ns = k * 1_000_000  # 1 kHz
+            writer.write('/pentapod/excitation', encode_wrench_stamped(t_ns, [force[k], 0, 0]),
+                         t_ns)
+            writer.write('/pentapod/tcp_state',
+                         encode_joint_state(t_ns, ['tcp_x'], [x1[k]], [0.0]), t_ns)
+    out = tmp_path / 'analysis'
+    code = main(['--out', str(out), 'frf', str(tmp_path / 'run'),
+                 '--input', '/pentapod/excitation.force.x',
+                 '--output', '/pentapod/tcp_state.position.tcp_x', '--nperseg', '16384',
+                 '--fmax', '150'])
+    assert code == 0
+    assert 'peak' in capsys.readouterr().out
+    suffixes = sorted(p.suffix for p in out.iterdir())
+    assert suffixes == ['.csv', '.csv', '.png', '.uff']
+    peaks_csv = next(p for p in out.iterdir() if p.name.endswith('_peaks.csv'))
+    with open(peaks_csv, newline='') as handle:
+        rows = list(csv.DictReader(handle))
+    assert_allclose([float(r['freq_Hz']) for r in rows], F_MODES, rtol=0.01)
+    assert_allclose([float(r['damping_ratio']) for r in rows], [ZETA, ZETA], rtol=0.15)
+    assert main(['info', str(tmp_path / 'run')]) == 0
+    assert 'scenario = random' in capsys.readouterr().out
+    assert main(['info', str(tmp_path / 'nothing')]) == 2  # BagError -> exit code 2
