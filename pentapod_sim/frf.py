@@ -1,0 +1,280 @@
+"""
+Analytic frequency responses of the modal plant, open loop and with added viscous damping.
+
+Open loop, the FRF is a vectorised modal sum (numpy einsum), which is far cheaper than
+``control.frequency_response`` of the 2m-state system (see bench/). Added damping is velocity
+feedback ``u = -g * rate`` through collocated ports (strut bending, strut axial, TCP or PMA
+mount against ground); the loop is closed with ``control.feedback`` and evaluated through the
+eigen-decomposition of the closed-loop A. Plotting functions end in ``_plot`` and write PNGs.
+"""
+from __future__ import annotations
+
+import csv
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Mapping, Sequence
+
+import control
+import numpy as np
+import numpy.typing as npt
+import scipy.linalg as spla
+
+from pentapod_sim.exceptions import ConfigError, PortError
+from pentapod_sim.plant_model import PlantModel
+from pentapod_sim.ports import collocated_output
+
+
+@dataclass(frozen=True)
+class FrfResult:
+    """
+    Frequency response on a grid.
+
+    Attributes
+    ----------
+    freq : (n_f,) ndarray
+        Frequencies [Hz].
+    H : (n_out, n_in, n_f) complex ndarray
+        Response of each output to each input (output unit per input unit, e.g. m/N).
+    input_names, output_names : list of str
+        Port names.
+    input_units, output_units : list of str
+        SI units.
+    label : str
+        Free text for legends (e.g. 'P1 open loop').
+    """
+
+    freq: np.ndarray
+    H: np.ndarray
+    input_names: list
+    output_names: list
+    input_units: list
+    output_units: list
+    label: str = ''
+
+    def pair(self, output: str, input_: str) -> np.ndarray:
+        """The (n_f,) FRF of one output/input pair (PortError if absent)."""
+        for name, have in ((output, self.output_names), (input_, self.input_names)):
+            if name not in have:
+                raise PortError(f'{name!r} is not in this FRF; it has {", ".join(have)}')
+        return self.H[self.output_names.index(output), self.input_names.index(input_)]
+
+
+def _check_freq(freq_hz: npt.ArrayLike) -> np.ndarray:
+    freq = np.atleast_1d(np.asarray(freq_hz, dtype=float))
+    if freq.ndim != 1 or np.any(freq < 0) or not np.all(np.isfinite(freq)):
+        raise ConfigError(f'frequencies must be finite and >= 0 Hz, got {freq_hz!r}')
+    return freq
+
+
+def modal_frf_matrix(omega: npt.ArrayLike, zeta: npt.ArrayLike, b: npt.ArrayLike,
+                     c_disp: npt.ArrayLike, c_vel: npt.ArrayLike, d: npt.ArrayLike | None,
+                     freq_hz: npt.ArrayLike) -> npt.NDArray[np.complex128]:
+    """
+    Modal-sum FRF ``sum_i (c_d,i + j w c_v,i) b_i / (w_i^2 - w^2 + 2 j zeta_i w_i w) + D``.
+
+    Parameters
+    ----------
+    omega, zeta : (m,) array_like
+        Natural angular frequencies [rad/s] and damping ratios [-].
+    b : (m, n_in) array_like
+        Modal input matrix.
+    c_disp, c_vel : (n_out, m) array_like
+        Modal output matrices on modal displacements and velocities.
+    d : (n_out, n_in) array_like or None
+        Feed-through.
+    freq_hz : (n_f,) array_like
+        Frequencies [Hz].
+
+    Returns
+    -------
+    (n_out, n_in, n_f) complex ndarray
+    """
+    w = 2 * np.pi * _check_freq(freq_hz)
+    omega = np.asarray(omega, float)
+    zeta = np.broadcast_to(np.asarray(zeta, float), omega.shape)
+    denom = omega[:, None] ** 2 - w[None, :] ** 2 + 2j * (zeta * omega)[:, None] * w[None, :]
+    modal = 1.0 / denom                                             # (m, n_f)
+    c_disp, c_vel = np.asarray(c_disp, float), np.asarray(c_vel, float)
+    b = np.asarray(b, float)
+    h = np.empty((c_disp.shape[0], b.shape[1], w.size), dtype=complex)
+    for start in range(0, w.size, 256):   # bounded memory: (n_out, m, 256) per block
+        part = slice(start, start + 256)
+        weights = c_disp[:, :, None] * modal[None, :, part] \
+            + c_vel[:, :, None] * (modal[:, part] * (1j * w[part]))[None]
+        h[:, :, part] = np.tensordot(weights, b, axes=(1, 0)).transpose(0, 2, 1)
+    if d is not None:
+        h = h + np.asarray(d, float)[:, :, None]
+    return h
+
+
+def modal_frf(plant: PlantModel, freq_hz: npt.ArrayLike, label: str = '') -> FrfResult:
+    """FRF of all ports of a plant model on a frequency grid [Hz]."""
+    freq = _check_freq(freq_hz)
+    h = modal_frf_matrix(plant.omega, plant.zeta, plant.b, plant.c_disp, plant.c_vel, plant.d,
+                         freq)
+    return FrfResult(freq, h, list(plant.input_names), list(plant.output_names),
+                     list(plant.input_units), list(plant.output_units), label)
+
+
+def damper_feedback(plant: PlantModel, dampers: Mapping[str, float]) -> control.StateSpace:
+    """
+    Close velocity-feedback loops ``u_k = -g_k * rate_k`` on collocated ports.
+
+    Parameters
+    ----------
+    plant : PlantModel
+        Must contain each damper input and its collocated velocity output.
+    dampers : mapping of input port name to gain
+        Gain g_k >= 0 [N s/m for forces on velocities, N m s/rad for moments on rates].
+
+    Returns
+    -------
+    control.StateSpace
+        Continuous closed loop with the plant's input/output names; the damper inputs stay
+        as external inputs (added to the damper force).
+    """
+    sys = plant.to_statespace()
+    gain = np.zeros((len(plant.input_names), len(plant.output_names)))
+    for input_name, g in dampers.items():
+        if not np.isfinite(g) or g < 0:
+            raise ConfigError(f'damper gain for {input_name!r} must be >= 0, got {g!r}')
+        rate = collocated_output(input_name, 'velocity')
+        if input_name not in plant.input_names or rate not in plant.output_names:
+            raise PortError(f'damper {input_name!r} needs input {input_name!r} and output '
+                            f'{rate!r} in the plant model')
+        gain[plant.input_names.index(input_name), plant.output_names.index(rate)] = g
+    feedback = control.ss([], [], [], gain, inputs=list(plant.output_names),
+                          outputs=list(plant.input_names))
+    closed = control.feedback(sys, feedback, sign=-1)
+    return control.ss(closed.A, closed.B, closed.C, closed.D, inputs=list(plant.input_names),
+                      outputs=list(plant.output_names), name='pentapod_damped')
+
+
+def statespace_frf(sys: control.StateSpace, freq_hz: npt.ArrayLike) -> np.ndarray:
+    """
+    FRF (n_out, n_in, n_f) of a continuous state space through the eigen-decomposition of A.
+
+    ``H(jw) = C V diag(1 / (jw - lambda)) V^-1 B + D``; hand-written because
+    ``control.frequency_response`` solves one dense system per frequency.
+    """
+    w = 2 * np.pi * _check_freq(freq_hz)
+    lam, vec = spla.eig(sys.A)
+    if np.linalg.cond(vec) > 1e10:
+        raise ConfigError('closed-loop A is (nearly) defective; eigen-decomposition FRF '
+                          'unreliable, use control.frequency_response')
+    left = sys.C @ vec                                   # (n_out, n)
+    right = np.linalg.solve(vec, sys.B)                  # (n, n_in)
+    resolvent = 1.0 / (1j * w[None, :] - lam[:, None])   # (n, n_f)
+    return np.einsum('on,ni,nf->oif', left, right, resolvent) + sys.D[:, :, None]
+
+
+def closed_loop_frf(plant: PlantModel, dampers: Mapping[str, float], freq_hz: npt.ArrayLike,
+                    label: str = '') -> FrfResult:
+    """FRF of all ports with added viscous dampers (see :func:`damper_feedback`)."""
+    freq = _check_freq(freq_hz)
+    h = statespace_frf(damper_feedback(plant, dampers), freq)
+    return FrfResult(freq, h, list(plant.input_names), list(plant.output_names),
+                     list(plant.input_units), list(plant.output_units), label)
+
+
+def frf_to_csv(results: Sequence[FrfResult], pairs: Sequence[tuple[str, str]],
+               path: str | Path) -> Path:
+    """
+    Write magnitude and phase of (output, input) pairs of one or more FRFs to CSV.
+
+    Columns: freq_hz, then per result and pair ``<label>:<out>/<in>:mag`` and ``:phase_deg``.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    header, columns = ['freq_hz'], [results[0].freq]
+    for res in results:
+        for out, inp in pairs:
+            h = res.pair(out, inp)
+            header += [f'{res.label}:{out}/{inp}:mag', f'{res.label}:{out}/{inp}:phase_deg']
+            columns += [np.abs(h), np.degrees(np.angle(h))]
+    with open(path, 'w', newline='') as stream:
+        writer = csv.writer(stream)
+        writer.writerow(header)
+        writer.writerows(np.column_stack(columns).tolist())
+    return path
+
+
+def frf_plot(results: Sequence[FrfResult], output: str, input_: str, path: str | Path,
+             mode_freqs: Sequence[Sequence[float]] | None = None, title: str = '') -> Path:
+    """
+    Bode plot (log magnitude, phase) of one pair for several FRFs; PNG at ``path``.
+
+    ``mode_freqs[k]`` [Hz], if given, are marked as ticks along the top for result k.
+    """
+    import matplotlib.pyplot as plt
+    fig, (ax_mag, ax_ph) = plt.subplots(2, 1, sharex=True, figsize=(8, 6),
+                                        gridspec_kw={'height_ratios': [2, 1]})
+    for k, res in enumerate(results):
+        h = res.pair(output, input_)
+        line, = ax_mag.semilogy(res.freq, np.abs(h), lw=1, label=res.label or None)
+        ax_ph.plot(res.freq, np.degrees(np.angle(h)), lw=1, color=line.get_color())
+        if mode_freqs is not None:
+            marks = [f for f in mode_freqs[k] if res.freq[0] <= f <= res.freq[-1]]
+            ax_mag.plot(marks, np.full(len(marks), 1.0), '|', ms=8, color=line.get_color(),
+                        transform=ax_mag.get_xaxis_transform(), clip_on=False)
+    unit = f'{res.output_units[res.output_names.index(output)]}/' \
+           f'{res.input_units[res.input_names.index(input_)]}'
+    ax_mag.set_ylabel(f'|H| [{unit}]')
+    ax_ph.set_ylabel('phase [deg]')
+    ax_ph.set_xlabel('frequency [Hz]')
+    ax_ph.set_yticks([-180, -90, 0, 90, 180])
+    ax_mag.set_title(title or f'{output} / {input_}', pad=14)
+    for ax in (ax_mag, ax_ph):
+        ax.grid(True, which='both', alpha=0.3)
+    if any(r.label for r in results):
+        ax_mag.legend(loc='lower left')
+    return _save(fig, path)
+
+
+def dc_gain_plot(gains: npt.ArrayLike, freq_hz: npt.ArrayLike, path: str | Path,
+                 limit: float | None = None, keep: npt.ArrayLike | None = None,
+                 title: str = '', unit: str = 'm/N') -> Path:
+    """
+    Bar chart of |dc gain| per mode (log scale) with the relevance limit line; PNG.
+
+    Parameters
+    ----------
+    gains : (m,) array_like
+        Modal dc gains of one pair.
+    freq_hz : (m,) array_like
+        Mode frequencies [Hz] (secondary axis labels).
+    limit : float, optional
+        Absolute relevance limit drawn as a horizontal line.
+    keep : array_like of int, optional
+        Kept mode indices, drawn in a different colour.
+    """
+    import matplotlib.pyplot as plt
+    g = np.abs(np.asarray(gains, float))
+    kept = np.zeros(g.size, bool)
+    if keep is not None:
+        kept[np.asarray(keep, int)] = True
+    fig, ax = plt.subplots(figsize=(9, 4))
+    modes = np.arange(1, g.size + 1)
+    ax.bar(modes[~kept], g[~kept], color='0.6', width=0.8, label='dropped')
+    ax.bar(modes[kept], g[kept], color='tab:blue', width=0.8, label='kept')
+    ax.set_yscale('log')
+    if limit is not None:
+        ax.axhline(limit, color='tab:red', lw=1, label=f'limit {limit:g} {unit}')
+    ax.set_xlabel('mode number')
+    ax.set_ylabel(f'|dc gain| [{unit}]')
+    freq = np.asarray(freq_hz, float)
+    ax.set_title(title or f'dc gain per mode ({freq[0]:.1f} .. {freq[-1]:.1f} Hz)')
+    ax.set_ylim(bottom=max(g[g > 0].min() if np.any(g > 0) else 1e-20, 1e-6 * g.max()))
+    ax.legend()
+    ax.grid(True, axis='y', which='both', alpha=0.3)
+    return _save(fig, path)
+
+
+def _save(fig, path: str | Path) -> Path:
+    import matplotlib.pyplot as plt
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
