@@ -264,6 +264,25 @@ def _rigid_elimination(mesh: _Mesh) -> sp.csr_matrix:
                          shape=(n_full, 6 * len(free_nodes)))
 
 
+def _assemble(mesh: _Mesh) -> tuple[sp.csr_matrix, dict, sp.csr_matrix]:
+    """Return T, the reduced stiffness groups and the reduced mass matrix of a mesh."""
+    n_full = 6 * mesh.n_nodes
+    k_parts: dict[str, list] = {}
+    m_parts: list = []
+    _beam_triplets(mesh, k_parts, m_parts)
+    _spring_triplets(mesh, k_parts)
+    _lumped_mass_triplets(mesh, m_parts)
+    k_full = {g: _to_csr(parts, n_full) for g, parts in k_parts.items()}
+    m_full = _to_csr(m_parts, n_full)
+    LOG.debug('full matrices assembled (%d DOF); eliminating the rigid platform', n_full)
+    t_mat = _rigid_elimination(mesh)
+    t_t = t_mat.T.tocsr()
+    n_free = t_mat.shape[1]
+    groups = {g: (t_t @ k_full[g] @ t_mat).tocsr() if g in k_full
+              else sp.csr_matrix((n_free, n_free)) for g in GROUPS}
+    return t_mat, groups, (t_t @ m_full @ t_mat).tocsr()
+
+
 def _resolve_pose(pose: npt.ArrayLike | str) -> Array:
     if isinstance(pose, str):
         positions = load_positions()
@@ -315,20 +334,9 @@ def build_model(machine: MachineParams, pose: npt.ArrayLike | str,
                         'installation')
     _struts_and_joints(mesh, state, bracket_col)
     _platform(mesh, state)
-    n_full = 6 * mesh.n_nodes
-    k_parts: dict[str, list] = {}
-    m_parts: list = []
-    _beam_triplets(mesh, k_parts, m_parts)
-    _spring_triplets(mesh, k_parts)
-    _lumped_mass_triplets(mesh, m_parts)
-    k_full = {g: _to_csr(parts, n_full) for g, parts in k_parts.items()}
-    m_full = _to_csr(m_parts, n_full)
-    t_mat = _rigid_elimination(mesh)
-    t_t = t_mat.T.tocsr()
-    groups = {g: (t_t @ k_full[g] @ t_mat).tocsr() if g in k_full
-              else sp.csr_matrix((t_mat.shape[1],) * 2) for g in GROUPS}
+    LOG.debug('mesh: %d nodes, %d beam members; assembling', mesh.n_nodes, len(mesh.beams))
+    t_mat, groups, mass = _assemble(mesh)
     stiffness = sum(groups.values()).tocsr()
-    mass = (t_t @ m_full @ t_mat).tocsr()
     xyz = mesh.positions()
     points = {name: t_mat[_dofs([node])[0]].tocsr() for name, node in mesh.named.items()}
     meta = dict(parameter_file=machine.source, element_size=h, installed=installed,

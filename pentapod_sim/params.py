@@ -9,7 +9,7 @@ Quantities in radians may be written in degrees in YAML by appending ``_deg`` to
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field, fields, is_dataclass
+from dataclasses import dataclass, field, fields, is_dataclass, replace
 import math
 import os
 from pathlib import Path
@@ -311,11 +311,6 @@ def machine_from_dict(data: dict, source: str = '<dict>') -> MachineParams:
     """
     params = _build(MachineParams, data, '')
     _check_consistency(params)
-    return _replace_source(params, source)
-
-
-def _replace_source(params: MachineParams, source: str) -> MachineParams:
-    from dataclasses import replace
     return replace(params, source=source)
 
 

@@ -178,3 +178,27 @@ def test_calibration_targets_of_the_default_model(model):
     assert f.min() > 15.0
     axial = f[energy['bp_joints'] > 0.2]
     assert axial.size >= 2 and 70.0 < axial.min() and axial.min() < 110.0
+
+
+def test_joint_springs_act_along_the_strut_frame(machine, model):
+    """Moving one joint node along/about e1, e2, e3 stores exactly the parameter stiffness."""
+    bp, fd, wp = machine.bp_joints, machine.feed_drives, machine.wp_joints
+    cases = [('gimbal', 'bp_joints', [bp.needle_axial_stiffness, bp.needle_cardan1_stiffness,
+                                      bp.needle_cardan2_stiffness, bp.torsion_stiffness, 0, 0]),
+             ('gimbal', 'feed_drives', [fd.nut_axial_stiffness, fd.guide_lateral_stiffness,
+                                        fd.guide_lateral_stiffness, fd.torsion_stiffness,
+                                        fd.bending_stiffness, fd.bending_stiffness]),
+             ('strut{}_wp_end', 'wp_joints', [wp.axial_stiffness, wp.lateral_stiffness,
+                                              wp.lateral_stiffness, wp.torsion_stiffness, 0, 0])]
+    for i in range(1, 6):
+        frame = model.strut_frames[i - 1]
+        for node, group, stiffness in cases:
+            name = node.format(i) if '{' in node else f'{node}{i}'
+            obs = model.point(name)
+            k_group = model.stiffness_groups[group]
+            for j in range(6):
+                d = np.zeros(6)
+                d[3 * (j // 3):3 * (j // 3) + 3] = frame[j % 3]
+                q = obs.T @ d                         # this node alone moves by d
+                assert q @ (k_group @ q) == pytest.approx(stiffness[j], rel=1e-9,
+                                                          abs=1e-6), (name, group, j)

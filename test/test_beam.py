@@ -113,6 +113,33 @@ def test_timoshenko_shear_deflection_of_stocky_cantilever():
         assert tip == pytest.approx(expected, rel=1e-10)
 
 
+def _timoshenko_simply_supported(k_wave, sec, inertia, kappa):
+    """Lowest root omega^2 of the Timoshenko beam's 2x2 characteristic determinant."""
+    ka = kappa * G * sec.area
+    # det [[ka k^2 - rho A w2, -ka k], [-ka k, E I k^2 + ka - rho I w2]] = 0, a quadratic in w2
+    a2 = RHO * sec.area * RHO * inertia
+    a1 = -(RHO * sec.area * (E * inertia * k_wave ** 2 + ka) + RHO * inertia * ka * k_wave ** 2)
+    a0 = ka * k_wave ** 2 * (E * inertia * k_wave ** 2 + ka) - (ka * k_wave) ** 2
+    return np.sqrt(np.min(np.roots([a2, a1, a0]).real)) / (2 * np.pi)
+
+
+@pytest.mark.parametrize('mode', [1, 2])
+def test_stocky_simply_supported_beam_matches_timoshenko_theory(mode):
+    """Shear and rotary inertia matter here (L / h = 4): checks the phi-dependent terms."""
+    sec, kappa, length = beam.rhs_section(0.3, 0.4, 0.03), 5 / 6, 1.6
+    k, m = _line(80, sec=sec, kappa=kappa, length=length)
+    n = k.shape[0]
+    fixed = [0, 1, 2, 3, n - 5, n - 4]             # pins: ux, uy, uz, rx at 0; uy, uz at L
+    keep = np.setdiff1d(np.arange(n), fixed)
+    f = _freqs(k[np.ix_(keep, keep)], m[np.ix_(keep, keep)], 12)
+    k_wave = mode * np.pi / length
+    for inertia in (sec.iy, sec.iz):
+        expected = _timoshenko_simply_supported(k_wave, sec, inertia, kappa)
+        euler = k_wave ** 2 * np.sqrt(E * inertia / (RHO * sec.area)) / (2 * np.pi)
+        assert expected < 0.95 * euler                  # the case is really non-slender
+        assert np.min(np.abs(f / expected - 1.0)) < 5e-3
+
+
 def test_orientation_parallel_to_axis_is_rejected():
     with pytest.raises(ConfigError, match='parallel to the element axis'):
         beam.local_axes([[0, 0, 0]], [[0, 0, 1]], [0, 0, 2])
