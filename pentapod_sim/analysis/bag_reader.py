@@ -30,6 +30,7 @@ import yaml
 
 from pentapod_sim.analysis import cdr_arrays
 from pentapod_sim.analysis.mcap_chunks import split_chunk
+from pentapod_sim.analysis.message_store import MessageStore
 from pentapod_sim.exceptions import BagError
 
 LOGGER = logging.getLogger(__name__)
@@ -40,18 +41,26 @@ WRENCH_FIELDS = ('force.x', 'force.y', 'force.z', 'torque.x', 'torque.y', 'torqu
 
 @dataclasses.dataclass
 class TopicData:
-    """Raw messages of one topic: log times [ns] and CDR payloads."""
+    """Raw messages of one topic: CDR payloads and their MCAP log times [ns]."""
 
     name: str
     msg_type: str
     schema_text: str
-    log_time_ns: list = dataclasses.field(default_factory=list)
-    payloads: list = dataclasses.field(default_factory=list)
+    payloads: MessageStore = dataclasses.field(default_factory=MessageStore)
+    _times: list = dataclasses.field(default_factory=list)
 
     @property
     def count(self) -> int:
         """Number of messages."""
         return len(self.payloads)
+
+    @property
+    def log_time_ns(self) -> np.ndarray:
+        """(N,) int64 MCAP log times [ns]."""
+        if len(self._times) != 1:
+            self._times = [np.concatenate([np.atleast_1d(t) for t in self._times])
+                           if self._times else np.zeros(0, np.int64)]
+        return self._times[0]
 
 
 @dataclasses.dataclass
@@ -165,19 +174,20 @@ class Bag:
 
     def _take(self, record, schemas: dict, channels: dict) -> None:
         if isinstance(record, Chunk):
-            messages, others = split_chunk(record)
+            data, channel_ids, times, starts, lengths, others = split_chunk(record)
             for other in others:
                 self._take(other, schemas, channels)
-            for channel_id, log_time, data in messages:
-                topic = channels.get(channel_id)
+            for channel_id in np.unique(channel_ids):
+                topic = channels.get(int(channel_id))
                 if topic is not None:
-                    topic.log_time_ns.append(log_time)
-                    topic.payloads.append(data)
+                    mine = channel_ids == channel_id
+                    topic.payloads.add_segment(data, starts[mine], lengths[mine])
+                    topic._times.append(times[mine])
         elif isinstance(record, Message):
             topic = channels.get(record.channel_id)
             if topic is not None:
-                topic.log_time_ns.append(record.log_time)
                 topic.payloads.append(record.data)
+                topic._times.append(np.array([record.log_time], dtype=np.int64))
         elif isinstance(record, Schema):
             schemas[record.id] = record
         elif isinstance(record, Channel):
@@ -206,13 +216,13 @@ class Bag:
         data = self.topic(name)
         if data.msg_type in STAMPED_TYPES and data.count:
             return cdr_arrays.stamps_ns(data.payloads)
-        return np.asarray(data.log_time_ns, dtype=np.int64)
+        return data.log_time_ns
 
     def fields(self, name: str) -> list:
         """List the field specs :meth:`series` accepts for a topic (known types only)."""
         data = self.topic(name)
         if data.msg_type == 'sensor_msgs/msg/JointState' and data.count:
-            names, values = cdr_arrays.joint_state_arrays(data.payloads[:1])
+            names, values = cdr_arrays.joint_state_arrays([data.payloads[0]])
             return [f'{f}.{n}' for f in cdr_arrays.JOINT_STATE_FIELDS for k, n in enumerate(names)
                     if not np.isnan(values[f][0, k])]
         if data.msg_type == 'geometry_msgs/msg/WrenchStamped':

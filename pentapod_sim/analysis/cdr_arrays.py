@@ -4,18 +4,20 @@ Vectorised decoding of recorded CDR messages (JointState, WrenchStamped, Clock) 
 Hand-written because the generic decoders (mcap_ros2, rosbags) build one Python object per
 message, about 20-50 us each, too slow for 1e6 samples. Runs of messages with the same byte
 length and the same layout (names, sequence lengths) are stacked into a 2-D uint8 array and
-the float64 columns are read with numpy views; any other message goes through a per-message
-parser. Offsets count from the end of the 4-byte encapsulation header (Fast-CDR alignment).
+the float64 columns are read with numpy views; messages of other layouts form their own
+groups. Offsets count from the end of the 4-byte encapsulation header (Fast-CDR alignment).
 """
 import dataclasses
 import struct
 
 import numpy as np
 
+from pentapod_sim.analysis.message_store import MessageStore
 from pentapod_sim.exceptions import BagError
 
 JOINT_STATE_FIELDS = ('position', 'velocity', 'effort')
 HEADER = 4  # CDR encapsulation header bytes
+BATCH = 200_000  # messages per gather when checking layouts
 
 
 @dataclasses.dataclass
@@ -77,40 +79,67 @@ def joint_state_layout(data: bytes) -> JointStateLayout:
     return JointStateLayout(names, arrays, np.asarray(structure, dtype=np.intp) + HEADER)
 
 
-def stamps_ns(payloads: list) -> np.ndarray:
+def _store(messages) -> MessageStore:
+    return messages if isinstance(messages, MessageStore) else MessageStore.from_list(messages)
+
+
+def stamps_ns(messages) -> np.ndarray:
     """
     Header stamps [ns] of messages whose first field is a std_msgs/Header or builtin Time.
 
     Parameters
     ----------
-    payloads : list of bytes
+    messages : MessageStore or list of bytes
         CDR messages.
 
     Returns
     -------
     (N,) int64 ndarray
     """
-    head = np.frombuffer(b''.join(bytes(p[HEADER:HEADER + 8]) for p in payloads), dtype='<i4')
-    head = head.reshape(-1, 2).astype(np.int64)
-    sec, nanosec = head[:, 0], head[:, 1] & 0xFFFFFFFF
+    store = _store(messages)
+    head = store.gather(np.arange(len(store)), HEADER, 8)
+    sec = head[:, :4].copy().view('<i4')[:, 0].astype(np.int64)
+    nanosec = head[:, 4:].copy().view('<u4')[:, 0].astype(np.int64)
     return sec * 1_000_000_000 + nanosec
 
 
-def _groups_by_length(payloads: list) -> dict:
-    lengths = np.fromiter((len(p) for p in payloads), dtype=np.int64, count=len(payloads))
-    groups = {}
-    for length in np.unique(lengths):
-        groups[int(length)] = np.flatnonzero(lengths == length)
+def _groups_by_length(store: MessageStore) -> dict:
+    lengths = store.lengths
+    return {int(length): np.flatnonzero(lengths == length) for length in np.unique(lengths)}
+
+
+def _same_layout(store: MessageStore, indices: np.ndarray, layout: JointStateLayout) -> tuple:
+    """Split ``indices`` into those whose structural bytes equal the layout's and the rest."""
+    if len(layout.structure) == 0:
+        return indices, indices[:0]
+    lo, hi = int(layout.structure.min()), int(layout.structure.max()) + 1
+    cols = layout.structure - lo
+    reference = np.frombuffer(store[indices[0]], dtype=np.uint8)[layout.structure]
+    same = np.ones(len(indices), dtype=bool)
+    for start in range(0, len(indices), BATCH):  # bounded temporary memory
+        part = store.gather(indices[start:start + BATCH], lo, hi - lo)
+        same[start:start + BATCH] = np.all(part[:, cols] == reference, axis=1)
+    return indices[same], indices[~same]
+
+
+def _layouts(store: MessageStore) -> list:
+    """Group message indices by identical JointState layout: [(indices, layout)]."""
+    groups = []
+    for _, indices in _groups_by_length(store).items():
+        while len(indices):
+            layout = joint_state_layout(store[indices[0]])
+            same, indices = _same_layout(store, indices, layout)
+            groups.append((same, layout))
     return groups
 
 
-def joint_state_arrays(payloads: list) -> tuple:
+def joint_state_arrays(messages) -> tuple:
     """
     Decode JointState messages into per-field arrays.
 
     Parameters
     ----------
-    payloads : list of bytes
+    messages : MessageStore or list of bytes
         CDR JointState messages of one topic.
 
     Returns
@@ -121,59 +150,49 @@ def joint_state_arrays(payloads: list) -> tuple:
         ``{field: (N, len(names)) float64 ndarray}`` for position/velocity/effort; NaN where a
         message lacks the name or the field.
     """
-    n_msgs = len(payloads)
+    store = _store(messages)
+    groups = _layouts(store)
     names: list = []
-    blocks = []  # (indices, layout, rows)
-    for length, indices in _groups_by_length(payloads).items():
-        rows = np.frombuffer(b''.join(payloads[i] for i in indices), dtype=np.uint8)
-        rows = rows.reshape(len(indices), length)
-        layout = joint_state_layout(payloads[indices[0]])
-        same = np.all(rows[:, layout.structure] == rows[0, layout.structure], axis=1)
-        if not same.all():
-            odd = indices[~same]
-            indices, rows = indices[same], rows[same]
-            for i in odd:  # layouts differing at equal length: decode one by one
-                single = np.frombuffer(payloads[i], dtype=np.uint8)[None, :]
-                blocks.append((np.array([i]), joint_state_layout(payloads[i]), single))
-        blocks.append((indices, layout, rows))
-    for _, layout, _ in blocks:
+    for _, layout in groups:
         names.extend(n for n in layout.names if n not in names)
     column = {name: k for k, name in enumerate(names)}
-    values = {f: np.full((n_msgs, len(names)), np.nan) for f in JOINT_STATE_FIELDS}
-    for indices, layout, rows in blocks:
+    values = {f: np.full((len(store), len(names)), np.nan) for f in JOINT_STATE_FIELDS}
+    for indices, layout in groups:
         cols = [column[n] for n in layout.names]
         for field, (offset, count) in layout.arrays.items():
-            if count == 0 or len(indices) == 0:
+            if count == 0:
                 continue
             if count != len(layout.names):
                 raise BagError(f'JointState {field} has {count} values for '
                                f'{len(layout.names)} names')
-            block = np.ascontiguousarray(rows[:, offset:offset + 8 * count]).view('<f8')
+            block = store.gather(indices, offset, 8 * count).view('<f8')
             values[field][np.ix_(indices, cols)] = block
     return names, values
 
 
-def wrench_arrays(payloads: list) -> np.ndarray:
+def wrench_arrays(messages) -> np.ndarray:
     """
     Decode WrenchStamped messages.
+
+    Parameters
+    ----------
+    messages : MessageStore or list of bytes
+        CDR WrenchStamped messages of one topic.
 
     Returns
     -------
     (N, 6) float64 ndarray
         force x, y, z [N], torque x, y, z [N m].
     """
-    out = np.empty((len(payloads), 6))
-    for length, indices in _groups_by_length(payloads).items():
-        (frame_len,) = struct.unpack_from('<I', payloads[indices[0]], HEADER + 8)
-        offset = HEADER + _align(12 + frame_len, 8)
-        if offset + 48 > length:
-            raise BagError(f'malformed WrenchStamped message ({length} bytes)')
-        rows = np.frombuffer(b''.join(payloads[i] for i in indices), dtype=np.uint8)
-        rows = rows.reshape(len(indices), length)
-        frame_lens = np.ascontiguousarray(rows[:, HEADER + 8:HEADER + 12]).view('<u4')[:, 0]
-        if np.any(frame_lens != frame_len):  # rare: different frame ids of equal total length
-            for i in indices[frame_lens != frame_len]:
-                out[i] = wrench_arrays([payloads[i]])[0]
-            indices, rows = indices[frame_lens == frame_len], rows[frame_lens == frame_len]
-        out[indices] = np.ascontiguousarray(rows[:, offset:offset + 48]).view('<f8')
+    store = _store(messages)
+    out = np.empty((len(store), 6))
+    lengths = store.lengths
+    frame_lens = store.gather(np.arange(len(store)), HEADER + 8, 4).view('<u4')[:, 0]
+    for length in np.unique(lengths):
+        for frame_len in np.unique(frame_lens[lengths == length]):
+            indices = np.flatnonzero((lengths == length) & (frame_lens == frame_len))
+            offset = HEADER + _align(12 + int(frame_len), 8)
+            if offset + 48 > length:
+                raise BagError(f'malformed WrenchStamped message ({length} bytes)')
+            out[indices] = store.gather(indices, offset, 48).view('<f8')
     return out

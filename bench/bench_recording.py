@@ -1,0 +1,160 @@
+"""
+Benchmarks of recording and bag analysis.
+
+* messages/s written by :class:`pentapod_sim.recording.BagWriter` vs the bare ``mcap`` Writer
+  (same CDR payloads, same chunk size, no compression);
+* time to load a bag of N samples (excitation force + TCP displacement, 1 kHz) and compute its
+  FRF with our reader vs reading the same topics with rosbags ``AnyReader`` + deserialize
+  (same FRF code afterwards); each run in a fresh process;
+* peak RSS of those two processes.
+
+Full run: N = 1e6 samples (2e6 messages); quick: N = 1e5.
+"""
+import os
+from pathlib import Path
+import shutil
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from mcap.writer import CompressionType, Writer  # noqa: E402
+
+from pentapod_sim.recording import (  # noqa: E402
+    BagWriter, encode_joint_state, encode_wrench_stamped, message_definition)
+
+STATE, EXCITATION = '/pentapod/tcp_state', '/pentapod/excitation'
+
+OURS = r'''
+import sys, time
+import numpy as np
+from pentapod_sim.analysis.bag_reader import open_bag
+from pentapod_sim.analysis.frf import frf_from_series
+t0 = time.perf_counter()
+bag = open_bag(sys.argv[1])
+res = frf_from_series(bag.series('/pentapod/excitation.force.x'),
+                      bag.series('/pentapod/tcp_state.position.tcp_x'), 'random', 8192)
+print(time.perf_counter() - t0, abs(res.H[100]))
+'''
+
+ROSBAGS = r'''
+import sys, time
+from pathlib import Path
+import numpy as np
+from rosbags.highlevel import AnyReader
+from rosbags.typesys import Stores, get_typestore
+from pentapod_sim.analysis.frf import estimate_frf
+t0 = time.perf_counter()
+force, disp = [], []
+with AnyReader([Path(sys.argv[1])], default_typestore=get_typestore(Stores.ROS2_JAZZY)) as r:
+    for conn, _, raw in r.messages():
+        msg = r.deserialize(raw, conn.msgtype)
+        if conn.topic == '/pentapod/excitation':
+            force.append(msg.wrench.force.x)
+        else:
+            disp.append(msg.position[0])
+res = estimate_frf(np.array(force), np.array(disp), 1000.0, 'random', 8192)
+print(time.perf_counter() - t0, abs(res.H[100]))
+'''
+
+
+def _payloads(n: int) -> tuple:
+    rng = np.random.default_rng(0)
+    force = rng.normal(0.0, 10.0, n)
+    # a lightly damped 40 Hz oscillator driven by the force, as a plausible response
+    from scipy import signal
+    b, a = signal.iirpeak(40.0, 30.0, fs=1000.0)
+    disp = 1e-6 * signal.lfilter(b, a, force)
+    states = [encode_joint_state(k * 1_000_000, ['tcp_x', 'tcp_y', 'tcp_z'],
+                                 [disp[k], 0.0, 0.0], [0.0, 0.0, 0.0]) for k in range(n)]
+    wrenches = [encode_wrench_stamped(k * 1_000_000, [force[k], 0.0, 0.0]) for k in range(n)]
+    return states, wrenches
+
+
+def _write_ours(path: Path, states: list, wrenches: list) -> float:
+    t0 = time.perf_counter()
+    with BagWriter(path, run_info={'bench': 'recording'}) as writer:
+        writer.add_topic(STATE, 'sensor_msgs/msg/JointState')
+        writer.add_topic(EXCITATION, 'geometry_msgs/msg/WrenchStamped')
+        for k, (state, wrench) in enumerate(zip(states, wrenches)):
+            writer.write(EXCITATION, wrench, k * 1_000_000)
+            writer.write(STATE, state, k * 1_000_000)
+    return time.perf_counter() - t0
+
+
+def _write_bare(path: Path, states: list, wrenches: list) -> float:
+    t0 = time.perf_counter()
+    with open(path, 'wb') as stream:
+        writer = Writer(stream, chunk_size=64 * 1024, compression=CompressionType.NONE)
+        writer.start(profile='ros2')
+        ids = []
+        for topic, msg_type in ((STATE, 'sensor_msgs/msg/JointState'),
+                                (EXCITATION, 'geometry_msgs/msg/WrenchStamped')):
+            schema = writer.register_schema(msg_type, 'ros2msg',
+                                            message_definition(msg_type).encode())
+            ids.append(writer.register_channel(topic, 'cdr', schema))
+        for k, (state, wrench) in enumerate(zip(states, wrenches)):
+            writer.add_message(ids[1], k * 1_000_000, wrench, k * 1_000_000)
+            writer.add_message(ids[0], k * 1_000_000, state, k * 1_000_000)
+        writer.finish()
+    return time.perf_counter() - t0
+
+
+def _run_child(script: str, bag: Path) -> tuple:
+    """Run a reader script in a fresh process; return (seconds inside, peak RSS [MB], |H|)."""
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    read_fd, write_fd = os.pipe()
+    pid = os.fork()
+    if pid == 0:  # child: run the script with stdout into the pipe
+        os.dup2(write_fd, 1)
+        os.close(read_fd)
+        os.execve(sys.executable, [sys.executable, '-c', script, str(bag)], env)
+    os.close(write_fd)
+    with os.fdopen(read_fd) as pipe:
+        out = pipe.read()
+    _, status, usage = os.wait4(pid, 0)
+    if status != 0:
+        raise RuntimeError(f'reader process failed with status {status}')
+    seconds, magnitude = (float(v) for v in out.split())
+    return seconds, usage.ru_maxrss / 1024.0, magnitude
+
+
+def run(quick: bool) -> list:
+    """Run the benchmarks; return result rows (see bench/run_all.py)."""
+    n = 100_000 if quick else 1_000_000
+    rows = []
+    tmp = Path(tempfile.mkdtemp(prefix='bench_recording_'))
+    try:
+        states, wrenches = _payloads(n)
+        ours_s = _write_ours(tmp / 'ours', states, wrenches)
+        bare_s = _write_bare(tmp / 'bare.mcap', states, wrenches)
+        rate, bare_rate = 2 * n / ours_s, 2 * n / bare_s
+        rows.append(dict(name='write rate (JointState + WrenchStamped)', value=rate,
+                         unit='msg/s', baseline='bare mcap Writer', baseline_value=bare_rate,
+                         ratio=rate / bare_rate,
+                         note='ours adds metadata.yaml, periodic flush+fsync, counts'))
+        del states, wrenches
+        ours = _run_child(OURS, tmp / 'ours')
+        base = _run_child(ROSBAGS, tmp / 'ours')
+        if not np.isclose(ours[2], base[2], rtol=1e-9):
+            raise RuntimeError(f'readers disagree: |H| {ours[2]} vs {base[2]}')
+        rows.append(dict(name=f'load {n:.0e} samples + FRF', value=ours[0], unit='s',
+                         baseline='rosbags AnyReader + deserialize', baseline_value=base[0],
+                         ratio=base[0] / ours[0], note=f'{2 * n} messages, same FRF code'))
+        rows.append(dict(name=f'peak RSS load {n:.0e} samples + FRF', value=ours[1],
+                         unit='MB', baseline='rosbags AnyReader + deserialize',
+                         baseline_value=base[1], ratio=base[1] / ours[1],
+                         note='whole reader process (ru_maxrss)'))
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return rows
+
+
+if __name__ == '__main__':
+    for row in run(quick='--quick' in sys.argv):
+        print(f"{row['name']}: {row['value']:.4g} {row['unit']} vs {row['baseline']} "
+              f"{row['baseline_value']:.4g} {row['unit']} -> ratio {row['ratio']:.2f}")
