@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 import hashlib
 import json
 import logging
+import zipfile
 from pathlib import Path
 from typing import Callable, Mapping, Sequence
 
@@ -249,7 +250,7 @@ class PlantModel:
             with np.load(path, allow_pickle=False) as data:
                 header = json.loads(str(data['header']))
                 arrays = {n: data[n] for n in _ARRAYS}
-        except (OSError, ValueError, KeyError, json.JSONDecodeError) as err:
+        except (OSError, ValueError, KeyError, zipfile.BadZipFile) as err:
             raise ModelFileError(f'cannot read plant model {path}: {err}') from None
         if header.get('format') != FILE_FORMAT:
             raise ModelFileError(f'{path}: format {header.get("format")!r}, expected '

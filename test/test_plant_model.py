@@ -1,0 +1,172 @@
+"""PlantModel: continuous/discrete state space against physics, save/load, building."""
+import zipfile
+
+import control
+import numpy as np
+import pytest
+import scipy.signal as signal
+from statespace_fixtures import all_modes, small_model
+
+from pentapod_sim import ports
+from pentapod_sim.exceptions import ConfigError, ModelFileError, PortError
+from pentapod_sim.plant_model import build_plant, from_modal_data, PlantModel
+from pentapod_sim.reduction import harmonic_response, static_compliance
+
+INPUTS = ['tcp_force_y', 'strut1_bending_moment_3', 'strut4_axial_force', 'pma_force_z']
+OUTPUTS = ['tcp_displacement_y', 'tcp_velocity_y', 'strut1_bending_3', 'strut1_bending_rate_3',
+           'strut4_axial_displacement', 'pma_mount_velocity_z']
+
+
+@pytest.fixture(scope='module')
+def full():
+    """Small FE model, all its modes and the plant keeping every mode (zeta = 0.02)."""
+    model = small_model(4)
+    omega, phi = all_modes(model)
+    plant = from_modal_data(omega / (2 * np.pi), ports.modal_points(model.points, phi),
+                            model.strut_frames, INPUTS, OUTPUTS, zeta=0.02)
+    return model, omega, phi, plant
+
+
+def one_mode(omega=2 * np.pi * 40.0, zeta=0.01, b=0.3, c=0.3) -> PlantModel:
+    return PlantModel([omega], [zeta], [[b]], [[c]], [[0.0]], [[0.0]], ['tcp_force_x'],
+                      ['tcp_displacement_x'], ['N'], ['m'], ['f'], ['x'])
+
+
+def test_poles_are_modal(full):
+    _, omega, _, plant = full
+    poles = np.sort_complex(plant.to_statespace().poles())
+    expected = -0.02 * omega + 1j * omega * np.sqrt(1 - 0.02 ** 2)
+    expected = np.sort_complex(np.r_[expected, expected.conj()])
+    np.testing.assert_allclose(poles, expected, rtol=1e-9)
+
+
+def test_names_reach_python_control(full):
+    sys = full[3].to_statespace()
+    assert sys.input_labels == INPUTS and sys.output_labels == OUTPUTS
+
+
+def test_statespace_equals_direct_harmonic_solve_of_fe_model(full):
+    model, omega, phi, plant = full
+    M = model.M.toarray()
+    damping = M @ phi @ np.diag(2 * 0.02 * omega) @ phi.T @ M   # modal damping matrix
+    B = ports.input_matrix(ports.ports(model.points, model.strut_frames, INPUTS))
+    out = ports.ports(model.points, model.strut_frames, OUTPUTS)
+    c_disp, c_vel = ports.output_matrices(out)
+    freq = np.array([3.0, omega[0] / (2 * np.pi), 0.5 * (omega[3] + omega[4]) / (2 * np.pi)])
+    x = harmonic_response(model.K, model.M, B, np.eye(model.n_dof), freq, damping)
+    w = 2 * np.pi * freq
+    direct = np.einsum('on,nif->oif', c_disp, x) + np.einsum('on,nif,f->oif', c_vel, x, 1j * w)
+    resp = control.frequency_response(plant.to_statespace(), w)
+    h = np.asarray(resp.complex).reshape(len(OUTPUTS), len(INPUTS), -1)
+    np.testing.assert_allclose(h, direct, rtol=1e-7, atol=1e-9 * np.abs(direct).max())
+
+
+def test_zoh_matches_scipy_cont2discrete(full):
+    plant = full[3]
+    a, b, c, d = plant.state_matrices()
+    a_ref, b_ref, *_ = signal.cont2discrete((a, b, c, d), 2e-4, method='zoh')
+    a_d, b_d, _, _ = plant.discrete_matrices(2e-4)
+    np.testing.assert_allclose(a_d, a_ref, atol=1e-10)
+    np.testing.assert_allclose(b_d, b_ref, atol=1e-12 * np.abs(b_ref).max())
+
+
+def test_discrete_step_hits_closed_form_continuous_step_at_samples():
+    w, z, bc = 2 * np.pi * 40.0, 0.01, 0.09
+    plant = one_mode(w, z)
+    dt, n = 1e-3, 200
+    t = dt * np.arange(n)
+    resp = control.forced_response(plant.discretize(dt), t, np.ones(n))
+    wd = w * np.sqrt(1 - z ** 2)
+    exact = bc / w ** 2 * (1 - np.exp(-z * w * t) * (np.cos(wd * t)
+                                                      + z / np.sqrt(1 - z ** 2) * np.sin(wd * t)))
+    np.testing.assert_allclose(np.ravel(resp.outputs), exact, atol=1e-9 * bc / w ** 2)
+
+
+def test_discrete_equals_continuous_with_held_input(full):
+    # continuous response to a held input = superposition of shifted continuous step responses
+    plant = full[3].select(['tcp_force_y'], ['tcp_displacement_y'])
+    dt, n = 1e-3, 60
+    u_k = np.random.default_rng(0).normal(size=n)
+    t = dt * np.arange(n)
+    step = np.ravel(control.step_response(plant.to_statespace(), t).outputs)
+    jumps = np.diff(np.r_[0.0, u_k])
+    cont = sum(jump * np.r_[np.zeros(k), step[:n - k]] for k, jump in enumerate(jumps))
+    disc = control.forced_response(plant.discretize(dt), t, u_k)
+    np.testing.assert_allclose(np.ravel(disc.outputs), cont, atol=1e-9 * np.abs(cont).max())
+
+
+def test_rigid_body_mode_zoh_is_exact():
+    plant = one_mode(omega=0.0, zeta=0.0, b=1.0, c=1.0)
+    phi, gamma = plant.zoh_blocks(0.1)
+    np.testing.assert_allclose(phi[0], [[1.0, 0.1], [0.0, 1.0]])
+    np.testing.assert_allclose(gamma[0], [0.1 ** 2 / 2, 0.1])
+
+
+@pytest.mark.parametrize('dt', [0.0, -1e-3, float('nan')])
+def test_bad_sample_time(dt):
+    with pytest.raises(ConfigError, match='dt'):
+        one_mode().discretize(dt)
+
+
+def test_save_load_roundtrip(full, tmp_path):
+    plant = full[3]
+    plant.meta['position'] = 'P1'
+    path = plant.save(tmp_path / 'plant.npz')
+    back = PlantModel.load(path)
+    for name in ('omega', 'zeta', 'b', 'c_disp', 'c_vel', 'd'):
+        np.testing.assert_array_equal(getattr(back, name), getattr(plant, name))
+    assert back.input_names == INPUTS and back.output_units == plant.output_units
+    assert back.meta['position'] == 'P1'
+
+
+def test_edited_file_is_rejected(full, tmp_path):
+    path = full[3].save(tmp_path / 'plant.npz')
+    with zipfile.ZipFile(path) as src:
+        members = {n: src.read(n) for n in src.namelist()}
+    with np.load(path) as data:
+        omega = data['omega'].copy()
+    omega[0] *= 1.01
+    edited = tmp_path / 'edited.npz'
+    with open(edited, 'wb') as stream:
+        np.save(stream, omega)
+    members['omega.npy'] = edited.read_bytes()
+    with zipfile.ZipFile(edited, 'w') as dst:
+        for name, data in members.items():
+            dst.writestr(name, data)
+    with pytest.raises(ModelFileError, match='hash'):
+        PlantModel.load(edited)
+    (tmp_path / 'cut.npz').write_bytes(path.read_bytes()[:200])
+    with pytest.raises(ModelFileError, match='cut.npz'):
+        PlantModel.load(tmp_path / 'cut.npz')
+
+
+def test_shape_mismatch_is_reported():
+    with pytest.raises(ModelFileError, match='b has shape'):
+        PlantModel([1.0, 2.0], [0.01, 0.01], [[1.0]], [[1.0, 1.0]], [[0.0, 0.0]], [[0.0]],
+                   ['tcp_force_x'], ['tcp_displacement_x'], ['N'], ['m'], ['f'], ['x'])
+
+
+def test_select_unknown_port(full):
+    with pytest.raises(PortError, match='not in this plant model'):
+        full[3].select(['tcp_force_x'])
+
+
+def test_build_plant_static_gain_equals_fe_compliance():
+    from pentapod_sim.assembly import build_model
+    from pentapod_sim.params import load_machine
+    from pentapod_sim.plant_model import load_reduction_config
+    cfg = load_reduction_config()
+    cfg['inputs'] = ['tcp_force_x', 'tcp_force_y', 'tcp_force_z', 'strut1_axial_force']
+    cfg['outputs'] = ['tcp_displacement_x', 'tcp_displacement_y', 'tcp_displacement_z',
+                      'strut1_axial_displacement', 'tcp_velocity_y']
+    cfg['relevance'] = cfg['relevance'][:1]
+    plant = build_plant('P1', reduction_cfg=cfg)
+    fe = build_model(load_machine(), 'P1')
+    B = ports.input_matrix(ports.ports(fe.points, fe.strut_frames, cfg['inputs']))
+    C, _ = ports.output_matrices(ports.ports(fe.points, fe.strut_frames, cfg['outputs']))
+    exact = static_compliance(fe.K, B, C)
+    a, b, c, d = plant.state_matrices()
+    dc = d - c @ np.linalg.solve(a, b)        # G(0) = D - C A^-1 B
+    np.testing.assert_allclose(dc, exact, rtol=1e-8, atol=1e-8 * np.abs(exact).max())
+    assert 0 < plant.n_modes < plant.meta['n_modes_computed']
+    assert plant.meta['params_sha256'] == fe.meta['params_sha256']
