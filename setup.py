@@ -13,6 +13,7 @@ PACKAGE = 'pentapod_testbed'
 EXECUTABLES = {
     'recorder': 'pentapod_sim.nodes.recorder_node:main',
     'analyze': 'pentapod_sim.cli.analyze:main',
+    'modes': 'pentapod_sim.cli.modes:main',
 }
 
 

@@ -36,6 +36,9 @@ _LOG = logging.getLogger(__name__)
 DEFAULT_ALPHA = 1.0e4
 #: Least mass-weighted MAC for a mode of a one-elasticity model to count as the same mode.
 DEFAULT_MAC_MIN = 0.5
+#: Lever arm [m] that makes a rotation [rad] comparable with a translation [m] when naming a
+#: mode's TCP direction: a tool-length scale (the TCP is 0.15 m below the spindle nose).
+DEFAULT_ROTATION_LENGTH = 0.1
 #: Names of the six components of a point's observation matrix.
 DIRECTIONS = ('x', 'y', 'z', 'rx', 'ry', 'rz')
 
@@ -239,7 +242,7 @@ def neuber_frequencies(groups: Mapping[str, sp.spmatrix], M: sp.spmatrix, modes:
 
 
 def tcp_directions(modes: ModalResult, T: sp.spmatrix | npt.ArrayLike,
-                   rotation_length: float = 1.0) -> tuple[str, ...]:
+                   rotation_length: float = DEFAULT_ROTATION_LENGTH) -> tuple[str, ...]:
     """
     Return the dominant component of each mode at a point.
 
@@ -272,7 +275,7 @@ def _neuber_cause(freq: np.ndarray, f_full: np.ndarray,
 
 def analyse_causes(model, modes: ModalResult, *, neuber: bool = True,
                    alpha: float = DEFAULT_ALPHA, mac_min: float = DEFAULT_MAC_MIN,
-                   rotation_length: float = 1.0,
+                   rotation_length: float = DEFAULT_ROTATION_LENGTH,
                    progress: Callable[[str], None] | None = None) -> CauseTable:
     """
     Build the cause table of a model's modes.

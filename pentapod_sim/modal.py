@@ -37,6 +37,9 @@ DENSE_LIMIT = 400
 #: checked afterwards by their residual ||K phi - omega^2 M phi|| / ||K phi||.
 LANCZOS_TOL = 1e-10
 
+#: Modes asked for per window, relative to the modes it should deliver (overlap margin).
+WINDOW_PAD = 1.3
+
 #: Progress callback: (modes found so far, modes wanted or None, message).
 Progress = Callable[[int, 'int | None', str], None]
 
@@ -206,6 +209,22 @@ def _edge_between(lam: np.ndarray, hi_index: int) -> float:
     return 0.5 * (lam[i - 1] + lam[i])
 
 
+def _next_shift(lam: np.ndarray, a: float, target: int) -> float:
+    """
+    Shift of the next window above edge ``a`` [rad^2/s^2] that should hold ``target`` modes.
+
+    The mode count of these structures grows about linearly in frequency, so the density per
+    unit omega of the last window is extrapolated; the shift sits in the middle (in omega^2)
+    of the predicted window, and asking for ``WINDOW_PAD * target`` modes makes the returned
+    set reach a little below ``a``.
+    """
+    w = np.sqrt(np.clip(lam, 0.0, None))
+    density = (w.size - 1) / max(w[-1] - w[0], 1e-300)   # modes per rad/s
+    w_a = math.sqrt(max(a, 0.0))
+    w_b = w_a + target / density
+    return 0.5 * (w_a ** 2 + w_b ** 2)
+
+
 @dataclass
 class _Slicer:
     """State of one spectrum-slicing run (kept small so each step stays readable)."""
@@ -272,10 +291,8 @@ def _slice(sl: _Slicer, wanted: int | None, lam_max: float | None) -> None:
         if done_by_limit or (wanted is not None and c_b >= wanted):
             return
         target = sl.per_window
-        rho = lam.size / max(lam[-1] - lam[0], 1e-300)   # eigenvalues per rad^2/s^2
-        half = 0.5 * 1.25 * target / rho                  # half width of what k modes cover
-        sigma = a + 0.8 * half                            # nearest-k set reaches below a
-        lam, phi = _window_solve(sl.K, sl.M, sigma, int(1.25 * target), sl.lu_times)
+        sigma = _next_shift(lam, a, target)
+        lam, phi = _window_solve(sl.K, sl.M, sigma, int(WINDOW_PAD * target), sl.lu_times)
 
 
 def _assemble_blocks(lam_blocks: list, phi_blocks: list, n_keep: int | None):

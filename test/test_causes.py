@@ -189,3 +189,35 @@ class TestErrors:
         model = rigid_body_on_springs()
         modes = solve_modes(model.K, model.M, n_modes=6)
         assert_allclose(mass_mac(modes.shapes, modes.shapes, model.M), np.eye(6), atol=1e-12)
+
+
+class TestModesCommand:
+    """The `modes` command on the real default model, against a plain ARPACK solve."""
+
+    def test_table_csv_and_count_agree_with_plain_eigsh(self, tmp_path, capsys):
+        import scipy.sparse.linalg as spla
+
+        from pentapod_sim import assembly, params
+        from pentapod_sim.cli.modes import main
+
+        assert main(['--position', 'P2', '--out', str(tmp_path), '--rows', '12']) == 0
+        text = capsys.readouterr().out
+        with open(tmp_path / 'modes.csv') as fh:
+            rows = list(csv.DictReader(fh))
+        model = assembly.build_model(params.load_machine(), 'P2')
+        lam = spla.eigsh(model.K, len(rows) + 3, model.M, sigma=0, return_eigenvectors=False)
+        f_ref = np.sort(np.sqrt(lam)) / (2 * np.pi)
+        # every mode below 750 Hz and no other: the next one is above the band
+        assert f_ref[len(rows) - 1] < 750.0 < f_ref[len(rows)]
+        assert_allclose([float(r['frequency_hz']) for r in rows], f_ref[:len(rows)], rtol=1e-8)
+        assert f'modes below 750 Hz (Sturm count): {len(rows)}' in text
+        assert f'{model.n_dof} DOF' in text
+        assert len([ln for ln in text.splitlines() if ln[:4].strip().isdigit()]) == 12
+        for name in ('energy_shares.png', 'mode_distribution.png'):
+            assert (tmp_path / name).stat().st_size > 1000
+
+    def test_unknown_position_is_an_error_naming_it(self, tmp_path, capsys):
+        from pentapod_sim.cli.modes import main
+
+        assert main(['--position', 'P99', '--out', str(tmp_path)]) == 2
+        assert 'P99' in capsys.readouterr().err
