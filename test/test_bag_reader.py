@@ -171,3 +171,11 @@ def test_units_follow_port_naming():
     assert joint_unit('velocity', 'strut2_bending_3') == 'rad/s'
     assert joint_unit('effort', 'strut2_bending_moment_3') == 'N m'
     assert joint_unit('effort', 'pma_force_x') == 'N'
+
+
+def test_topic_selection_loads_only_those_messages(mixed):
+    path, reference = mixed
+    bag = open_bag(path, topics=[WRENCH])
+    assert bag.topics[STATE].count == 0 and bag.topics[WRENCH].count == 120
+    expected = [m.wrench.torque.z for _, m in reference[WRENCH]]
+    assert_allclose(bag.series(f'{WRENCH}.torque.z').values, expected)

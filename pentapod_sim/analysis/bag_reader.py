@@ -106,6 +106,8 @@ class Bag:
     ----------
     path : str or Path
         Bag folder (with metadata.yaml and/or ``*.mcap``) or a single ``.mcap`` file.
+    topics : list of str, optional
+        Load only these topics (saves memory: their bytes are copied out of each chunk).
 
     Attributes
     ----------
@@ -117,8 +119,9 @@ class Bag:
         True when a file ended early (crash); only its complete part was loaded.
     """
 
-    def __init__(self, path) -> None:
+    def __init__(self, path, topics: Optional[list] = None) -> None:
         self.path = Path(path)
+        self.wanted = set(topics) if topics is not None else None
         self.topics: dict = {}
         self.custom_data: dict = {}
         self.mcap_metadata: dict = {}
@@ -181,7 +184,10 @@ class Bag:
                 topic = channels.get(int(channel_id))
                 if topic is not None:
                     mine = channel_ids == channel_id
-                    topic.payloads.add_segment(data, starts[mine], lengths[mine])
+                    segment = (data, starts[mine], lengths[mine])
+                    if self.wanted is not None:
+                        segment = _compact(*segment)  # do not keep the whole chunk alive
+                    topic.payloads.add_segment(*segment)
                     topic._times.append(times[mine])
         elif isinstance(record, Message):
             topic = channels.get(record.channel_id)
@@ -196,7 +202,8 @@ class Bag:
             if record.topic not in self.topics:
                 text = schema.data.decode('utf-8', 'replace') if schema else ''
                 self.topics[record.topic] = TopicData(record.topic, name, text)
-            channels[record.id] = self.topics[record.topic]
+            if self.wanted is None or record.topic in self.wanted:
+                channels[record.id] = self.topics[record.topic]
         elif isinstance(record, Metadata):
             self.mcap_metadata[record.name] = dict(record.metadata)
 
@@ -300,7 +307,16 @@ def _generic_field(data: TopicData, field: str) -> np.ndarray:
     return out
 
 
-def open_bag(path) -> Bag:
+def _compact(data: np.ndarray, starts: np.ndarray, lengths: np.ndarray) -> tuple:
+    """Copy the given messages of a chunk into a new contiguous array; return a segment."""
+    ends = np.cumsum(lengths)
+    new_starts = ends - lengths
+    positions = np.arange(int(ends[-1]) if len(ends) else 0) + np.repeat(starts - new_starts,
+                                                                          lengths)
+    return data[positions], new_starts, lengths
+
+
+def open_bag(path, topics: Optional[list] = None) -> Bag:
     """
     Load a bag folder or .mcap file.
 
@@ -308,9 +324,11 @@ def open_bag(path) -> Bag:
     ----------
     path : str or Path
         Bag folder or ``.mcap`` file.
+    topics : list of str, optional
+        Load only these topics (others are listed in ``topics`` without messages).
 
     Returns
     -------
     Bag
     """
-    return Bag(path)
+    return Bag(path, topics)

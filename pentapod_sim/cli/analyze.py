@@ -50,7 +50,8 @@ def cmd_info(args) -> int:
 
 
 def _frfs(bag_path, args) -> list:
-    bag = open_bag(bag_path)
+    topics = [spec.partition('.')[0] for spec in [args.input] + args.output]
+    bag = open_bag(bag_path, topics)
     u = bag.series(args.input)
     return [frf_from_series(u, bag.series(out), args.excitation, args.nperseg)
             for out in args.output]
@@ -65,6 +66,16 @@ def _write_peaks(path: Path, peaks: list, unit: str) -> None:
         writer = csv.writer(handle)
         writer.writerow(['freq_Hz', f'magnitude_{unit}', 'damping_ratio', 'coherence'])
         writer.writerows([[p.freq, p.magnitude, p.damping_ratio, p.coherence] for p in peaks])
+
+
+def _analytic(args):
+    """Read ``--analytic`` CSV (columns freq_Hz, re, im; header line) as (freq, H, label)."""
+    if not args.analytic:
+        return None
+    table = np.loadtxt(args.analytic, delimiter=',', skiprows=1, ndmin=2)
+    if table.shape[1] < 3:
+        raise BagError(f'{args.analytic}: need columns freq_Hz, re, im; got {table.shape[1]}')
+    return table[:, 0], table[:, 1] + 1j * table[:, 2], f'analytic ({Path(args.analytic).name})'
 
 
 def cmd_frf(args, plot: bool = True) -> int:
@@ -91,8 +102,8 @@ def cmd_frf(args, plot: bool = True) -> int:
                       f'{row.reduction_db:6.2f} dB  (zeta {row.damping_ref:.3%} -> '
                       f'{row.damping_cmp:.3%})')
         if plot:
-            png = plots.frf_plot(shown, out_dir / f'{tag}.png', resonances=peaks,
-                                 fmin=args.fmin, fmax=args.fmax, title=tag)
+            png = plots.frf_plot(shown, out_dir / f'{tag}.png', analytic=_analytic(args),
+                                 resonances=peaks, fmin=args.fmin, fmax=args.fmax, title=tag)
             print(f'  wrote {png}')
         write_csv(out_dir / f'{tag}.csv', [res])
         write_uff58(out_dir / f'{tag}.uff', shown)
@@ -101,7 +112,7 @@ def cmd_frf(args, plot: bool = True) -> int:
 
 def cmd_time(args) -> int:
     """Plot recorded series over time."""
-    bag = open_bag(args.bag)
+    bag = open_bag(args.bag, [spec.partition('.')[0] for spec in args.specs])
     png = plots.time_plot([bag.series(s) for s in args.specs],
                           Path(args.out) / f'{_slug(Path(args.bag).name)}_time.png',
                           title=str(args.bag))
@@ -111,7 +122,7 @@ def cmd_time(args) -> int:
 
 def cmd_amplitudes(args) -> int:
     """Stroke [m] and force [N] amplitude spectra of every axis of a PMA state topic."""
-    bag = open_bag(args.bag)
+    bag = open_bag(args.bag, [args.topic])
     amps, units, freq = {}, {}, None
     for spec in bag.fields(args.topic):
         field, _, name = spec.partition('.')
@@ -149,6 +160,7 @@ def _frf_arguments(sub) -> None:
     sub.add_argument('--fmin', type=float, default=1.0, help='lowest frequency [Hz]')
     sub.add_argument('--fmax', type=float, default=None, help='highest frequency [Hz]')
     sub.add_argument('--prominence-db', type=float, default=6.0, help='peak prominence [dB]')
+    sub.add_argument('--analytic', help='CSV freq_Hz,re,im of an analytic FRF to overlay')
 
 
 def build_parser() -> argparse.ArgumentParser:
