@@ -14,6 +14,7 @@ EXECUTABLES = {
     'recorder': 'pentapod_sim.nodes.recorder_node:main',
     'analyze': 'pentapod_sim.cli.analyze:main',
     'modes': 'pentapod_sim.cli.modes:main',
+    'statespace': 'pentapod_sim.cli.statespace:main',
 }
 
 

@@ -201,11 +201,15 @@ class PlantModel:
                                 + ', '.join(have))
         ii = [self.input_names.index(n) for n in inputs]
         oo = [self.output_names.index(n) for n in outputs]
+        meta = dict(self.meta)
+        if 'static_compliance_full' in meta:     # (n_out, n_in) like d
+            meta['static_compliance_full'] = np.asarray(
+                meta['static_compliance_full'])[np.ix_(oo, ii)].tolist()
         return PlantModel(self.omega, self.zeta, self.b[:, ii], self.c_disp[oo],
                           self.c_vel[oo], self.d[np.ix_(oo, ii)], inputs, outputs,
                           [self.input_units[i] for i in ii], [self.output_units[o] for o in oo],
                           [self.input_descriptions[i] for i in ii],
-                          [self.output_descriptions[o] for o in oo], dict(self.meta))
+                          [self.output_descriptions[o] for o in oo], meta)
 
     def content_hash(self) -> str:
         """SHA-256 over all numbers and names (hex); identical models give identical hashes."""
@@ -354,6 +358,75 @@ def keep_by_relevance(plant_all: PlantModel, relevance: Sequence[dict]) -> np.nd
     return np.flatnonzero(keep)
 
 
+def plant_from_fe(fe, reduction_cfg: dict, progress: Callable[[str], None] | None = None
+                  ) -> tuple[PlantModel, np.ndarray]:
+    """
+    Plant with every mode below ``modes_f_max`` of an FE model, and the relevant modes.
+
+    Parameters
+    ----------
+    fe : FEModel
+        The FE model (:func:`pentapod_sim.assembly.build_model`).
+    reduction_cfg : dict
+        As :func:`load_reduction_config` returns.
+    progress : callable, optional
+        Receives one message per stage.
+
+    Returns
+    -------
+    plant_all : PlantModel
+        All computed modes; ``d`` holds the residual flexibility of the modes that were not
+        computed (``C K^-1 B`` minus all computed modes), so its static gain is exact, and
+        ``meta['static_compliance_full']`` the exact static gain ``C K^-1 B``.
+    keep : (r,) ndarray of int
+        Indices of the modes kept by the relevance criteria.
+    """
+    from pentapod_sim import __version__
+    from pentapod_sim.modal import solve_modes
+    say = progress or (lambda msg: LOG.info('%s', msg))
+    cfg = reduction_cfg
+    say(f'FE model: {fe.n_dof} DOF; solving modes below {cfg["modes_f_max"]} Hz')
+    modes = solve_modes(fe.K, fe.M, f_max=float(cfg['modes_f_max']))
+    say(f'{modes.n_modes} modes, {modes.frequencies[0]:.2f} .. {modes.frequencies[-1]:.2f} Hz')
+    inputs = _names(cfg['inputs'], INPUT_NAMES, 'input')
+    outputs = _names(cfg['outputs'], OUTPUT_NAMES, 'output')
+    plant_all = from_modal_data(modes.frequencies, modal_points(fe.points, modes.shapes),
+                                fe.strut_frames, inputs, outputs, cfg['damping_ratio'])
+    keep = keep_by_relevance(plant_all, cfg['relevance'])
+    c_disp_full, _ = output_matrices(port_list(fe.points, fe.strut_frames, outputs))
+    g_full = static_compliance(fe.K, input_matrix(port_list(fe.points, fe.strut_frames, inputs)),
+                               c_disp_full)
+    plant_all.d = g_full - modal_dc_gains(plant_all.omega, plant_all.b,
+                                          plant_all.c_disp).sum(axis=0)
+    plant_all.meta.update({
+        'pose': [float(v) for v in fe.pose], 'params_sha256': fe.meta.get('params_sha256'),
+        'package_version': __version__, 'n_dof': fe.n_dof, 'n_modes_computed': modes.n_modes,
+        'modes_f_max_hz': float(cfg['modes_f_max']), 'static_compliance_full': g_full.tolist()})
+    return plant_all, keep
+
+
+def reduce_plant(plant_all: PlantModel, keep: npt.ArrayLike,
+                 static_correction: bool = True) -> PlantModel:
+    """
+    Keep the modes ``keep`` of :func:`plant_from_fe`'s plant, with or without static correction.
+
+    With the correction, ``d = C K^-1 B - sum_kept c b^T / omega^2`` (exact static gain);
+    without it, ``d = 0``.
+    """
+    keep = np.asarray(keep, dtype=int)
+    g_full = np.asarray(plant_all.meta['static_compliance_full'])
+    g_kept = modal_dc_gains(plant_all.omega[keep], plant_all.b[keep],
+                            plant_all.c_disp[:, keep]).sum(axis=0)
+    d = g_full - g_kept if static_correction else np.zeros_like(g_full)
+    meta = dict(plant_all.meta, kept_modes=(keep + 1).tolist(),
+                static_correction=bool(static_correction))
+    return PlantModel(plant_all.omega[keep], plant_all.zeta[keep], plant_all.b[keep],
+                      plant_all.c_disp[:, keep], plant_all.c_vel[:, keep], d,
+                      plant_all.input_names, plant_all.output_names, plant_all.input_units,
+                      plant_all.output_units, plant_all.input_descriptions,
+                      plant_all.output_descriptions, meta)
+
+
 def build_plant(position: str | npt.ArrayLike, machine=None, reduction_cfg: dict | None = None,
                 progress: Callable[[str], None] | None = None) -> PlantModel:
     """
@@ -373,41 +446,17 @@ def build_plant(position: str | npt.ArrayLike, machine=None, reduction_cfg: dict
     Returns
     -------
     PlantModel
-        Kept modes only, static correction in ``d`` if configured; ``meta`` holds the
-        reduction report (kept mode numbers, static compliance of the full FE model).
+        Kept modes only, static correction in ``d`` if configured; ``meta`` records the
+        position, pose, parameter hash, package version and kept mode numbers (1-based).
     """
-    from pentapod_sim import __version__
     from pentapod_sim.assembly import build_model
-    from pentapod_sim.modal import solve_modes
     from pentapod_sim.params import load_machine
-    say = progress or (lambda msg: LOG.info('%s', msg))
     cfg = load_reduction_config() if reduction_cfg is None else reduction_cfg
     machine = load_machine() if machine is None else machine
-    fe = build_model(machine, position)
-    say(f'FE model at {position}: {fe.n_dof} DOF')
-    modes = solve_modes(fe.K, fe.M, f_max=float(cfg['modes_f_max']))
-    say(f'{modes.n_modes} modes below {cfg["modes_f_max"]} Hz')
-    inputs = _names(cfg['inputs'], INPUT_NAMES, 'input')
-    outputs = _names(cfg['outputs'], OUTPUT_NAMES, 'output')
-    plant_all = from_modal_data(modes.frequencies, modal_points(fe.points, modes.shapes),
-                                fe.strut_frames, inputs, outputs, cfg['damping_ratio'])
-    keep = keep_by_relevance(plant_all, cfg['relevance'])
-    in_ports = port_list(fe.points, fe.strut_frames, inputs)
-    c_disp_full, _ = output_matrices(port_list(fe.points, fe.strut_frames, outputs))
-    g_full = static_compliance(fe.K, input_matrix(in_ports), c_disp_full)
-    g_kept = modal_dc_gains(plant_all.omega[keep], plant_all.b[keep],
-                            plant_all.c_disp[:, keep]).sum(axis=0)
-    d = g_full - g_kept if cfg['static_correction'] else np.zeros_like(g_full)
-    say(f'kept {keep.size} of {modes.n_modes} modes; static correction '
+    plant_all, keep = plant_from_fe(build_model(machine, position), cfg, progress)
+    plant_all.meta['position'] = position if isinstance(position, str) else None
+    plant = reduce_plant(plant_all, keep, bool(cfg['static_correction']))
+    (progress or (lambda msg: LOG.info('%s', msg)))(
+        f'kept {keep.size} of {plant_all.n_modes} modes; static correction '
         f'{"on" if cfg["static_correction"] else "off"}')
-    meta = {'position': position if isinstance(position, str) else None,
-            'pose': [float(v) for v in fe.pose], 'params_sha256': fe.meta.get('params_sha256'),
-            'package_version': __version__, 'n_dof': fe.n_dof,
-            'n_modes_computed': modes.n_modes, 'kept_modes': (keep + 1).tolist(),
-            'static_correction': bool(cfg['static_correction']),
-            'static_compliance_full': g_full.tolist()}
-    zeta = np.broadcast_to(np.asarray(cfg['damping_ratio'], float), plant_all.omega.shape)
-    return PlantModel(plant_all.omega[keep], zeta[keep], plant_all.b[keep],
-                      plant_all.c_disp[:, keep], plant_all.c_vel[:, keep], d, inputs, outputs,
-                      plant_all.input_units, plant_all.output_units,
-                      plant_all.input_descriptions, plant_all.output_descriptions, meta)
+    return plant

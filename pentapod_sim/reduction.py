@@ -248,3 +248,22 @@ def frf_error_percent(h_reduced: npt.ArrayLike, h_reference: npt.ArrayLike) -> n
     with np.errstate(divide='ignore', invalid='ignore'):
         return np.where(peak > 0, np.max(np.abs(h_reduced - h_reference), axis=-1) / peak * 100,
                         np.nan)
+
+
+def frf_relative_error_percent(h_reduced: npt.ArrayLike,
+                               h_reference: npt.ArrayLike) -> np.ndarray:
+    """
+    Pointwise relative FRF error ``|H_red - H_ref| / |H_ref| * 100`` [%], shape of the inputs.
+
+    Large near anti-resonances of the reference; summarise it with a median or percentile.
+    """
+    h_reduced, h_reference = np.asarray(h_reduced), np.asarray(h_reference)
+    with np.errstate(divide='ignore', invalid='ignore'):
+        return np.abs(h_reduced - h_reference) / np.abs(h_reference) * 100
+
+
+def between_resonances(freq_hz: npt.ArrayLike, f_max: float) -> np.ndarray:
+    """Midpoints [Hz] between consecutive natural frequencies below ``f_max`` [Hz]."""
+    freq = np.sort(np.asarray(freq_hz, float))
+    freq = freq[freq < f_max]
+    return 0.5 * (freq[:-1] + freq[1:])

@@ -112,3 +112,22 @@ def test_csv_and_plots(full, tmp_path):
                             plant.frequencies_hz, tmp_path / 'dc.png', limit=1e-9, keep=[0, 2])
     for p in (png, bars):
         assert p.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
+
+
+def test_statespace_cli_writes_report_plots_and_plant(tmp_path):
+    import json
+
+    from pentapod_sim.cli.statespace import main
+    from pentapod_sim.plant_model import PlantModel
+    assert main(['report', '--position', 'P1', '--out', str(tmp_path)]) == 0
+    row = json.loads((tmp_path / 'reduction_report.json').read_text())[0]
+    assert 0 < row['modes_kept'] < row['modes_computed']
+    assert row['static_error_percent_without_correction'] < 0   # collocated: under-estimate
+    assert abs(row['static_error_percent_with_correction']) < 1e-8
+    assert row['reference_vs_direct_solve_percent_of_peak'] < 0.1
+    assert main(['dcgain', '--position', 'P1', '--out', str(tmp_path)]) == 0
+    assert main(['build', '--position', 'P1', '--out', str(tmp_path)]) == 0
+    plant = PlantModel.load(tmp_path / 'plant_P1.npz')
+    assert plant.meta['position'] == 'P1' and plant.meta['static_correction']
+    assert main(['closed-loop', '--position', 'P1', '--out', str(tmp_path),
+                 '--damper', 'strut1_bending_moment_2=oops']) == 2

@@ -1,0 +1,257 @@
+"""
+`statespace`: modal reduction report, FRF plots, dc-gain charts, damped FRFs, plant files.
+
+All subcommands read config/reduction.yaml (``--config``) and write to ``--out``
+(default out/statespace/). Examples::
+
+    statespace report                      # P1, P2: modes kept, static and FRF error
+    statespace frf --position P1,P2        # TCP FRF PNG + CSV
+    statespace dcgain                      # dc gain per mode with the relevance limit
+    statespace closed-loop --damper strut1_bending_moment_2=20000 ...
+    statespace build --position P1         # out/statespace/plant_P1.npz
+    statespace build --modal-data modes.csv --strut-frames frames.yaml
+"""
+from __future__ import annotations
+
+import argparse
+import copy
+import json
+import logging
+from pathlib import Path
+import sys
+
+import numpy as np
+
+from pentapod_sim.cli import add_model_arguments, configure_logging, model_from_args
+from pentapod_sim.exceptions import ConfigError, ModelFileError, PortError
+from pentapod_sim import frf, reduction
+from pentapod_sim.plant_model import (from_modal_data, keep_by_relevance,
+                                      load_reduction_config, plant_from_fe, reduce_plant)
+
+LOGGER = logging.getLogger('statespace')
+DEFAULT_OUT = Path('out') / 'statespace'
+#: Dampers of the default closed-loop case: bending of every strut, b = 20 kN s/m applied
+#: as a moment pair per rad/s (see docs/statespace.md for the unit).
+DEFAULT_DAMPERS = [f'strut{i}_bending_moment_{k}=2e4' for i in range(1, 6) for k in (2, 3)]
+
+
+def _positions(args) -> list[str]:
+    return [p for p in (args.position or ','.join(args.cfg['positions'])).split(',') if p]
+
+
+def _plants(args):
+    """Yield (position, plant with all computed modes, kept indices) per position."""
+    for position in _positions(args):
+        model_args = copy.copy(args)
+        model_args.position = position
+        LOGGER.info('%s: building FE model', position)
+        fe = model_from_args(model_args)
+        plant_all, keep = plant_from_fe(fe, args.cfg, lambda msg: LOGGER.info('%s', msg))
+        plant_all.meta['position'] = position
+        args.fe_model = fe
+        yield position, plant_all, keep
+
+
+def _freq(cfg: dict) -> np.ndarray:
+    f = cfg['frequency']
+    return np.linspace(float(f['f_min']), float(f['f_max']), int(f['n_points']))
+
+
+def _pair_rule(args) -> list[dict]:
+    """Relevance for the report: the report pair alone at the first rule's limit (or --limit)."""
+    out, inp = args.cfg['report_pair']
+    rule = {k: v for k, v in args.cfg['relevance'][0].items() if k in ('abs_limit', 'rel_limit',
+                                                                       'count')}
+    if args.limit is not None:
+        rule = {'abs_limit': args.limit}
+    return [dict(rule, inputs=[inp], outputs=[out])]
+
+
+def _direct_check(fe, pair_all, f_max: float) -> dict:
+    """Undamped modal plant (all modes + residual) vs a direct FE harmonic solve."""
+    from pentapod_sim.ports import input_matrix, output_matrices, ports
+    freq = reduction.between_resonances(pair_all.frequencies_hz, f_max)
+    b = input_matrix(ports(fe.points, fe.strut_frames, pair_all.input_names))
+    c, _ = output_matrices(ports(fe.points, fe.strut_frames, pair_all.output_names))
+    direct = reduction.harmonic_response(fe.K, fe.M, b, c, freq)
+    undamped = frf.modal_frf_matrix(pair_all.omega, 0.0, pair_all.b, pair_all.c_disp,
+                                    pair_all.c_vel, pair_all.d, freq)
+    pointwise = reduction.frf_relative_error_percent(undamped, direct)
+    return {'reference_vs_direct_solve_percent_of_peak':
+            float(reduction.frf_error_percent(undamped, direct).max()),
+            'reference_vs_direct_solve_median_percent': float(np.median(pointwise)),
+            'direct_solve_frequencies': int(freq.size)}
+
+
+def cmd_report(args) -> int:
+    """Modes kept, static error with/without correction and FRF error for the report pair."""
+    out, inp = args.cfg['report_pair']
+    freq = _freq(args.cfg)
+    rows = []
+    for position, plant_all, _ in _plants(args):
+        pair_all = plant_all.select([inp], [out])
+        keep = keep_by_relevance(pair_all, _pair_rule(args))
+        reference = frf.modal_frf(pair_all, freq).H
+        row = {'position': position, 'pair': f'{out}/{inp}', 'n_dof': plant_all.meta['n_dof'],
+               'modes_computed': plant_all.n_modes, 'modes_kept': int(keep.size),
+               'relevance': {k: v for k, v in _pair_rule(args)[0].items()
+                             if k not in ('inputs', 'outputs')},
+               'static_compliance_m_per_n': float(pair_all.meta['static_compliance_full'][0][0])}
+        for corrected in (False, True):
+            red = reduce_plant(pair_all, keep, corrected)
+            g_red = red.d[0, 0] + (red.c_disp[0] * red.b[:, 0] / red.omega ** 2).sum()
+            tag = 'with' if corrected else 'without'
+            row[f'static_error_percent_{tag}_correction'] = float(
+                reduction.static_error_percent(g_red, row['static_compliance_m_per_n']))
+            h_red = frf.modal_frf(red, freq).H
+            row[f'frf_error_percent_{tag}_correction'] = float(
+                reduction.frf_error_percent(h_red, reference)[0, 0])
+            row[f'frf_median_relative_error_percent_{tag}_correction'] = float(np.median(
+                reduction.frf_relative_error_percent(h_red, reference)))
+        row.update(_direct_check(args.fe_model, pair_all, freq[-1]))
+        rows.append(row)
+        print(f'{position}: {out}/{inp}: kept {keep.size} of {plant_all.n_modes} modes '
+              f'({row["relevance"]}); static error '
+              f'{row["static_error_percent_without_correction"]:+.3f} % without, '
+              f'{row["static_error_percent_with_correction"]:+.2e} % with correction; FRF error '
+              f'0..{freq[-1]:g} Hz {row["frf_error_percent_without_correction"]:.3f} % / '
+              f'{row["frf_error_percent_with_correction"]:.3f} % (max, of peak |H|), median '
+              f'{row["frf_median_relative_error_percent_without_correction"]:.3f} % / '
+              f'{row["frf_median_relative_error_percent_with_correction"]:.3f} %; '
+              f'reference vs direct FE solve {row["direct_solve_frequencies"]} freqs: '
+              f'{row["reference_vs_direct_solve_percent_of_peak"]:.1e} % of peak, median '
+              f'{row["reference_vs_direct_solve_median_percent"]:.1e} %')
+    path = args.out / 'reduction_report.json'
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(rows, indent=2))
+    LOGGER.info('wrote %s', path)
+    return 0
+
+
+def cmd_frf(args) -> int:
+    """FRF of the report pair (kept modes, configured correction) per position: PNG + CSV."""
+    out, inp = args.cfg['report_pair']
+    freq, results, marks = _freq(args.cfg), [], []
+    for position, plant_all, keep in _plants(args):
+        plant = reduce_plant(plant_all, keep, bool(args.cfg['static_correction']))
+        results.append(frf.modal_frf(plant.select([inp], [out]), freq, label=position))
+        marks.append(plant_all.frequencies_hz)
+    stem = f'frf_{out}_{inp}_{"_".join(r.label for r in results)}'
+    png = frf.frf_plot(results, out, inp, args.out / f'{stem}.png', mode_freqs=marks,
+                       title=f'{out} / {inp} (ticks: modes)')
+    csv_path = frf.frf_to_csv(results, [(out, inp)], args.out / f'{stem}.csv')
+    print(f'wrote {png} and {csv_path}')
+    return 0
+
+
+def cmd_dcgain(args) -> int:
+    """Bar chart of the report pair's dc gain per mode with the relevance limit."""
+    out, inp = args.cfg['report_pair']
+    rule = _pair_rule(args)[0]
+    for position, plant_all, _ in _plants(args):
+        pair_all = plant_all.select([inp], [out])
+        keep = keep_by_relevance(pair_all, [rule])
+        gains = reduction.modal_dc_gains(pair_all.omega, pair_all.b, pair_all.c_disp)[:, 0, 0]
+        png = frf.dc_gain_plot(gains, pair_all.frequencies_hz,
+                               args.out / f'dcgain_{out}_{inp}_{position}.png',
+                               limit=rule.get('abs_limit'), keep=keep,
+                               title=f'{position}: dc gain per mode, {out} / {inp}; '
+                                     f'{keep.size} of {gains.size} kept')
+        print(f'wrote {png}')
+    return 0
+
+
+def _dampers(specs: list[str]) -> dict[str, float]:
+    dampers = {}
+    for spec in specs:
+        name, sep, value = spec.partition('=')
+        try:
+            dampers[name] = float(value)
+        except ValueError:
+            raise ConfigError(f'--damper must be NAME=GAIN, got {spec!r}') from None
+        if not sep:
+            raise ConfigError(f'--damper must be NAME=GAIN, got {spec!r}')
+    return dampers
+
+
+def cmd_closed_loop(args) -> int:
+    """Open vs closed-loop FRF of the report pair with added viscous dampers."""
+    out, inp = args.cfg['report_pair']
+    dampers = _dampers(args.damper or DEFAULT_DAMPERS)
+    freq = _freq(args.cfg)
+    for position, plant_all, keep in _plants(args):
+        plant = reduce_plant(plant_all, keep, bool(args.cfg['static_correction']))
+        open_ = frf.modal_frf(plant, freq, label=f'{position} open loop')
+        closed = frf.closed_loop_frf(plant, dampers, freq, label=f'{position} damped')
+        stem = f'closed_loop_{out}_{inp}_{position}'
+        png = frf.frf_plot([open_, closed], out, inp, args.out / f'{stem}.png',
+                           title=f'{position}: {out} / {inp}, dampers: {len(dampers)}')
+        frf.frf_to_csv([open_, closed], [(out, inp)], args.out / f'{stem}.csv')
+        peak_o = np.abs(open_.pair(out, inp)).max()
+        peak_c = np.abs(closed.pair(out, inp)).max()
+        print(f'{position}: peak |H| {peak_o:.3e} -> {peak_c:.3e} '
+              f'({peak_o / peak_c:.2f}x lower); wrote {png}')
+    return 0
+
+
+def cmd_build(args) -> int:
+    """Build and save plant model files (from the FE model or from external modal data)."""
+    if args.modal_data:
+        from pentapod_sim.modal_data import load_modal_data
+        from pentapod_sim.ports import INPUT_NAMES, OUTPUT_NAMES
+        data = load_modal_data(args.modal_data, args.strut_frames)
+        inputs = list(INPUT_NAMES) if args.cfg['inputs'] == 'all' else args.cfg['inputs']
+        outputs = list(OUTPUT_NAMES) if args.cfg['outputs'] == 'all' else args.cfg['outputs']
+        zeta = data.zeta if data.zeta is not None else args.cfg['damping_ratio']
+        plant = from_modal_data(data.frequencies_hz, data.point_shapes, data.strut_frames,
+                                inputs, outputs, zeta, meta={'source': data.source})
+        path = plant.save(args.out / f'plant_{Path(args.modal_data).stem}.npz')
+        print(f'wrote {path} ({plant.n_modes} modes, no reduction, no static correction)')
+        return 0
+    for position, plant_all, keep in _plants(args):
+        plant = reduce_plant(plant_all, keep, bool(args.cfg['static_correction']))
+        path = plant.save(args.out / f'plant_{position}.npz')
+        print(f'wrote {path} ({plant.n_modes} of {plant_all.n_modes} modes, '
+              f'{len(plant.input_names)} inputs, {len(plant.output_names)} outputs)')
+    return 0
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog='statespace', description=__doc__.split('\n\n')[0],
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument('-v', '--verbose', action='store_true')
+    sub = parser.add_subparsers(dest='command', required=True)
+    for name, func in (('report', cmd_report), ('frf', cmd_frf), ('dcgain', cmd_dcgain),
+                       ('closed-loop', cmd_closed_loop), ('build', cmd_build)):
+        p = sub.add_parser(name, help=func.__doc__.split('\n')[0])
+        p.set_defaults(func=func)
+        add_model_arguments(p, position='')
+        p.add_argument('--config', default=None, help='reduction config (default: '
+                       'config/reduction.yaml)')
+        p.add_argument('--out', type=Path, default=DEFAULT_OUT, help='output directory')
+        p.add_argument('--limit', type=float, default=None,
+                       help='absolute relevance limit for the report pair [m/N]')
+        if name == 'closed-loop':
+            p.add_argument('--damper', action='append', metavar='INPUT=GAIN',
+                           help='damper on a collocated input port, gain in N s/m or '
+                                'N m s/rad (repeatable; default: bending of all struts, 2e4)')
+        if name == 'build':
+            p.add_argument('--modal-data', default=None, help='external modal data .npz/.csv')
+            p.add_argument('--strut-frames', default=None, help='YAML with strut_frames')
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the `statespace` command line; returns the exit code."""
+    args = _parser().parse_args(argv)
+    configure_logging(args.verbose)
+    try:
+        args.cfg = load_reduction_config(args.config)
+        return args.func(args)
+    except (ConfigError, ModelFileError, PortError) as err:
+        LOGGER.error('%s', err)
+        return 2
+
+
+if __name__ == '__main__':
+    sys.exit(main())
