@@ -35,7 +35,7 @@ import numpy as np
 from pentapod_sim.analysis.bag_reader import open_bag
 from pentapod_sim.analysis.frf import frf_from_series
 t0 = time.perf_counter()
-bag = open_bag(sys.argv[1])
+bag = open_bag(sys.argv[1], ['/pentapod/excitation', '/pentapod/tcp_state'])
 res = frf_from_series(bag.series('/pentapod/excitation.force.x'),
                       bag.series('/pentapod/tcp_state.position.tcp_x'), 'random', 8192)
 print(time.perf_counter() - t0, abs(res.H[100]))
@@ -130,13 +130,16 @@ def run(quick: bool) -> list:
     tmp = Path(tempfile.mkdtemp(prefix='bench_recording_'))
     try:
         states, wrenches = _payloads(n)
-        ours_s = _write_ours(tmp / 'ours', states, wrenches)
-        bare_s = _write_bare(tmp / 'bare.mcap', states, wrenches)
+        ours_s, bare_s = np.inf, np.inf
+        for attempt in range(2):  # best of two, alternating: the machine is shared
+            shutil.rmtree(tmp / 'ours', ignore_errors=True)
+            ours_s = min(ours_s, _write_ours(tmp / 'ours', states, wrenches))
+            bare_s = min(bare_s, _write_bare(tmp / 'bare.mcap', states, wrenches))
         rate, bare_rate = 2 * n / ours_s, 2 * n / bare_s
         rows.append(dict(name='write rate (JointState + WrenchStamped)', value=rate,
                          unit='msg/s', baseline='bare mcap Writer', baseline_value=bare_rate,
                          ratio=rate / bare_rate,
-                         note='ours adds metadata.yaml, periodic flush+fsync, counts'))
+                         note='best of 2; ours adds metadata.yaml, flush+fsync every 0.5 s'))
         del states, wrenches
         ours = _run_child(OURS, tmp / 'ours')
         base = _run_child(ROSBAGS, tmp / 'ours')

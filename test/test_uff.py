@@ -66,7 +66,8 @@ def test_uff58_file_holds_one_block_per_frf(tmp_path):
     res = first_order_frf()
     path = write_uff58(tmp_path / 'frf.uff', [res, res])
     lines = path.read_text(encoding='ascii').splitlines()
-    starts = [k for k in range(len(lines) - 1) if lines[k] == '    -1' and lines[k + 1] == '    58']
+    starts = [k for k in range(len(lines) - 1)
+              if lines[k] == '    -1' and lines[k + 1] == '    58']
     assert len(starts) == 2
     second = parse_block(lines[starts[1]:])
     assert second['function_id'] == 2

@@ -157,9 +157,11 @@ class Bag:
         schemas, channels, n_before = {}, {}, self.message_count
         with open(file, 'rb') as stream:
             try:
-                for record in StreamReader(stream, emit_chunks=True,
-                                           record_size_limit=2**31).records:
+                reader = StreamReader(stream, emit_chunks=True, record_size_limit=2**31)
+                for n_records, record in enumerate(reader.records):
                     self._take(record, schemas, channels)
+                    if n_records % 5000 == 4999:  # progress on large bags
+                        LOGGER.info('%s: %d MB read', file.name, stream.tell() >> 20)
             except McapError as err:
                 if self.message_count == n_before and not channels:
                     raise BagError(f'{file} is not a readable MCAP file: {err!r}') from None
@@ -267,11 +269,12 @@ class Bag:
         first, _, second = field.partition('.')
         if second in cdr_arrays.JOINT_STATE_FIELDS and first not in cdr_arrays.JOINT_STATE_FIELDS:
             first, second = second, first
-        names, values = cdr_arrays.joint_state_arrays(data.payloads)
-        if first not in cdr_arrays.JOINT_STATE_FIELDS or second not in names:
-            raise BagError(f'field {field!r} not in {data.name}; use one of '
-                           f'{[f"{f}.{n}" for f in cdr_arrays.JOINT_STATE_FIELDS for n in names]}')
-        column = values[first][:, names.index(second)]
+        if first not in cdr_arrays.JOINT_STATE_FIELDS:
+            layout = cdr_arrays.joint_state_layout(data.payloads[0])
+            _unknown_joint_field(data, field, layout.names)
+        column, names = cdr_arrays.joint_state_column(data.payloads, first, second)
+        if second not in names:
+            _unknown_joint_field(data, field, names)
         if np.all(np.isnan(column)):
             raise BagError(f'{data.name} carries no {first} values for {second!r}')
         return column, joint_unit(first, second)
@@ -305,6 +308,12 @@ def _generic_field(data: TopicData, field: str) -> np.ndarray:
             raise BagError(f'field {field!r} of {data.name} ({data.msg_type}) is not a '
                            'numeric attribute path') from None
     return out
+
+
+def _unknown_joint_field(data: TopicData, field: str, names: list) -> None:
+    """Raise BagError listing the JointState fields that exist."""
+    choices = [f'{f}.{n}' for f in cdr_arrays.JOINT_STATE_FIELDS for n in names]
+    raise BagError(f'field {field!r} not in {data.name}; use one of {choices}')
 
 
 def _compact(data: np.ndarray, starts: np.ndarray, lengths: np.ndarray) -> tuple:

@@ -170,6 +170,40 @@ def joint_state_arrays(messages) -> tuple:
     return names, values
 
 
+def joint_state_column(messages, field: str, name: str) -> tuple:
+    """
+    Decode one value (``field`` of joint ``name``) of every JointState message.
+
+    Reads only those 8 bytes per message, unlike :func:`joint_state_arrays`.
+
+    Parameters
+    ----------
+    messages : MessageStore or list of bytes
+        CDR JointState messages of one topic.
+    field : str
+        ``'position'``, ``'velocity'`` or ``'effort'``.
+    name : str
+        Joint name.
+
+    Returns
+    -------
+    values : (N,) float64 ndarray
+        NaN where a message lacks the name or the field.
+    names : list of str
+        All joint names seen (for error messages).
+    """
+    store = _store(messages)
+    values = np.full(len(store), np.nan)
+    names: list = []
+    for indices, layout in _layouts(store):
+        names.extend(n for n in layout.names if n not in names)
+        offset, count = layout.arrays[field]
+        if name in layout.names and count == len(layout.names):
+            where = offset + 8 * layout.names.index(name)
+            values[indices] = store.gather(indices, where, 8).view('<f8')[:, 0]
+    return values, names
+
+
 def wrench_arrays(messages) -> np.ndarray:
     """
     Decode WrenchStamped messages.

@@ -91,10 +91,8 @@ def estimate_frf(u: npt.ArrayLike, y: npt.ArrayLike, fs: float, excitation: str 
         Excitation type; selects window and averaging (module docstring).
     nperseg : int, optional
         Segment length [samples] for random/chirp; default N // 8 (random), N // 4 (chirp).
-    input_unit, output_unit : str
-        Units, stored in the result.
-    label : str
-        Stored in the result.
+    input_unit, output_unit, label : str
+        Units and a free label, stored in the result.
 
     Returns
     -------
@@ -135,6 +133,8 @@ def estimate_frf(u: npt.ArrayLike, y: npt.ArrayLike, fs: float, excitation: str 
         h2 = g_yy / np.conj(g_uy)
         coherence = np.clip(np.abs(g_uy) ** 2 / (g_uu * g_yy), 0.0, 1.0)
     n_avg = 1 + (n - nperseg) // (nperseg - overlap)
+    LOGGER.info('FRF %s: %s, %d samples, %d segments of %d, df = %.4g Hz', label, excitation,
+                n, n_avg, nperseg, fs / nperseg)
     return FrfResult(freq, h1, h1, h2, coherence, n_averages=n_avg, **meta)
 
 

@@ -25,6 +25,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rcl_interfaces.msg import ParameterDescriptor, ParameterType
 import yaml
 
+from pentapod_sim.exceptions import BagError
 from pentapod_sim.recording import BagWriter, qos_profile
 from pentapod_sim.recording.msgdefs import has_header_stamp
 
@@ -83,7 +84,11 @@ class RecorderNode(Node):
             publishers = self.get_publishers_info_by_topic(topic)
             if not publishers:
                 continue
-            self._subscribe(topic, types[0], publishers)
+            try:
+                self._subscribe(topic, types[0], publishers)
+            except (BagError, ImportError, AttributeError, ValueError) as err:
+                self.get_logger().error(f'cannot record {topic} [{types[0]}]: {err}')
+                self.subs[topic] = None  # do not retry every period
 
     def _subscribe(self, topic: str, msg_type: str, publishers) -> None:
         best_effort = any(p.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT

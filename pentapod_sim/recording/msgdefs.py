@@ -45,6 +45,7 @@ def msg_file_text(msg_type: str) -> str:
         path = share / pkg / 'msg' / f'{name}.msg'
         tried.append(str(path))
         if path.is_file():
+            LOGGER.debug('message definition %s from %s', msg_type, path)
             return path.read_text(encoding='utf-8')
     raise BagError(f'no .msg file for type {msg_type!r}; looked in {tried}')
 
