@@ -3,10 +3,10 @@ Analytic frequency responses of the modal plant, open loop and with added viscou
 
 Open loop, the FRF is a vectorised modal sum (BLAS products over frequency blocks), far
 cheaper than ``control.frequency_response`` of the 2m-state system (bench/bench_statespace.py).
-Added damping is velocity
-feedback ``u = -g * rate`` through collocated ports (strut bending, strut axial, TCP or PMA
-mount against ground); the loop is closed with ``control.feedback`` and evaluated through the
-eigen-decomposition of the closed-loop A. Plotting functions end in ``_plot`` and write PNGs.
+Added damping is velocity feedback ``u = -g * rate`` through collocated ports (strut bending,
+strut axial, TCP or PMA mount against ground); the loop is closed with ``control.feedback``
+and evaluated through the eigen-decomposition of the closed-loop A. Plotting functions end in
+``_plot`` and write PNGs.
 """
 from __future__ import annotations
 
