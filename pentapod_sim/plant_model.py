@@ -27,7 +27,8 @@ from pentapod_sim.exceptions import ConfigError, ModelFileError, PortError
 from pentapod_sim.ports import (check_names, INPUT_NAMES, input_matrix, modal_points,
                                 output_matrices, OUTPUT_NAMES)
 from pentapod_sim.ports import ports as port_list
-from pentapod_sim.reduction import modal_dc_gains, select_modes, static_compliance
+from pentapod_sim.reduction import (modal_dc_gains, modal_resonance_gains, select_modes,
+                                    static_compliance)
 
 LOG = logging.getLogger(__name__)
 
@@ -338,7 +339,10 @@ def from_modal_data(frequencies_hz: npt.ArrayLike, point_shapes: Mapping[str, np
             raise ModelFileError(f'port {p.name!r} needs strut frames, none were given')
     c_disp, c_vel = output_matrices(out_ports)
     d = np.zeros((len(outputs), len(inputs))) if d is None else d
-    return PlantModel(omega, np.broadcast_to(np.asarray(zeta, float), omega.shape),
+    zeta = np.asarray(zeta, float)
+    if zeta.ndim > 0 and zeta.shape != omega.shape:
+        raise ConfigError(f'damping ratios: {zeta.size} given for {omega.size} modes')
+    return PlantModel(omega, np.broadcast_to(zeta, omega.shape),
                       input_matrix(in_ports), c_disp, c_vel, d, list(inputs), list(outputs),
                       [p.unit for p in in_ports], [p.unit for p in out_ports],
                       [p.description for p in in_ports], [p.description for p in out_ports],
@@ -348,12 +352,21 @@ def from_modal_data(frequencies_hz: npt.ArrayLike, point_shapes: Mapping[str, np
 def keep_by_relevance(plant_all: PlantModel, relevance: Sequence[dict]) -> np.ndarray:
     """
     Indices of the modes kept by any of the relevance criteria (see config/reduction.yaml).
+
+    A rule's optional ``measure`` is 'dc' (default, ``c b / omega^2``) or 'resonance'
+    (``c b / (2 zeta omega^2)``, for modes with individual damping ratios).
     """
     keep = np.zeros(plant_all.n_modes, dtype=bool)
     for rule in relevance:
         sub = plant_all.select(rule['inputs'], rule['outputs'])
         criterion = {k: rule[k] for k in ('abs_limit', 'rel_limit', 'count') if k in rule}
-        gains = modal_dc_gains(sub.omega, sub.b, sub.c_disp)
+        if rule.get('measure', 'dc') == 'resonance':
+            gains = modal_resonance_gains(sub.omega, sub.zeta, sub.b, sub.c_disp)
+        elif rule.get('measure', 'dc') == 'dc':
+            gains = modal_dc_gains(sub.omega, sub.b, sub.c_disp)
+        else:
+            raise ConfigError(f'relevance measure must be dc or resonance, got '
+                              f'{rule["measure"]!r}')
         keep[select_modes(gains, **criterion)] = True
     return np.flatnonzero(keep)
 

@@ -52,6 +52,21 @@ def modal_dc_gains(omega: npt.ArrayLike, b: npt.ArrayLike,
         / (omega ** 2)[:, None, None]
 
 
+def modal_resonance_gains(omega: npt.ArrayLike, zeta: npt.ArrayLike, b: npt.ArrayLike,
+                          c: npt.ArrayLike) -> npt.NDArray[np.float64]:
+    """
+    Peak gain of every mode at its resonance, ``c_ji b_ik / (2 zeta_i omega_i^2)``.
+
+    The dc gain ranks modes correctly only when all share one damping ratio; with individual
+    ratios the single-mode resonance gain is the measure to compare. Same shapes as
+    :func:`modal_dc_gains`; zeta (m,) > 0.
+    """
+    zeta = np.broadcast_to(np.asarray(zeta, float), np.shape(omega))
+    if np.any(zeta <= 0):
+        raise ConfigError(f'resonance gains need zeta > 0; got min zeta {zeta.min()}')
+    return modal_dc_gains(omega, b, c) / (2 * zeta)[:, None, None]
+
+
 def _check_limit(name: str, value, upper: float = np.inf) -> None:
     """ConfigError unless 0 < value < upper (finite number)."""
     if not isinstance(value, (int, float, np.floating, np.integer)) or isinstance(value, bool) \

@@ -209,3 +209,18 @@ def test_external_modal_data_errors(full, tmp_path):
                         ['strut1_axial_force'], ['tcp_displacement_x'])
     with pytest.raises(ModelFileError, match='format'):
         modal_data.load_modal_data(tmp_path / 'modes.unv')
+
+
+def test_relevance_rules_are_united(full):
+    from pentapod_sim.plant_model import keep_by_relevance
+    plant = full[3]
+    tcp = {'inputs': ['tcp_force_y'], 'outputs': ['tcp_displacement_y'], 'count': 3}
+    strut = {'inputs': ['strut4_axial_force'], 'outputs': ['strut4_axial_displacement'],
+             'count': 3}
+    a, b = keep_by_relevance(plant, [tcp]), keep_by_relevance(plant, [strut])
+    np.testing.assert_array_equal(keep_by_relevance(plant, [tcp, strut]), np.union1d(a, b))
+    with pytest.raises(ConfigError, match="'peak'"):
+        keep_by_relevance(plant, [dict(tcp, measure='peak')])
+    with pytest.raises(ConfigError, match='2 given'):
+        from_modal_data([10.0, 20.0, 30.0], {'tcp': np.ones((6, 3))}, None, ['tcp_force_x'],
+                        ['tcp_displacement_x'], zeta=[0.01, 0.02])

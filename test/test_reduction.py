@@ -96,3 +96,16 @@ def test_frf_error_percent_definition():
 def test_rigid_modes_have_no_dc_gain():
     with pytest.raises(ConfigError, match='rigid'):
         red.modal_dc_gains([0.0, 10.0], np.ones((2, 1)), np.ones((1, 2)))
+
+
+def test_resonance_gain_is_single_mode_peak():
+    # |H(i w_n)| of one mode = c b / (2 zeta w_n^2)
+    omega, zeta, b, c = 2 * np.pi * 50.0, 0.02, 0.4, 0.7
+    g = red.modal_resonance_gains([omega], [zeta], [[b]], [[c]])[0, 0, 0]
+    peak = abs(c * b / (omega ** 2 - omega ** 2 + 2j * zeta * omega * omega))
+    assert g == pytest.approx(peak, rel=1e-12)
+    # a lightly damped mode with a small dc gain wins on the resonance measure
+    gains = red.modal_resonance_gains([10.0, 20.0], [0.001, 0.1], [[1.0], [2.0]], [[1.0, 2.0]])
+    np.testing.assert_array_equal(red.select_modes(gains, count=1), [0])
+    with pytest.raises(ConfigError, match='zeta'):
+        red.modal_resonance_gains([10.0], [0.0], [[1.0]], [[1.0]])
