@@ -380,6 +380,7 @@ def plot_mode_distribution(frequencies: npt.ArrayLike, path: str | os.PathLike,
                                                                [f.size]]),
              where='post', color='tab:red')
     ax2.set_ylabel('number of modes below f', color='tab:red')
+    ax2.set_ylim(0, max(f.size, 1) * 1.05)
     ax.set_title(title or f'{f.size} modes below {top:g} Hz')
     fig.tight_layout()
     fig.savefig(path, dpi=120)
