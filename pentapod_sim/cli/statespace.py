@@ -217,7 +217,7 @@ def cmd_build(args) -> int:
 
 
 def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog='statespace', description=__doc__.split('\n\n')[0],
+    parser = argparse.ArgumentParser(prog='statespace', description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument('-v', '--verbose', action='store_true')
     sub = parser.add_subparsers(dest='command', required=True)
@@ -226,6 +226,9 @@ def _parser() -> argparse.ArgumentParser:
         p = sub.add_parser(name, help=func.__doc__.split('\n')[0])
         p.set_defaults(func=func)
         add_model_arguments(p, position='')
+        for action in p._actions:     # the shared option takes one name; here a list
+            if action.dest == 'position':
+                action.help = 'comma-separated positions (default: positions in the config)'
         p.add_argument('--config', default=None, help='reduction config (default: '
                        'config/reduction.yaml)')
         p.add_argument('--out', type=Path, default=DEFAULT_OUT, help='output directory')
