@@ -126,6 +126,12 @@ def test_statespace_cli_writes_report_plots_and_plant(tmp_path):
     assert abs(row['static_error_percent_with_correction']) < 1e-8
     assert row['reference_vs_direct_solve_percent_of_peak'] < 0.1
     assert main(['dcgain', '--position', 'P1', '--out', str(tmp_path)]) == 0
+    table = np.loadtxt(tmp_path / 'dcgain_tcp_displacement_y_tcp_force_y_P1.csv',
+                       delimiter=',', skiprows=1)
+    assert table[:, 3].sum() == row['modes_kept']
+    np.testing.assert_array_equal(table[:, 3] == 1, np.abs(table[:, 2]) >= 5e-11)
+    # all computed modes miss only the (small) flexibility of the modes above 750 Hz
+    assert table[:, 2].sum() == pytest.approx(row['static_compliance_m_per_n'], rel=0.01)
     assert main(['build', '--position', 'P1', '--out', str(tmp_path)]) == 0
     plant = PlantModel.load(tmp_path / 'plant_P1.npz')
     assert plant.meta['position'] == 'P1' and plant.meta['static_correction']

@@ -157,7 +157,13 @@ def cmd_dcgain(args) -> int:
                                limit=rule.get('abs_limit'), keep=keep,
                                title=f'{position}: dc gain per mode, {out} / {inp}; '
                                      f'{keep.size} of {gains.size} kept')
-        print(f'wrote {png}')
+        table = args.out / f'dcgain_{out}_{inp}_{position}.csv'
+        np.savetxt(table, np.column_stack([np.arange(1, gains.size + 1),
+                                           pair_all.frequencies_hz, gains,
+                                           np.isin(np.arange(gains.size), keep)]),
+                   delimiter=',', header='mode,frequency_hz,dc_gain,kept', comments='',
+                   fmt=['%d', '%.6f', '%.6e', '%d'])
+        print(f'wrote {png} and {table}')
     return 0
 
 
