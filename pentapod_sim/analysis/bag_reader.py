@@ -285,7 +285,7 @@ class Bag:
         if field not in WRENCH_FIELDS:
             raise BagError(f'field {field!r} not in {data.name}; use one of {WRENCH_FIELDS}')
         index = WRENCH_FIELDS.index(field)
-        return cdr_arrays.wrench_arrays(data.payloads)[:, index], 'N' if index < 3 else 'N m'
+        return cdr_arrays.wrench_arrays(data.payloads, index), 'N' if index < 3 else 'N m'
 
 
 def _generic_field(data: TopicData, field: str) -> np.ndarray:

@@ -9,6 +9,7 @@ groups. Offsets count from the end of the 4-byte encapsulation header (Fast-CDR 
 """
 import dataclasses
 import struct
+from typing import Optional
 
 import numpy as np
 
@@ -204,7 +205,7 @@ def joint_state_column(messages, field: str, name: str) -> tuple:
     return values, names
 
 
-def wrench_arrays(messages) -> np.ndarray:
+def wrench_arrays(messages, component: Optional[int] = None) -> np.ndarray:
     """
     Decode WrenchStamped messages.
 
@@ -212,14 +213,17 @@ def wrench_arrays(messages) -> np.ndarray:
     ----------
     messages : MessageStore or list of bytes
         CDR WrenchStamped messages of one topic.
+    component : int, optional
+        Decode only this column (0-2 force x, y, z; 3-5 torque x, y, z).
 
     Returns
     -------
-    (N, 6) float64 ndarray
-        force x, y, z [N], torque x, y, z [N m].
+    (N, 6) or (N,) float64 ndarray
+        force x, y, z [N], torque x, y, z [N m] (or the one requested column).
     """
     store = _store(messages)
-    out = np.empty((len(store), 6))
+    first, width = (0, 6) if component is None else (int(component), 1)
+    out = np.empty((len(store), width))
     lengths = store.lengths
     frame_lens = store.gather(np.arange(len(store)), HEADER + 8, 4).view('<u4')[:, 0]
     for length in np.unique(lengths):
@@ -228,5 +232,5 @@ def wrench_arrays(messages) -> np.ndarray:
             offset = HEADER + _align(12 + int(frame_len), 8)
             if offset + 48 > length:
                 raise BagError(f'malformed WrenchStamped message ({length} bytes)')
-            out[indices] = store.gather(indices, offset, 48).view('<f8')
-    return out
+            out[indices] = store.gather(indices, offset + 8 * first, 8 * width).view('<f8')
+    return out if component is None else out[:, 0]
