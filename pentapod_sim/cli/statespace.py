@@ -52,6 +52,20 @@ def _plants(args):
         yield position, plant_all, keep
 
 
+def _pair(args) -> tuple[str, str]:
+    """(output, input) from --pair OUT/IN or the config's report_pair (PortError if unknown)."""
+    from pentapod_sim.ports import check_names
+    if args.pair:
+        out, sep, inp = args.pair.partition('/')
+        if not sep:
+            raise ConfigError(f'--pair must be OUTPUT/INPUT, got {args.pair!r}')
+    else:
+        out, inp = args.cfg['report_pair']
+    check_names([out], 'output')
+    check_names([inp], 'input')
+    return out, inp
+
+
 def _freq(cfg: dict) -> np.ndarray:
     f = cfg['frequency']
     return np.linspace(float(f['f_min']), float(f['f_max']), int(f['n_points']))
@@ -59,7 +73,7 @@ def _freq(cfg: dict) -> np.ndarray:
 
 def _pair_rule(args) -> list[dict]:
     """Relevance for the report: the report pair alone at the first rule's limit (or --limit)."""
-    out, inp = args.cfg['report_pair']
+    out, inp = _pair(args)
     rule = {k: v for k, v in args.cfg['relevance'][0].items() if k in ('abs_limit', 'rel_limit',
                                                                        'count')}
     if args.limit is not None:
@@ -85,7 +99,7 @@ def _direct_check(fe, pair_all, f_max: float) -> dict:
 
 def cmd_report(args) -> int:
     """Modes kept, static error with/without correction and FRF error for the report pair."""
-    out, inp = args.cfg['report_pair']
+    out, inp = _pair(args)
     freq = _freq(args.cfg)
     rows = []
     for position, plant_all, _ in _plants(args):
@@ -130,7 +144,7 @@ def cmd_report(args) -> int:
 
 def cmd_frf(args) -> int:
     """FRF of the report pair (kept modes, configured correction) per position: PNG + CSV."""
-    out, inp = args.cfg['report_pair']
+    out, inp = _pair(args)
     freq, results, marks = _freq(args.cfg), [], []
     for position, plant_all, keep in _plants(args):
         plant = reduce_plant(plant_all, keep, bool(args.cfg['static_correction']))
@@ -146,7 +160,7 @@ def cmd_frf(args) -> int:
 
 def cmd_dcgain(args) -> int:
     """Bar chart of the report pair's dc gain per mode with the relevance limit."""
-    out, inp = args.cfg['report_pair']
+    out, inp = _pair(args)
     rule = _pair_rule(args)[0]
     for position, plant_all, _ in _plants(args):
         pair_all = plant_all.select([inp], [out])
@@ -182,7 +196,7 @@ def _dampers(specs: list[str]) -> dict[str, float]:
 
 def cmd_closed_loop(args) -> int:
     """Open vs closed-loop FRF of the report pair with added viscous dampers."""
-    out, inp = args.cfg['report_pair']
+    out, inp = _pair(args)
     dampers = _dampers(args.damper or DEFAULT_DAMPERS)
     freq = _freq(args.cfg)
     for position, plant_all, keep in _plants(args):
@@ -238,6 +252,8 @@ def _parser() -> argparse.ArgumentParser:
         p.add_argument('--config', default=None, help='reduction config (default: '
                        'config/reduction.yaml)')
         p.add_argument('--out', type=Path, default=DEFAULT_OUT, help='output directory')
+        p.add_argument('--pair', default=None, metavar='OUTPUT/INPUT',
+                       help='port pair to report and plot (default: report_pair of the config)')
         p.add_argument('--limit', type=float, default=None,
                        help='absolute relevance limit for the report pair [m/N]')
         if name == 'closed-loop':
