@@ -427,10 +427,14 @@ def reduce_plant(plant_all: PlantModel, keep: npt.ArrayLike,
     without it, ``d = 0``.
     """
     keep = np.asarray(keep, dtype=int)
-    g_full = np.asarray(plant_all.meta['static_compliance_full'])
-    g_kept = modal_dc_gains(plant_all.omega[keep], plant_all.b[keep],
-                            plant_all.c_disp[:, keep]).sum(axis=0)
-    d = g_full - g_kept if static_correction else np.zeros_like(g_full)
+    d = np.zeros_like(plant_all.d)
+    if static_correction:
+        if 'static_compliance_full' not in plant_all.meta:
+            raise ConfigError('static correction needs the FE compliance C K^-1 B '
+                              "(meta['static_compliance_full']); this plant has none")
+        g_kept = modal_dc_gains(plant_all.omega[keep], plant_all.b[keep],
+                                plant_all.c_disp[:, keep]).sum(axis=0)
+        d = np.asarray(plant_all.meta['static_compliance_full']) - g_kept
     meta = dict(plant_all.meta, kept_modes=(keep + 1).tolist(),
                 static_correction=bool(static_correction))
     return PlantModel(plant_all.omega[keep], plant_all.zeta[keep], plant_all.b[keep],

@@ -224,3 +224,13 @@ def test_relevance_rules_are_united(full):
     with pytest.raises(ConfigError, match='2 given'):
         from_modal_data([10.0, 20.0, 30.0], {'tcp': np.ones((6, 3))}, None, ['tcp_force_x'],
                         ['tcp_displacement_x'], zeta=[0.01, 0.02])
+
+
+def test_reduce_without_fe_compliance(full):
+    from pentapod_sim.plant_model import reduce_plant
+    plant = full[3]                       # from modal data: no C K^-1 B known
+    small = reduce_plant(plant, [0, 2], static_correction=False)
+    np.testing.assert_array_equal(small.omega, plant.omega[[0, 2]])
+    assert not small.d.any() and small.meta['kept_modes'] == [1, 3]
+    with pytest.raises(ConfigError, match='static correction'):
+        reduce_plant(plant, [0, 2])
