@@ -8,9 +8,10 @@ Two views, both on the stiffness groups of :class:`pentapod_sim.fe_model.FEModel
   rigid. A full-model mode that reappears in that model (mass-weighted MAC above a limit) at a
   frequency close to its own is caused by group g. Because ``K_g >= K``, the i-th frequency
   can only rise; for a mode caused by g alone it stays put, and for a fundamental mode
-  ``(f / f_g)^2`` estimates g's share (Dunkerley). ``alpha = 1e4`` moves modes of the other groups up by about ``sqrt(alpha) =
-  100``, far above the analysed band, while ``K_g`` stays well conditioned for LU in double
-  precision; :func:`neuber_frequencies` can be rerun with other values to check sensitivity.
+  ``(f / f_g)^2`` estimates g's share (Dunkerley). ``alpha = 1e4`` moves modes of the other
+  groups up by about ``sqrt(alpha) = 100``, far above the analysed band, while ``K_g`` stays
+  well conditioned for LU in double precision; :func:`neuber_frequencies` can be rerun with
+  other values to check the sensitivity.
 * **Modal strain energy**: ``E_g = phi^T K_g phi / omega^2`` for mass-normalised ``phi``; the
   shares of one mode sum to one because the groups sum to K.
 
