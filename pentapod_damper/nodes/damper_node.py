@@ -1,0 +1,84 @@
+"""
+Damper node: viscous velocity feedback u = -b * rate on struts and the TCP.
+
+One node may serve several dampers: strut bending dampers (moment pairs about e2 and e3 from
+the bending rates, b [N m s/rad]), strut axial dampers (force from the axial velocity,
+b [N s/m]) and TCP dampers against ground (force from the TCP velocity, b [N s/m]). It answers
+every plant step on /pentapod/forces/<source_name> (lockstep contract, docs/nodes.md). The
+gains may be changed at run time (``ros2 param set``); everything else is read-only.
+"""
+from __future__ import annotations
+
+import numpy as np
+from rcl_interfaces.msg import SetParametersResult
+
+from pentapod_damper.laws import strut_axial_damper, strut_bending_damper, tcp_damper
+from pentapod_sim.exceptions import ConfigError
+from pentapod_sim.nodes.common import declare, run_node
+from pentapod_sim.nodes.lockstep_source import LockstepSource
+
+MAX_GAIN = 1.0e9
+
+
+class DamperNode(LockstepSource):
+    """Viscous dampers on selected struts and TCP directions."""
+
+    def __init__(self, **kwargs):
+        super().__init__('damper', **kwargs)
+        d = self
+        struts_b = declare(d, 'bending_struts', [0], 'struts (1..5) with bending dampers on '
+                           'both cardan axes; [] or [0] = none', read_only=True,
+                           array='integer[]')
+        struts_a = declare(d, 'axial_struts', [0], 'struts (1..5) with axial dampers',
+                           read_only=True, array='integer[]')
+        dirs = declare(d, 'tcp_directions', [''], 'TCP damper directions (x, y, z)',
+                       read_only=True, array='string[]')
+        gains = {'bending_gain': declare(d, 'bending_gain', 20000.0, 'bending damping '
+                                         '[N m s/rad]', low=0.0, high=MAX_GAIN),
+                 'axial_gain': declare(d, 'axial_gain', 50000.0, 'axial damping [N s/m]',
+                                       low=0.0, high=MAX_GAIN),
+                 'tcp_gain': declare(d, 'tcp_gain', 20000.0, 'TCP damping [N s/m]',
+                                     low=0.0, high=MAX_GAIN)}
+        self.laws = {}
+        if [s for s in struts_b if s]:
+            self.laws['bending_gain'] = strut_bending_damper([s for s in struts_b if s],
+                                                             gains['bending_gain'])
+        if [s for s in struts_a if s]:
+            self.laws['axial_gain'] = strut_axial_damper([s for s in struts_a if s],
+                                                         gains['axial_gain'])
+        if [a for a in dirs if a]:
+            self.laws['tcp_gain'] = tcp_damper([a for a in dirs if a], gains['tcp_gain'])
+        if not self.laws:
+            raise ConfigError('damper node has no damper: set bending_struts, axial_struts '
+                              'or tcp_directions')
+        laws = list(self.laws.values())
+        self.setup([p for law in laws for p in law.sensor_ports],
+                   [p for law in laws for p in law.actuator_ports])
+        self._slices = []
+        start = 0
+        for law in laws:
+            self._slices.append((slice(start, start + len(law.sensor_ports)), law))
+            start += len(law.sensor_ports)
+        self.add_on_set_parameters_callback(self._on_set)
+        self.get_logger().info(f'dampers on {self.actuator_ports}')
+
+    def _on_set(self, params) -> SetParametersResult:
+        """Apply new gains (range already checked by rclpy)."""
+        for p in params:
+            if p.name in self.laws:
+                law = self.laws[p.name]
+                law.gains = np.full(len(law.actuator_ports), float(p.value))
+        return SetParametersResult(successful=True)
+
+    def compute(self, ns: int, sensors: np.ndarray) -> np.ndarray:
+        """u = -b * rate for every damper of this node."""
+        return np.concatenate([law.step(sensors[sl]) for sl, law in self._slices])
+
+
+def main(argv=None) -> int:
+    """Entry point of ``ros2 run pentapod_testbed damper``."""
+    return run_node(DamperNode, argv)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

@@ -1,0 +1,70 @@
+"""
+Proof-mass actuator (PMA) node on the working platform (port pma_force_*, sensor
+pma_mount_velocity_*).
+
+The ideal law of :class:`pentapod_damper.laws.ProofMassActuator`: the proof mass m_a [kg] is
+accelerated by g v (g [1/s], v the mount velocity, optionally high-passed), the structure gets
+the reaction -m_a g v, i.e. viscous damping b = m_a g [N s/m]. Stroke and force limits are
+optional. Answers each step on /pentapod/forces/<source_name> and publishes
+/pentapod/pma/state (sensor_msgs/JointState, joints pma_{x,y,z}: position = stroke of the
+proof mass relative to the mount [m] after the step, velocity = proof-mass velocity [m/s],
+effort = force on the structure over the step [N]).
+"""
+from __future__ import annotations
+
+from sensor_msgs.msg import JointState
+
+from pentapod_damper.laws import ProofMassActuator
+from pentapod_sim.nodes.common import declare, INFO_QOS, PMA_STATE_TOPIC, run_node
+from pentapod_sim.nodes.lockstep_source import LockstepSource
+
+
+class PmaNode(LockstepSource):
+    """Proof-mass actuator as a lockstep force source."""
+
+    def __init__(self, **kwargs):
+        super().__init__('pma', **kwargs)
+        d = self
+        rate = declare(d, 'sample_rate', 5000.0, 'plant sample rate [Hz] (same as the plant)',
+                       read_only=True, low=1.0, high=1e6)
+        self.law = ProofMassActuator(
+            declare(d, 'directions', ['x'], 'actuated axes (x, y, z)', read_only=True,
+                    array='string[]'),
+            mass=declare(d, 'proof_mass', 5.0, 'proof mass m_a [kg]', read_only=True,
+                         low=1e-6, high=1e6),
+            gain=declare(d, 'gain', 4000.0, 'g [1/s]; damping b = m_a g [N s/m]',
+                         read_only=True, low=0.0, high=1e9),
+            dt=1.0 / rate,
+            highpass_hz=declare(d, 'highpass_hz', 0.0, '2nd-order Butterworth high-pass on '
+                                'the velocity [Hz]; 0 = none', read_only=True, low=0.0,
+                                high=1e5),
+            stroke_limit=declare(d, 'stroke_limit', 0.0, 'max |stroke| [m]; 0 = unlimited',
+                                 read_only=True, low=0.0, high=10.0),
+            force_limit=declare(d, 'force_limit', 0.0, 'max |force| [N]; 0 = unlimited',
+                                read_only=True, low=0.0, high=1e9))
+        self.setup(self.law.sensor_ports, self.law.actuator_ports)
+        self.joints = [p.replace('pma_force_', 'pma_') for p in self.law.actuator_ports]
+        self.state_pub = self.create_publisher(JointState, PMA_STATE_TOPIC, INFO_QOS)
+        self.get_logger().info(f'PMA m_a = {self.law.mass} kg, g = {self.law.gain} 1/s '
+                               f'(b = {self.law.mass * self.law.gain:.6g} N s/m) on '
+                               f'{self.law.actuator_ports}')
+
+    def compute(self, ns, sensors):
+        """Advance the proof mass one step and return the force on the structure [N]."""
+        return self.law.step(sensors)
+
+    def after_publish(self, stamp, efforts) -> None:
+        """Publish stroke, proof-mass velocity and force."""
+        msg = JointState(name=self.joints, position=self.law.stroke.tolist(),
+                         velocity=self.law.mass_velocity.tolist(), effort=efforts.tolist())
+        msg.header.stamp = stamp
+        self.state_pub.publish(msg)
+
+
+def main(argv=None) -> int:
+    """Entry point of ``ros2 run pentapod_testbed pma``."""
+    return run_node(PmaNode, argv)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

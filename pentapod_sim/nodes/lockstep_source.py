@@ -1,0 +1,130 @@
+"""
+Base class of force-source nodes that answer every plant step (lockstep contract).
+
+A source subscribes to the state topics that carry its sensor ports (or to /clock if it has
+none), waits until it holds every needed message of one stamp t_k, computes u_k with
+:meth:`LockstepSource.compute` and publishes it on /pentapod/forces/<source_name> with the
+same stamp. A re-published step (same stamp again) gets the cached answer, so stateful laws
+advance exactly once per step. Messages with NaN/Inf or a missing joint are rejected,
+counted and warned about.
+"""
+from __future__ import annotations
+
+import time
+from typing import Sequence
+
+import numpy as np
+from rclpy.node import Node
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+
+from pentapod_sim.nodes.common import (declare, FORCE_QOS, FORCE_TOPIC_PREFIX, STATE_QOS,
+                                       stamp_msg, stamp_to_ns)
+from pentapod_sim.state_topics import port_location
+
+CLOCK_TOPIC = '/clock'
+
+
+class LockstepSource(Node):
+    """
+    A node that answers each plant step with forces on some input ports.
+
+    Subclasses set ``sensor_ports`` / ``actuator_ports`` and call :meth:`setup`, then
+    implement :meth:`compute`.
+    """
+
+    def __init__(self, default_name: str, **kwargs):
+        super().__init__(default_name, **kwargs)
+        self.source_name = declare(self, 'source_name', self.get_name(), 'publishes forces on '
+                                   '/pentapod/forces/<source_name>', read_only=True)
+        self.rejected = {}
+        self.answered = 0
+        self._last_warn = 0.0
+
+    def setup(self, sensor_ports: Sequence[str], actuator_ports: Sequence[str]) -> None:
+        """Create the subscriptions for the sensors and the force publisher."""
+        self.sensor_ports = list(sensor_ports)
+        self.actuator_ports = list(actuator_ports)
+        # topic -> list of (slot in the sensor vector, joint name, field)
+        self.needs: dict[str, list[tuple[int, str, str]]] = {}
+        for slot, port in enumerate(self.sensor_ports):
+            topic, joint, field = port_location(port)
+            self.needs.setdefault(topic, []).append((slot, joint, field))
+        self._pending: dict[int, dict[str, object]] = {}
+        self._cache: dict[tuple[str, tuple], list] = {}
+        self._last = (-1, None)   # (stamp ns, published message)
+        self.force_pub = self.create_publisher(JointState, FORCE_TOPIC_PREFIX + self.source_name,
+                                               FORCE_QOS)
+        topics = list(self.needs) or [CLOCK_TOPIC]
+        self.subs = [self.create_subscription(
+            Clock if t == CLOCK_TOPIC else JointState, t,
+            lambda msg, t=t: self._on_state(t, msg), STATE_QOS) for t in topics]
+
+    def compute(self, stamp_ns: int, sensors: np.ndarray) -> np.ndarray:
+        """Return efforts for ``actuator_ports`` at this step (N or N m)."""
+        raise NotImplementedError
+
+    def after_publish(self, stamp, efforts: np.ndarray) -> None:
+        """Hook for extra publications (diagnostics) after a step was answered."""
+
+    def _reject(self, reason: str) -> None:
+        """Count and warn (at most once a second) about a bad state message."""
+        kind = reason.split(':')[0]
+        self.rejected[kind] = self.rejected.get(kind, 0) + 1
+        now = time.monotonic()
+        if now - self._last_warn > 1.0:
+            self._last_warn = now
+            self.get_logger().warn(f'rejected state message: {reason} '
+                                   f'({self.rejected[kind]} so far)')
+
+    def _on_state(self, topic: str, msg) -> None:
+        """Collect the messages of one stamp; answer when all needed topics are in."""
+        stamp = msg.clock if topic == CLOCK_TOPIC else msg.header.stamp
+        ns = stamp_to_ns(stamp)
+        if ns == self._last[0]:
+            self.force_pub.publish(self._last[1])   # a re-published step: same answer
+            return
+        if ns < self._last[0]:
+            return                                   # an old step; already answered
+        pending = self._pending.setdefault(ns, {})
+        pending[topic] = msg
+        if len(pending) < max(1, len(self.needs)):
+            return
+        del self._pending[ns]
+        for old in [s for s in self._pending if s < ns]:
+            del self._pending[old]
+        sensors = np.empty(len(self.sensor_ports))
+        for t, msg_t in pending.items():
+            if t != CLOCK_TOPIC and not self._extract(t, msg_t, sensors):
+                return
+        efforts = np.asarray(self.compute(ns, sensors), dtype=float)
+        out = JointState(name=self.actuator_ports, effort=efforts.tolist())
+        out.header.stamp = stamp_msg(ns)
+        self.force_pub.publish(out)
+        self._last = (ns, out)
+        self.answered += 1
+        self.after_publish(out.header.stamp, efforts)
+
+    def _extract(self, topic: str, msg: JointState, sensors: np.ndarray) -> bool:
+        """Fill this topic's sensor slots; reject the step if a joint or value is bad."""
+        key = (topic, tuple(msg.name))
+        picks = self._cache.get(key)
+        if picks is None:
+            index = {n: i for i, n in enumerate(msg.name)}
+            missing = [j for _, j, _ in self.needs[topic] if j not in index]
+            if missing:
+                self._reject(f'missing_joint: {topic} lacks {missing}')
+                return False
+            picks = [(slot, index[j], field) for slot, j, field in self.needs[topic]]
+            self._cache[key] = picks
+        for slot, i, field in picks:
+            values = msg.velocity if field == 'velocity' else msg.position
+            if i >= len(values):
+                self._reject(f'length: {topic} has {len(values)} {field} values for '
+                             f'{len(msg.name)} names')
+                return False
+            sensors[slot] = values[i]
+        if not np.all(np.isfinite(sensors[[s for s, _, _ in picks]])):
+            self._reject(f'nonfinite: {topic} at stamp {stamp_to_ns(msg.header.stamp)} ns')
+            return False
+        return True

@@ -1,0 +1,253 @@
+"""
+Plant node: integrates the modal plant and exchanges outputs and forces over ROS 2.
+
+Every step k it publishes /clock and the state topics (y_k, stamp t_k), then applies the
+forces of its sources (/pentapod/forces/<source>) as u_k and steps x_{k+1} = A_d x_k + B_d u_k
+(:class:`pentapod_sim.plant.DiscretePlant`). Timing ``lockstep`` waits for every source's
+answer to step k (deterministic; a silent source stops the run naming it); ``realtime`` paces
+steps by the wall clock, holds the newest force of each source and reports the achieved rate,
+lateness percentiles and overruns. See docs/nodes.md.
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+from rclpy.node import Node
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+
+from pentapod_sim.exceptions import ConfigError, RunError
+from pentapod_sim.nodes.common import (declare, FORCE_QOS, FORCE_TOPIC_PREFIX, run_node,
+                                       spin_until, STATE_QOS, stamp_msg, stamp_to_ns)
+from pentapod_sim.nodes.realtime_stats import LatenessStats
+from pentapod_sim.plant import (DEFAULT_MAX_STATE_NORM, DiscretePlant, ForceMixer,
+                                load_or_build_model, parse_sources)
+from pentapod_sim.state_topics import stamp_ns, state_layouts, step_of
+
+
+class PlantNode(Node):
+    """Discrete modal plant as a ROS 2 node (parameters: docs/nodes.md)."""
+
+    def __init__(self, **kwargs):
+        super().__init__('plant', **kwargs)
+        self._declare()
+        model, origin = load_or_build_model(self.p['model_file'], self.p['position'],
+                                            self.p['model_cache_dir'])
+        self.model = model
+        self.core = DiscretePlant(model.discretize(1.0 / self.p['sample_rate']),
+                                  max_state_norm=self.p['max_state_norm'])
+        self.dt = self.core.dt
+        self.get_logger().info(f'plant model {origin}: {model.n_modes} modes, '
+                               f'{len(model.input_names)} inputs, {len(model.output_names)} '
+                               f'outputs, dt = {self.dt:.6g} s')
+        ports = {n: self.get_parameter_or_declare(f'source_ports.{n}')
+                 for n in self.p['sources']}
+        self.mixer = ForceMixer(self.core.input_names, parse_sources(self.p['sources'], ports))
+        self.n_steps = self._n_steps()
+        self.clock_pub = self.create_publisher(Clock, '/clock', STATE_QOS)
+        self.layouts = state_layouts(self.core.output_names)
+        self.state_pubs = [(self.create_publisher(JointState, lay.topic, STATE_QOS), lay)
+                           for lay in self.layouts]
+        self.force_subs = [self.create_subscription(
+            JointState, FORCE_TOPIC_PREFIX + name,
+            lambda msg, name=name: self._on_force(name, msg), FORCE_QOS)
+            for name in self.mixer.sources]
+        self._last_warn = {}
+
+    def _declare(self) -> None:
+        """Declare every parameter (docs/nodes.md) into ``self.p``."""
+        d = self
+        self.p = {
+            'model_file': declare(d, 'model_file', '', 'saved PlantModel .npz; wins over '
+                                  'position', read_only=True),
+            'position': declare(d, 'position', 'P1', 'position name of config/positions.yaml '
+                                'to build the model for (cached)', read_only=True),
+            'model_cache_dir': declare(d, 'model_cache_dir', 'out/models',
+                                       'folder of cached built models', read_only=True),
+            'sample_rate': declare(d, 'sample_rate', 5000.0, 'plant sample rate [Hz]',
+                                   read_only=True, low=1.0, high=1.0e6),
+            'timing': declare(d, 'timing', 'lockstep', "'lockstep' or 'realtime'",
+                              read_only=True),
+            'duration': declare(d, 'duration', 1.0, 'simulated time [s] (if steps is 0)',
+                                read_only=True, low=0.0, high=1.0e7),
+            'steps': declare(d, 'steps', 0, 'number of steps; 0 = use duration',
+                             read_only=True, low=0, high=2 ** 62),
+            'sources': declare(d, 'sources', [''], 'force source names; each publishes on '
+                               '/pentapod/forces/<name>', read_only=True, array='string[]'),
+            'source_timeout': declare(d, 'source_timeout', 5.0, 'lockstep: max wall time [s] '
+                                      'a source may stay silent', low=1e-3, high=3600.0),
+            'startup_timeout': declare(d, 'startup_timeout', 30.0, 'max wall time [s] to '
+                                       'wait for the sources at step 0', low=0.0,
+                                       high=3600.0),
+            'resend_period': declare(d, 'resend_period', 0.2, 'lockstep: re-publish y_k '
+                                     'after this wall time [s] without all answers',
+                                     low=1e-3, high=60.0),
+            'max_state_norm': declare(d, 'max_state_norm', DEFAULT_MAX_STATE_NORM,
+                                      'instability bound on ||x||', low=1e-12, high=1e300),
+            'report_period': declare(d, 'report_period', 2.0, 'realtime: log timing every '
+                                     'this wall time [s]', low=0.1, high=3600.0),
+            'output_file': declare(d, 'output_file', '', 'write y_k, u_k of every step to '
+                                   'this .npz at the end (empty: no file)', read_only=True),
+        }
+        self.p['sources'] = [s for s in self.p['sources'] if s]
+        if self.p['timing'] not in ('lockstep', 'realtime'):
+            raise ConfigError(f"parameter 'timing' must be 'lockstep' or 'realtime', got "
+                              f"{self.p['timing']!r}")
+
+    def get_parameter_or_declare(self, name: str) -> list:
+        """Declare ``source_ports.<source>`` (string array, empty = any input port)."""
+        ports = declare(self, name, [''], 'input ports this source may drive (empty: all)',
+                        read_only=True, array='string[]')
+        return [p for p in ports if p]
+
+    def _n_steps(self) -> int:
+        """Steps of the run from ``steps`` or ``duration``."""
+        if self.p['steps'] > 0:
+            return int(self.p['steps'])
+        n = int(round(self.p['duration'] / self.dt))
+        if n <= 0:
+            raise ConfigError(f"parameters 'steps' = 0 and 'duration' = {self.p['duration']} "
+                              's give no step')
+        return n
+
+    # -- communication ---------------------------------------------------------------------
+    def publish_outputs(self, y: np.ndarray) -> None:
+        """Publish /clock and the state topics of step k."""
+        stamp = stamp_msg(stamp_ns(self.core.k, self.dt))
+        self.clock_pub.publish(Clock(clock=stamp))
+        for pub, lay in self.state_pubs:
+            pos, vel = lay.values(y)
+            msg = JointState(name=lay.joints, position=pos.tolist(), velocity=vel.tolist())
+            msg.header.stamp = stamp
+            pub.publish(msg)
+
+    def _on_force(self, source: str, msg: JointState) -> None:
+        """Validate a force message; warn (throttled) and count rejects."""
+        step = step_of(stamp_to_ns(msg.header.stamp), self.dt)
+        reason = self.mixer.submit(source, msg.name, msg.effort, step, self.core.k,
+                                   exact=self.p['timing'] == 'lockstep')
+        if reason is not None:
+            kind = reason.split(':')[0]
+            if reason.startswith(('stale', 'duplicate:')):
+                return  # repeated answers to re-published steps are expected
+            now = time.monotonic()
+            if now - self._last_warn.get((source, kind), -1e9) > 1.0:
+                self._last_warn[(source, kind)] = now
+                self.get_logger().warn(f'rejected message from source {source!r}: {reason} '
+                                       f'({self.mixer.rejected[(source, kind)]} so far)')
+
+    # -- runs ------------------------------------------------------------------------------
+    def wait_for_sources(self, executor) -> None:
+        """Wait until every source topic has a publisher (RunError names the missing)."""
+        def missing():
+            return [s for s in self.mixer.sources
+                    if self.count_publishers(FORCE_TOPIC_PREFIX + s) == 0]
+        if not spin_until(executor, lambda: not missing(), self.p['startup_timeout']):
+            raise RunError(f'force source(s) {", ".join(missing())} did not appear within '
+                           f'startup_timeout = {self.p["startup_timeout"]} s')
+
+    def run_lockstep(self, executor, trace) -> None:
+        """Each step: publish y_k, wait for every source's u_k, advance."""
+        core, mixer = self.core, self.mixer
+        resend, timeout = self.p['resend_period'], self.p['source_timeout']
+        for k in range(self.n_steps):
+            y = core.outputs()
+            self.publish_outputs(y)
+            start = last_sent = time.monotonic()
+            limit = self.p['startup_timeout'] if k == 0 else timeout
+            while mixer.missing(k):
+                executor.spin_once(timeout_sec=resend / 4)
+                now = time.monotonic()
+                if now - start > limit:
+                    raise RunError(f'force source(s) {", ".join(mixer.missing(k))} silent '
+                                   f'for {now - start:.3g} s at step {k} (t = '
+                                   f'{core.time:.6g} s); source_timeout = {timeout} s')
+                if now - last_sent > resend:
+                    self.publish_outputs(y)
+                    last_sent = now
+            u = mixer.total()
+            trace.record(k, y, u)
+            core.advance(u)
+
+    def run_realtime(self, executor, trace) -> LatenessStats:
+        """Wall-clock paced steps with the newest force of each source held."""
+        core, mixer, dt = self.core, self.mixer, self.dt
+        stats = LatenessStats(self.n_steps, dt)
+        t0 = time.monotonic()
+        next_report = t0 + self.p['report_period']
+        for k in range(self.n_steps):
+            target = t0 + k * dt
+            now = time.monotonic()
+            while now < target:
+                executor.spin_once(timeout_sec=target - now)
+                now = time.monotonic()
+            stats.add(k, now - target)
+            y = core.outputs()
+            self.publish_outputs(y)
+            executor.spin_once(timeout_sec=0.0)
+            u = mixer.total()
+            trace.record(k, y, u)
+            core.advance(u)
+            if now > next_report:
+                self.get_logger().info('realtime: ' + stats.summary(k + 1, now - t0))
+                next_report = now + self.p['report_period']
+        stats.elapsed = time.monotonic() - t0
+        return stats
+
+
+class Trace:
+    """Per-step record of y_k and u_k, written to an .npz file at the end (optional)."""
+
+    def __init__(self, n_steps: int, core: DiscretePlant, enabled: bool):
+        self.enabled = enabled
+        shape = (n_steps if enabled else 0)
+        self.y = np.zeros((shape, len(core.output_names)))
+        self.u = np.zeros((shape, len(core.input_names)))
+
+    def record(self, k: int, y: np.ndarray, u: np.ndarray) -> None:
+        """Store step k."""
+        if self.enabled:
+            self.y[k], self.u[k] = y, u
+
+    def save(self, path: str, node: PlantNode, extra: dict) -> None:
+        """Write y, u, dt, port names, reject counts and ``extra`` (e.g. timing stats)."""
+        rejected = [f'{s}/{r}={c}' for (s, r), c in node.mixer.rejected.items()]
+        np.savez(path, y=self.y, u=self.u, dt=node.dt, x_final=node.core.x,
+                 output_names=np.array(node.core.output_names),
+                 input_names=np.array(node.core.input_names),
+                 rejected=np.array(rejected, dtype=str), **extra)
+
+
+def run(node: PlantNode, executor) -> None:
+    """Wait for the sources, run the configured number of steps, log a summary."""
+    trace = Trace(node.n_steps, node.core, bool(node.p['output_file']))
+    node.wait_for_sources(executor)
+    node.get_logger().info(f'{node.p["timing"]} run of {node.n_steps} steps with sources '
+                           f'{list(node.mixer.sources) or "none"}')
+    extra = {}
+    wall = time.monotonic()
+    try:
+        if node.p['timing'] == 'lockstep':
+            node.run_lockstep(executor, trace)
+        else:
+            stats = node.run_realtime(executor, trace)
+            node.get_logger().info('realtime final: ' + stats.summary(node.n_steps,
+                                                                       stats.elapsed))
+            extra = stats.as_dict()
+    finally:
+        wall = time.monotonic() - wall
+        node.get_logger().info(f'ran {node.core.k} steps in {wall:.3f} s wall '
+                               f'({node.core.k / max(wall, 1e-9):.0f} steps/s); '
+                               + node.mixer.reject_summary())
+        if node.p['output_file']:
+            trace.save(node.p['output_file'], node, dict(extra, wall_time=wall))
+
+
+def main(argv=None) -> int:
+    """Entry point of ``ros2 run pentapod_testbed plant``."""
+    return run_node(PlantNode, argv, run)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
