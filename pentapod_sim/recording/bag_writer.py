@@ -92,6 +92,10 @@ class BagWriter:
     def __init__(self, path, run_info: Optional[Mapping] = None, chunk_size: int = 64 * 1024,
                  flush_period_s: float = 0.5, compression: str = '') -> None:
         self.path = Path(path)
+        compressions = {'': CompressionType.NONE, 'zstd': CompressionType.ZSTD,
+                        'lz4': CompressionType.LZ4}
+        if compression not in compressions:
+            raise BagError(f'unknown compression {compression!r}; use one of {list(compressions)}')
         if self.path.exists() and any(self.path.iterdir()):
             raise BagError(f'bag folder {self.path} exists and is not empty')
         self.path.mkdir(parents=True, exist_ok=True)
@@ -106,10 +110,6 @@ class BagWriter:
         self._last_flush = time.monotonic()
         self._closed = False
         self._stream = open(self.path / self.mcap_name, 'wb')
-        compressions = {'': CompressionType.NONE, 'zstd': CompressionType.ZSTD,
-                        'lz4': CompressionType.LZ4}
-        if compression not in compressions:
-            raise BagError(f'unknown compression {compression!r}; use one of {list(compressions)}')
         self._writer = Writer(self._stream, chunk_size=chunk_size,
                               compression=compressions[compression])
         self._writer.start(profile='ros2', library=f'pentapod_testbed {__version__}')
