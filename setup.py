@@ -15,6 +15,12 @@ EXECUTABLES = {
     'analyze': 'pentapod_sim.cli.analyze:main',
     'modes': 'pentapod_sim.cli.modes:main',
     'statespace': 'pentapod_sim.cli.statespace:main',
+    'plant': 'pentapod_sim.nodes.plant_node:main',
+    'exciter': 'pentapod_sim.nodes.exciter_node:main',
+    'damper': 'pentapod_damper.nodes.damper_node:main',
+    'pma': 'pentapod_damper.nodes.pma_node:main',
+    'example_controller': 'pentapod_damper.nodes.example_controller:main',
+    'scenario': 'pentapod_sim.scenario:main',
 }
 
 
@@ -30,6 +36,7 @@ setup(
         ('share/ament_index/resource_index/packages', ['resource/' + PACKAGE]),
         ('share/' + PACKAGE, ['package.xml']),
         ('share/' + PACKAGE + '/config', _files('config/*.yaml')),
+        ('share/' + PACKAGE + '/config/scenarios', _files('config/scenarios/*.yaml')),
         ('share/' + PACKAGE + '/launch', _files('launch/*.launch.py')),
         ('lib/' + PACKAGE, ['scripts/' + name for name in EXECUTABLES]),
     ],

@@ -1,0 +1,52 @@
+"""
+Launch a testbed scenario: ``ros2 launch pentapod_testbed testbed.launch.py scenario:=<name>``.
+
+The scenario is a ROS parameter file of config/scenarios (or a path). Every node section of
+it becomes one Node of package pentapod_testbed; the executable follows from the node name's
+prefix exactly as in :mod:`pentapod_sim.scenario` (same table), and every node gets the
+whole file as its parameter file (so ``/**`` entries reach all nodes). The launch ends when
+the plant ends.
+"""
+from launch import LaunchDescription
+from launch.actions import (DeclareLaunchArgument, EmitEvent, OpaqueFunction,
+                            RegisterEventHandler)
+from launch.event_handlers import OnProcessExit
+from launch.events import Shutdown
+from launch.substitutions import LaunchConfiguration
+from launch_ros.actions import Node
+
+from pentapod_sim.scenario import resolve, scenario_nodes
+
+
+def _nodes(context):
+    """Nodes of the chosen scenario; shut the launch down when the plant exits."""
+    path = resolve(LaunchConfiguration('scenario').perform(context))
+    overrides = {}
+    for key in ('steps', 'duration'):
+        value = LaunchConfiguration(key).perform(context)
+        if value:
+            overrides[key] = int(value) if key == 'steps' else float(value)
+    actions = []
+    for node in scenario_nodes(path):
+        params = [str(path)] + ([overrides] if node.executable == 'plant' and overrides
+                                else [])
+        action = Node(package='pentapod_testbed', executable=node.executable, name=node.name,
+                      parameters=params, output='screen')
+        actions.append(action)
+        if node.executable == 'plant':
+            actions.append(RegisterEventHandler(OnProcessExit(
+                target_action=action, on_exit=[EmitEvent(event=Shutdown(
+                    reason='plant finished'))])))
+    return actions
+
+
+def generate_launch_description():
+    """Arguments: scenario (name or file), steps and duration (plant overrides)."""
+    return LaunchDescription([
+        DeclareLaunchArgument('scenario', default_value='baseline',
+                              description='scenario name (config/scenarios) or YAML path'),
+        DeclareLaunchArgument('steps', default_value='', description='plant steps override'),
+        DeclareLaunchArgument('duration', default_value='',
+                              description='plant duration override [s]'),
+        OpaqueFunction(function=_nodes),
+    ])

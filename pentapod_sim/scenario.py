@@ -1,0 +1,188 @@
+"""
+Start a whole scenario from a ROS parameter file: every node its own process, like ros2 run.
+
+A scenario file (config/scenarios/*.yaml) is an ordinary ROS 2 parameter file: one
+``<node_name>: ros__parameters:`` section per node plus an optional ``/**`` section shared by
+all (e.g. ``sample_rate``). The executable of a node follows from its name's prefix
+(:data:`NODE_KINDS`: ``plant``, ``exciter``, ``damper*``, ``pma*``, ``example_controller*``,
+``recorder*``). The runner starts the sources first, then the plant, waits for the plant to
+end, stops the others with SIGINT (SIGKILL after a grace period) and returns the plant's exit
+code (nonzero also if another node failed). launch/testbed.launch.py uses the same table.
+"""
+from __future__ import annotations
+
+import argparse
+from dataclasses import dataclass
+import logging
+import os
+from pathlib import Path
+import signal
+import subprocess
+import sys
+import time
+
+import yaml
+
+from pentapod_sim.exceptions import ConfigError
+
+LOG = logging.getLogger(__name__)
+
+#: node-name prefix -> (python module, executable name of setup.py)
+NODE_KINDS = {
+    'plant': ('pentapod_sim.nodes.plant_node', 'plant'),
+    'exciter': ('pentapod_sim.nodes.exciter_node', 'exciter'),
+    'damper': ('pentapod_damper.nodes.damper_node', 'damper'),
+    'pma': ('pentapod_damper.nodes.pma_node', 'pma'),
+    'example_controller': ('pentapod_damper.nodes.example_controller', 'example_controller'),
+    'recorder': ('pentapod_sim.nodes.recorder_node', 'recorder'),
+}
+
+
+@dataclass
+class ScenarioNode:
+    """A node of a scenario: its name, python module and ros2 executable."""
+
+    name: str
+    module: str
+    executable: str
+
+
+def scenario_dirs() -> list[Path]:
+    """Folders searched for scenario names (source checkout, then installed share)."""
+    return [Path(__file__).resolve().parent.parent / 'config' / 'scenarios',
+            Path(sys.prefix) / 'share' / 'pentapod_testbed' / 'config' / 'scenarios']
+
+
+def resolve(scenario: str) -> Path:
+    """Path of a scenario file given a path or a name of config/scenarios (ConfigError)."""
+    path = Path(scenario)
+    if path.is_file():
+        return path
+    for folder in scenario_dirs():
+        cand = folder / f'{scenario}.yaml'
+        if cand.is_file():
+            return cand
+    known = sorted({p.stem for d in scenario_dirs() if d.is_dir() for p in d.glob('*.yaml')})
+    raise ConfigError(f'scenario {scenario!r} is neither a file nor one of: {", ".join(known)}')
+
+
+def executable_of(node_name: str) -> tuple[str, str]:
+    """(module, executable) of a node name by its longest matching prefix."""
+    for prefix in sorted(NODE_KINDS, key=len, reverse=True):
+        if node_name.startswith(prefix):
+            return NODE_KINDS[prefix]
+    raise ConfigError(f'node {node_name!r}: name must start with one of '
+                      + ', '.join(NODE_KINDS))
+
+
+def scenario_nodes(path: str | Path) -> list[ScenarioNode]:
+    """Nodes of a scenario file, sources first and the plant last."""
+    try:
+        data = yaml.safe_load(Path(path).read_text(encoding='utf-8')) or {}
+    except (OSError, yaml.YAMLError) as err:
+        raise ConfigError(f'cannot read scenario {path}: {err}') from None
+    if not isinstance(data, dict):
+        raise ConfigError(f'scenario {path} must map node names to ros__parameters')
+    nodes = []
+    for name, section in data.items():
+        if name.startswith('/'):
+            continue                           # wildcard sections such as /**
+        if not isinstance(section, dict) or 'ros__parameters' not in section:
+            raise ConfigError(f'scenario {path}: section {name!r} lacks ros__parameters')
+        nodes.append(ScenarioNode(name, *executable_of(name)))
+    if sum(n.executable == 'plant' for n in nodes) != 1:
+        raise ConfigError(f'scenario {path} needs exactly one plant node')
+    return sorted(nodes, key=lambda n: n.executable == 'plant')
+
+
+def node_command(node: ScenarioNode, params_file: Path, overrides: list[str]) -> list[str]:
+    """Command line of one node process (``python -m module --ros-args ...``)."""
+    cmd = [sys.executable, '-m', node.module, '--ros-args', '-r', f'__node:={node.name}',
+           '--params-file', str(params_file)]
+    for item in overrides:
+        cmd += ['-p', item]
+    return cmd
+
+
+def stop(procs: dict[str, subprocess.Popen], grace: float = 5.0) -> None:
+    """SIGINT every running process, SIGKILL those still alive after ``grace`` seconds."""
+    for proc in procs.values():
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGINT)
+    end = time.monotonic() + grace
+    for proc in procs.values():
+        try:
+            proc.wait(timeout=max(0.1, end - time.monotonic()))
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
+def run_scenario(path: Path, plant_overrides: list[str], timeout: float,
+                 env: dict | None = None) -> int:
+    """Start the nodes of a scenario, wait for the plant, stop the rest; return exit code."""
+    nodes = scenario_nodes(path)
+    procs: dict[str, subprocess.Popen] = {}
+    try:
+        for node in nodes:
+            extra = plant_overrides if node.executable == 'plant' else []
+            LOG.info('starting %s (%s)', node.name, node.module)
+            procs[node.name] = subprocess.Popen(node_command(node, path, extra), env=env)
+        plant = procs[nodes[-1].name]
+        end = time.monotonic() + timeout
+        while plant.poll() is None:
+            dead = [n for n, p in procs.items() if p.poll() not in (None, 0)]
+            if dead:
+                LOG.error('node(s) %s exited early with an error', ', '.join(dead))
+            if time.monotonic() > end:
+                LOG.error('plant did not finish within %.0f s; stopping', timeout)
+                break
+            time.sleep(0.2)
+        code = plant.poll()
+        failed = [n for n, p in procs.items() if p.poll() not in (None, 0)]
+    finally:
+        stop(procs)
+    if code is None:
+        return 2
+    if code == 0 and failed:
+        LOG.error('node(s) %s failed', ', '.join(failed))
+        return 1
+    return code
+
+
+def main(argv=None) -> int:
+    """Entry point of ``ros2 run pentapod_testbed scenario <name or file>``."""
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser.add_argument('scenario', help='scenario name (config/scenarios) or YAML file')
+    parser.add_argument('--steps', type=int, help='override plant steps')
+    parser.add_argument('--duration', type=float, help='override plant duration [s]')
+    parser.add_argument('--timing', choices=['lockstep', 'realtime'])
+    parser.add_argument('--model-file', help='override plant model_file')
+    parser.add_argument('--output-file', help='plant trace .npz (y_k, u_k per step)')
+    parser.add_argument('--domain-id', type=int, help='ROS_DOMAIN_ID for all nodes')
+    parser.add_argument('--timeout', type=float, default=3600.0,
+                        help='wall-time limit of the run [s]')
+    parser.add_argument('--list', action='store_true', help='only print the nodes')
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=logging.INFO, format='%(levelname)s %(message)s')
+    try:
+        path = resolve(args.scenario)
+        if args.list:
+            for node in scenario_nodes(path):
+                print(f'{node.name}: {node.executable} ({node.module})')
+            return 0
+        overrides = [f'{key}:={value}' for key, value in (
+            ('steps', args.steps), ('duration', args.duration), ('timing', args.timing),
+            ('model_file', args.model_file), ('output_file', args.output_file))
+            if value is not None]
+        env = dict(os.environ)
+        if args.domain_id is not None:
+            env['ROS_DOMAIN_ID'] = str(args.domain_id)
+        return run_scenario(path, overrides, args.timeout, env)
+    except ConfigError as err:
+        print(f'error: {err}', file=sys.stderr)
+        return 1
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
