@@ -133,7 +133,8 @@ class ProofMassActuator:
     stroke_limit : float
         Max |stroke| [m] (proof mass relative to the mount); 0 = unlimited.
     force_limit : float
-        Max |F_a| [N]; 0 = unlimited.
+        Max |F_a| commanded [N]; 0 = unlimited. At the stroke limit an ideal end stop adds
+        the force that holds the proof mass at the limit (it may exceed ``force_limit``).
     """
 
     def __init__(self, directions: Sequence[str], mass: float, gain: float, dt: float,
