@@ -15,6 +15,7 @@ import warnings
 import numpy as np
 from numpy.testing import assert_allclose
 import pytest
+import yaml
 
 from pentapod_sim.analysis.bag_reader import open_bag
 
@@ -24,7 +25,7 @@ DT_NS = 1_000_000  # 1 ms sim-time step
 PUBLISHER = r'''
 import sys, time
 import rclpy
-from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from geometry_msgs.msg import WrenchStamped
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
@@ -35,9 +36,11 @@ qos = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
 pubs = [node.create_publisher(JointState, '/pentapod/tcp_state', qos),
         node.create_publisher(WrenchStamped, '/pentapod/excitation', qos),
         node.create_publisher(Clock, '/clock', qos),
-        node.create_publisher(JointState, '/other/ignored', qos)]
+        node.create_publisher(JointState, '/other/ignored', qos),
+        node.create_publisher(JointState, '/pentapod/forces/best_effort',
+                              qos_profile_sensor_data)]
 deadline = time.monotonic() + 30
-while any(p.get_subscription_count() == 0 for p in pubs[:3]):
+while any(p.get_subscription_count() == 0 for p in pubs[:3] + pubs[4:]):
     if time.monotonic() > deadline:
         sys.exit('recorder did not subscribe')
     rclpy.spin_once(node, timeout_sec=0.05)
@@ -58,6 +61,7 @@ for k in range(n):
     pubs[0].publish(js)
     pubs[1].publish(w)
     pubs[3].publish(js)
+    pubs[4].publish(js)
     time.sleep(0.002)
 time.sleep(0.5)
 node.destroy_node()
@@ -109,11 +113,18 @@ def test_recorded_bag_is_read_by_rosbags_with_all_messages(tmp_path, ros_env, si
         types = {c.topic: c.msgtype for c in reader.connections}
         assert types == {'/pentapod/tcp_state': 'sensor_msgs/msg/JointState',
                          '/pentapod/excitation': 'geometry_msgs/msg/WrenchStamped',
-                         '/clock': 'rosgraph_msgs/msg/Clock'}
+                         '/clock': 'rosgraph_msgs/msg/Clock',
+                         '/pentapod/forces/best_effort': 'sensor_msgs/msg/JointState'}
+        qos = {c.topic: c.ext.offered_qos_profiles[0].reliability.name
+               for c in reader.connections}
+        assert qos['/pentapod/forces/best_effort'] == 'BEST_EFFORT'
+        assert qos['/pentapod/tcp_state'] == 'RELIABLE'
         seen = {topic: [] for topic in types}
         for conn, log_time, raw in reader.messages():
             seen[conn.topic].append((log_time, reader.deserialize(raw, conn.msgtype)))
-    assert {t: len(v) for t, v in seen.items()} == {t: N_STEPS for t in types}
+    counts = {t: len(v) for t, v in seen.items()}
+    assert 0 < counts.pop('/pentapod/forces/best_effort') <= N_STEPS  # best effort may drop
+    assert counts == {t: N_STEPS for t in types if t != '/pentapod/forces/best_effort'}
     states = sorted(seen['/pentapod/tcp_state'], key=lambda item: item[0])
     k = np.arange(N_STEPS)
     assert_allclose([s.position[0] for _, s in states], 1e-6 * k)
@@ -144,5 +155,7 @@ def test_sigkill_leaves_a_readable_bag(tmp_path, ros_env):
     assert len(series.values) == N_STEPS
     assert_allclose(series.values, -2e-6 * np.arange(N_STEPS))
     assert_allclose(series.time, np.arange(N_STEPS) * DT_NS * 1e-9)
-    meta = (tmp_path / 'crash' / 'metadata.yaml').read_text()
-    assert f'message_count: {3 * N_STEPS}' in meta
+    meta = yaml.safe_load((tmp_path / 'crash' / 'metadata.yaml').read_text())
+    counts = {t['topic_metadata']['name']: t['message_count']
+              for t in meta['rosbag2_bagfile_information']['topics_with_message_count']}
+    assert counts['/pentapod/tcp_state'] == counts['/clock'] == N_STEPS  # last flush

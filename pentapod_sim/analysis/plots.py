@@ -50,8 +50,11 @@ def frf_plot(results: Sequence, path, analytic: Optional[tuple] = None,
         band = (freq > max(fmin, 0.0)) & (freq <= (fmax or freq[-1]))
         ax_mag.semilogy(freq[band], np.abs(h[band]), 'k--', lw=1, label=label)
         ax_ph.plot(freq[band], np.degrees(np.unwrap(np.angle(h[band]))), 'k--', lw=1)
-    for peak in resonances or ():
+    resonances = list(resonances or ())
+    for peak in resonances:
         ax_mag.plot(peak.freq, peak.magnitude, 'rv')
+        if len(resonances) > 8:
+            continue  # markers only; the numbers are in the _peaks.csv table
         ax_mag.annotate(f'{peak.freq:.1f} Hz\nζ={peak.damping_ratio:.3%}',
                         (peak.freq, peak.magnitude), textcoords='offset points',
                         xytext=(4, 4), fontsize=7)

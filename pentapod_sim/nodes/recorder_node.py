@@ -30,6 +30,15 @@ from pentapod_sim.recording import BagWriter, qos_profile
 from pentapod_sim.recording.msgdefs import has_header_stamp
 
 DEFAULT_PREFIX = '/pentapod/'
+# topics of docs/architecture.md: subscribed at start (before any publisher exists), so that a
+# recorder started before the plant misses no step; others are found by discovery
+KNOWN_TOPICS = {
+    '/clock': 'rosgraph_msgs/msg/Clock',
+    '/pentapod/tcp_state': 'sensor_msgs/msg/JointState',
+    '/pentapod/strut_states': 'sensor_msgs/msg/JointState',
+    '/pentapod/excitation': 'geometry_msgs/msg/WrenchStamped',
+    '/pentapod/pma/state': 'sensor_msgs/msg/JointState',
+}
 
 
 def message_class(msg_type: str):
@@ -52,7 +61,7 @@ class RecorderNode(Node):
         self.declare_parameter('run_info', '', desc(
             description='YAML mapping stored in custom_data (model hash, pose, scenario)'))
         self.declare_parameter('queue_depth', 1000, desc(description='subscription depth'))
-        self.declare_parameter('discovery_period', 1.0, desc(description='[s], wall time'))
+        self.declare_parameter('discovery_period', 0.2, desc(description='[s], wall time'))
         self.declare_parameter('flush_period', 0.5, desc(description='[s], wall time'))
         param = self.get_parameter
         self.wanted = list(param('topics').value or [])
@@ -64,7 +73,10 @@ class RecorderNode(Node):
         self.depth = int(param('queue_depth').value)
         self.writer = BagWriter(Path(param('output_dir').value) / name, run_info=run_info,
                                 flush_period_s=0.0)
-        self.subs = {}
+        self.subs = {}  # topic -> (subscription or None, msg_type, best_effort)
+        for topic, msg_type in KNOWN_TOPICS.items():
+            if self._selected(topic):
+                self._subscribe(topic, msg_type, [])
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.create_timer(float(param('discovery_period').value), self.discover, clock=steady)
         self.create_timer(float(param('flush_period').value), self.flush, clock=steady)
@@ -77,40 +89,54 @@ class RecorderNode(Node):
         return topic.startswith(DEFAULT_PREFIX) or topic == '/clock'
 
     def discover(self) -> None:
-        """Subscribe to newly appeared topics that are selected and have a publisher."""
+        """Subscribe to new selected topics with a publisher; follow best-effort publishers."""
         for topic, types in self.get_topic_names_and_types():
-            if topic in self.subs or not self._selected(topic):
+            if not self._selected(topic):
                 continue
+            known = self.subs.get(topic)
+            if known is not None and (known[0] is None or known[2]):
+                continue  # unrecordable, or already best effort (matches every publisher)
             publishers = self.get_publishers_info_by_topic(topic)
-            if not publishers:
+            if not publishers or (known is not None and not _any_best_effort(publishers)):
                 continue
+            if known is not None:  # a best-effort publisher cannot match a reliable reader
+                self.destroy_subscription(known[0])
+                self.get_logger().warn(f'{topic}: best-effort publisher, messages may be lost')
             try:
                 self._subscribe(topic, types[0], publishers)
             except (BagError, ImportError, AttributeError, ValueError) as err:
                 self.get_logger().error(f'cannot record {topic} [{types[0]}]: {err}')
-                self.subs[topic] = None  # do not retry every period
+                self.subs[topic] = (None, types[0], False)  # do not retry every period
 
     def _subscribe(self, topic: str, msg_type: str, publishers) -> None:
-        best_effort = any(p.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT
-                          for p in publishers)
+        best_effort = _any_best_effort(publishers)
         qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=self.depth,
                          reliability=(ReliabilityPolicy.BEST_EFFORT if best_effort
                                       else ReliabilityPolicy.RELIABLE),
                          durability=DurabilityPolicy.VOLATILE)
-        offered = [qos_profile(p.qos_profile.reliability.name.lower(), self.depth,
-                               p.qos_profile.durability.name.lower()) for p in publishers]
-        self.writer.add_topic(topic, msg_type, offered)
         stamped = has_header_stamp(msg_type)
-        self.subs[topic] = self.create_subscription(
-            message_class(msg_type), topic, self._callback(topic, stamped), qos, raw=True)
+        sub = self.create_subscription(message_class(msg_type), topic,
+                                       self._callback(topic, msg_type, stamped), qos, raw=True)
+        self.subs[topic] = (sub, msg_type, best_effort)
         self.get_logger().info(f'subscribed {topic} [{msg_type}]'
                                f'{" best effort" if best_effort else ""}')
 
-    def _callback(self, topic: str, stamped: bool):
+    def _register(self, topic: str, msg_type: str) -> None:
+        """Add the topic to the bag at its first message, with the publishers' offered QoS."""
+        offered = [qos_profile(p.qos_profile.reliability.name.lower(), self.depth,
+                               p.qos_profile.durability.name.lower())
+                   for p in self.get_publishers_info_by_topic(topic)]
+        self.writer.add_topic(topic, msg_type, offered or None)
+
+    def _callback(self, topic: str, msg_type: str, stamped: bool):
         clock, write = self.get_clock(), self.writer.write
+        registered = []
 
         def on_message(data: bytes) -> None:
             received = clock.now().nanoseconds
+            if not registered:
+                self._register(topic, msg_type)
+                registered.append(True)
             if stamped:
                 sec, nanosec = struct.unpack_from('<iI', data, 4)
                 write(topic, data, sec * 1_000_000_000 + nanosec, received)
@@ -127,6 +153,10 @@ class RecorderNode(Node):
         self.writer.close()
         if self.context.ok():  # after a signal the rosout publisher is gone
             self.get_logger().info(f'closed {self.writer.path}: {self.writer.topic_counts()}')
+
+
+def _any_best_effort(publishers) -> bool:
+    return any(p.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT for p in publishers)
 
 
 def main(argv=None) -> int:
