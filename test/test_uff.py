@@ -93,3 +93,12 @@ def test_csv_columns_round_trip(tmp_path):
     assert_allclose(table[:, 3], np.abs(res.H))
     assert_allclose(table[:, 4], np.angle(res.H))
     assert_allclose(table[:, 5], res.coherence)
+
+
+@pytest.mark.parametrize('spec, code', [
+    ('/pentapod/excitation.force.x', 1), ('/pentapod/excitation.wrench.torque.y', 5),
+    ('/pentapod/tcp_state.position.tcp_z', 3), ('/pentapod/tcp_state.tcp_y.velocity', 2),
+    ('/pentapod/strut_states.position.strut1_axial', 0), ('/pentapod/x.position.tcp_rz', 6)])
+def test_uff_direction_codes_from_field_names(spec, code):
+    from pentapod_sim.cli.analyze import uff_direction
+    assert uff_direction(spec) == code

@@ -68,6 +68,26 @@ def _write_peaks(path: Path, peaks: list, unit: str) -> None:
         writer.writerows([[p.freq, p.magnitude, p.damping_ratio, p.coherence] for p in peaks])
 
 
+def uff_direction(spec: str) -> int:
+    """
+    UFF direction code of a ``TOPIC.FIELD``: 1-3 for x/y/z, 4-6 for torque/rotation, 0 else.
+
+    Examples: ``/pentapod/excitation.force.x`` -> 1, ``/pentapod/tcp_state.position.tcp_z``
+    -> 3, ``...torque.y`` -> 5.
+    """
+    parts = [p for p in spec.partition('.')[2].split('.')
+             if p not in ('position', 'velocity', 'effort', 'wrench')]
+    name = parts[-1] if parts else ''
+    rotational = 'torque' in parts or name[-3:] in ('_rx', '_ry', '_rz')
+    if name in ('x', 'y', 'z'):
+        axis = name
+    elif name[-2:] in ('_x', '_y', '_z', 'rx', 'ry', 'rz'):
+        axis = name[-1]
+    else:
+        return 0
+    return 'xyz'.index(axis) + (4 if rotational else 1)
+
+
 def _analytic(args):
     """Read ``--analytic`` CSV (columns freq_Hz, re, im; header line) as (freq, H, label)."""
     if not args.analytic:
@@ -84,7 +104,7 @@ def cmd_frf(args, plot: bool = True) -> int:
     out_dir.mkdir(parents=True, exist_ok=True)
     results = _frfs(args.bag, args)
     compared = _frfs(args.compare, args) if args.compare else [None] * len(results)
-    for res, cmp in zip(results, compared):
+    for out_spec, res, cmp in zip(args.output, results, compared):
         tag = _slug(f'{Path(args.bag).name}_{res.label}')
         peaks = _peak_rows(res, args)
         print(f'FRF {res.label} [{res.unit}], {res.n_averages} averages')
@@ -106,7 +126,8 @@ def cmd_frf(args, plot: bool = True) -> int:
                                  resonances=peaks, fmin=args.fmin, fmax=args.fmax, title=tag)
             print(f'  wrote {png}')
         write_csv(out_dir / f'{tag}.csv', [res])
-        write_uff58(out_dir / f'{tag}.uff', shown)
+        write_uff58(out_dir / f'{tag}.uff', shown, response_dir=uff_direction(out_spec),
+                    reference_dir=uff_direction(args.input))
     return 0
 
 
