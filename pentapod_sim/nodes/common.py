@@ -90,13 +90,13 @@ def stamp_to_ns(stamp: Time) -> int:
     return stamp.sec * 1_000_000_000 + stamp.nanosec
 
 
-def make_executor():
-    """EventsExecutor if rclpy has it, else SingleThreadedExecutor."""
+def make_executor(context=None):
+    """EventsExecutor if rclpy has it, else SingleThreadedExecutor (optional context)."""
     try:
         from rclpy.experimental import EventsExecutor
-        return EventsExecutor()
+        return EventsExecutor(context=context)
     except ImportError:  # older rclpy
-        return SingleThreadedExecutor()
+        return SingleThreadedExecutor(context=context)
 
 
 def spin_until(executor, done: Callable[[], bool], timeout: float,

@@ -1,0 +1,270 @@
+"""Nodes in real processes (rclpy, DDS on localhost): lockstep, energy, PMA, failures."""
+import os
+from pathlib import Path
+import random
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+from numpy.testing import assert_allclose
+import pytest
+
+from pentapod_damper.laws import ProofMassActuator, strut_bending_damper, tcp_damper
+from pentapod_sim.closed_loop import excitation_matrix, simulate
+from pentapod_sim.demo_model import demo_model
+from pentapod_sim.excitation import Excitation, ExcitationSpec
+from pentapod_sim.plant import DiscretePlant
+
+RATE = 5000.0
+TCP = ['tcp_force_x', 'tcp_force_y', 'tcp_force_z']
+
+
+@pytest.fixture
+def ros_env():
+    """Environment with a domain id unique to this test run."""
+    env = dict(os.environ)
+    env['ROS_DOMAIN_ID'] = str(random.randint(1, 100))
+    env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    return env
+
+
+class Procs:
+    """Start node processes; always kill them at the end."""
+
+    def __init__(self, env, folder: Path):
+        self.env, self.folder, self.procs = env, folder, {}
+
+    def start(self, name: str, module: str, *params: str) -> subprocess.Popen:
+        cmd = [sys.executable, '-m', module, '--ros-args', '-r', f'__node:={name}']
+        for p in params:
+            cmd += ['-p', p]
+        log = open(self.folder / f'{name}.log', 'w')
+        proc = subprocess.Popen(cmd, env=self.env, stdout=log, stderr=subprocess.STDOUT)
+        self.procs[name] = proc
+        return proc
+
+    def log(self, name: str) -> str:
+        return (self.folder / f'{name}.log').read_text()
+
+    def wait(self, name: str, timeout: float = 90.0) -> int:
+        return self.procs[name].wait(timeout=timeout)
+
+    def close(self):
+        for proc in self.procs.values():
+            if proc.poll() is None:
+                proc.send_signal(signal.SIGINT)
+        for proc in self.procs.values():
+            try:
+                proc.wait(timeout=5)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+
+
+@pytest.fixture
+def procs(ros_env, tmp_path):
+    p = Procs(ros_env, tmp_path)
+    yield p
+    p.close()
+
+
+def plant_params(model_file, steps, sources, trace, *extra):
+    return (f'model_file:={model_file}', f'steps:={steps}', f'sample_rate:={RATE}',
+            'sources:=[' + ','.join(sources) + ']', f"output_file:='{trace}'",
+            'startup_timeout:=60.0', *extra)
+
+
+def test_lockstep_reproduces_offline_closed_loop(procs, tmp_path):
+    """Plant + exciter + damper + PMA through ROS equal the in-process closed loop."""
+    model = demo_model(10, seed=11)
+    model_file = model.save(tmp_path / 'model.npz')
+    steps, trace = 1500, tmp_path / 'trace.npz'
+    procs.start('exciter', 'pentapod_sim.nodes.exciter_node', 'kind:=random',
+                'amplitude:=50.0', 'direction:=[1.0, 0.5, 0.0]', 'duration:=0.3',
+                'f_start:=5.0', 'f_end:=400.0', 'seed:=3', f'sample_rate:={RATE}')
+    procs.start('damper', 'pentapod_damper.nodes.damper_node', "tcp_directions:=['x','y']",
+                'tcp_gain:=3000.0', 'bending_struts:=[1]', 'bending_gain:=400.0')
+    procs.start('pma', 'pentapod_damper.nodes.pma_node', "directions:=['x']",
+                'proof_mass:=2.0', 'gain:=1000.0', 'highpass_hz:=5.0', f'sample_rate:={RATE}')
+    procs.start('plant', 'pentapod_sim.nodes.plant_node',
+                *plant_params(model_file, steps, ['exciter', 'damper', 'pma'], trace))
+    assert procs.wait('plant') == 0, procs.log('plant')
+    run = np.load(trace)
+
+    plant = DiscretePlant(model.discretize(1 / RATE))
+    exc = Excitation(ExcitationSpec('random', 50.0, [1.0, 0.5, 0.0], f_start=5.0, f_end=400.0,
+                                    duration=0.3, seed=3), 1 / RATE)
+    laws = [tcp_damper(['x', 'y'], 3000.0), strut_bending_damper([1], 400.0),
+            ProofMassActuator(['x'], 2.0, 1000.0, 1 / RATE, highpass_hz=5.0)]
+    ref = simulate(plant, laws, excitation_matrix(plant, TCP, exc.series(steps), steps))
+    assert list(run['output_names']) == ref.output_names
+    scale = np.abs(ref.y).max(axis=0)
+    assert np.all(scale > 0)
+    assert np.max(np.abs(run['y'] - ref.y) / scale) < 1e-12
+    assert np.max(np.abs(run['u'] - ref.u)) <= 1e-12 * np.abs(ref.u).max()
+    assert list(run['rejected']) == []
+
+
+def test_tcp_damper_energy(procs, tmp_path):
+    """Dissipated energy = b int v^2 dt, and E_N = work of exciter + work of damper."""
+    model = demo_model(6, f_max=120.0, zeta=0.0, inputs=TCP, seed=2)
+    model_file = model.save(tmp_path / 'model.npz')
+    steps, gain, trace = 2500, 5000.0, tmp_path / 'trace.npz'
+    procs.start('exciter', 'pentapod_sim.nodes.exciter_node', 'kind:=sine',
+                'amplitude:=40.0', 'frequency:=30.0', 'duration:=0.2', f'sample_rate:={RATE}')
+    procs.start('damper', 'pentapod_damper.nodes.damper_node',
+                "tcp_directions:=['x','y','z']", f'tcp_gain:={gain}')
+    procs.start('plant', 'pentapod_sim.nodes.plant_node',
+                *plant_params(model_file, steps, ['exciter', 'damper'], trace))
+    assert procs.wait('plant') == 0, procs.log('plant')
+    run = np.load(trace)
+    y, u, dt, x_n = run['y'], run['u'], float(run['dt']), run['x_final']
+    names = list(run['output_names'])
+    disp_idx = [names.index(f'tcp_displacement_{a}') for a in 'xyz']
+    vel_idx = [names.index(f'tcp_velocity_{a}') for a in 'xyz']
+    c_disp = np.hstack([model.c_disp, model.c_vel])[disp_idx]
+    disp = np.vstack([y[:, disp_idx], c_disp @ x_n])          # s_0 .. s_N
+    steps_disp = np.diff(disp, axis=0)
+    inputs = list(run['input_names'])
+    t = np.arange(steps) * dt
+    f_exc = np.where(t < 0.2, 40.0 * np.sin(2 * np.pi * 30.0 * t), 0.0)
+    u_exc = np.zeros_like(u)
+    u_exc[:, inputs.index('tcp_force_x')] = f_exc
+    u_damp = u - u_exc
+    v = y[:, vel_idx]
+    assert_allclose(u_damp[:, :3], -gain * v, rtol=1e-12, atol=1e-12 * np.abs(u_damp).max())
+    dissipated = -np.einsum('kj,kj->', u_damp, steps_disp)
+    assert dissipated == pytest.approx(gain * np.trapezoid((v ** 2).sum(axis=1), dx=dt),
+                                       rel=5e-3)
+    m = model.n_modes
+    energy = 0.5 * (x_n[m:] @ x_n[m:] + model.omega ** 2 @ x_n[:m] ** 2)
+    w_exc = np.einsum('kj,kj->', u_exc, steps_disp)
+    assert energy == pytest.approx(w_exc - dissipated, rel=1e-9)
+    assert dissipated > 0.5 * w_exc   # the damper took most of the input energy
+
+
+def _drive_pma(env, n_steps, v_amp, omega):
+    """Act as the plant for a PMA node: send v_k = V cos(omega t_k), collect its answers."""
+    import rclpy
+    from rclpy.node import Node
+    from sensor_msgs.msg import JointState
+
+    from pentapod_sim.nodes.common import (FORCE_QOS, make_executor, spin_until, STATE_QOS,
+                                           stamp_msg, stamp_to_ns)
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=int(env['ROS_DOMAIN_ID']))
+    try:
+        node = Node('pma_driver', context=ctx)
+        pub = node.create_publisher(JointState, '/pentapod/pma_mount_state', STATE_QOS)
+        forces, states = {}, {}
+        node.create_subscription(JointState, '/pentapod/forces/pma',
+                                 lambda m: forces.setdefault(stamp_to_ns(m.header.stamp),
+                                                             m.effort[0]), FORCE_QOS)
+        node.create_subscription(JointState, '/pentapod/pma/state',
+                                 lambda m: states.setdefault(stamp_to_ns(m.header.stamp),
+                                                             (m.position[0], m.effort[0])),
+                                 STATE_QOS)
+        executor = make_executor(ctx)
+        executor.add_node(node)
+        assert spin_until(executor, lambda: pub.get_subscription_count() > 0, 60.0)
+        dt = 1 / RATE
+        for k in range(n_steps):
+            ns = round(k * dt * 1e9)
+            msg = JointState(name=['pma_mount_x'], position=[float('nan')],
+                             velocity=[v_amp * np.cos(omega * k * dt)])
+            msg.header.stamp = stamp_msg(ns)
+            pub.publish(msg)
+            if not spin_until(executor, lambda: ns in forces and ns in states, 2.0):
+                pub.publish(msg)     # the first messages may precede discovery
+                assert spin_until(executor, lambda: ns in forces and ns in states, 10.0)
+        return [forces[round(k * dt * 1e9)] for k in range(n_steps)], \
+            [states[round(k * dt * 1e9)] for k in range(n_steps)]
+    finally:
+        executor.shutdown()
+        rclpy.shutdown(context=ctx)
+
+
+def test_pma_node_follows_its_law(procs, ros_env):
+    """Force = -m g v each step; stroke matches the law's own discrete integration."""
+    mass, gain, v_amp, omega, n = 5.0, 4000.0, 2e-3, 2 * np.pi * 40.0, 400
+    procs.start('pma', 'pentapod_damper.nodes.pma_node', "directions:=['x']",
+                f'proof_mass:={mass}', f'gain:={gain}', f'sample_rate:={RATE}')
+    forces, states = _drive_pma(ros_env, n, v_amp, omega)
+    dt = 1 / RATE
+    v = np.array([v_amp * np.cos(omega * k * dt) for k in range(n)])   # as sent
+    assert_allclose(forces, -mass * gain * v, rtol=1e-15, atol=1e-300)
+    assert_allclose([s[1] for s in states], forces, rtol=0, atol=0)
+    # stroke after step k: dt sum_j (w_j - v_j) + dt^2/2 g sum_j v_j with w_j = g dt sum_{i<j} v_i
+    w = np.concatenate([[0.0], gain * dt * np.cumsum(v)[:-1]])
+    stroke = np.cumsum(dt * (w - v) + 0.5 * dt ** 2 * gain * v)
+    assert_allclose([s[0] for s in states], stroke, rtol=1e-9, atol=1e-18)
+
+
+def test_killed_damper_stops_lockstep_run(procs, tmp_path):
+    """SIGKILL of a source: the plant exits nonzero naming it."""
+    model_file = demo_model(4).save(tmp_path / 'model.npz')
+    damper = procs.start('damper_k', 'pentapod_damper.nodes.damper_node',
+                         "tcp_directions:=['x']", 'tcp_gain:=100.0')
+    plant = procs.start('plant', 'pentapod_sim.nodes.plant_node',
+                        *plant_params(model_file, 10 ** 8, ['damper_k'], ''),
+                        'source_timeout:=1.0')
+    end = time.monotonic() + 60
+    while ('lockstep run' not in procs.log('plant') and time.monotonic() < end
+           and plant.poll() is None):
+        time.sleep(0.1)
+    time.sleep(0.5)
+    damper.kill()
+    assert plant.wait(timeout=30) != 0
+    log = procs.log('plant')
+    assert "damper_k silent" in log and 'source_timeout' in log, log
+
+
+def test_bad_messages_rejected_and_counted(procs, ros_env, tmp_path):
+    """A source that sends NaN / wrong length / unknown port messages besides good ones."""
+    import rclpy
+    from rclpy.node import Node
+    from rosgraph_msgs.msg import Clock
+    from sensor_msgs.msg import JointState
+
+    from pentapod_sim.nodes.common import (FORCE_QOS, make_executor, spin_until, STATE_QOS,
+                                           stamp_to_ns)
+    model_file = demo_model(4, inputs=TCP).save(tmp_path / 'model.npz')
+    steps, trace = 300, tmp_path / 'trace.npz'
+    plant = procs.start('plant', 'pentapod_sim.nodes.plant_node',
+                        *plant_params(model_file, steps, ['tester'], trace))
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=int(ros_env['ROS_DOMAIN_ID']))
+    bad = [(['tcp_force_x'], [float('nan')]), (['tcp_force_x', 'tcp_force_y'], [1.0]),
+           (['tcp_force_q'], [1.0])]
+    try:
+        node = Node('tester', context=ctx)
+        pub = node.create_publisher(JointState, '/pentapod/forces/tester', FORCE_QOS)
+
+        def answer(clock):
+            k = round(stamp_to_ns(clock.clock) * RATE / 1e9)
+            if k % 10 == 0:        # first the bad ones, then the good answer
+                for names, efforts in bad:
+                    msg = JointState(name=names, effort=efforts)
+                    msg.header.stamp = clock.clock
+                    pub.publish(msg)
+            msg = JointState(name=['tcp_force_y'], effort=[float(k)])
+            msg.header.stamp = clock.clock
+            pub.publish(msg)
+        node.create_subscription(Clock, '/clock', answer, STATE_QOS)
+        executor = make_executor(ctx)
+        executor.add_node(node)
+        assert spin_until(executor, lambda: plant.poll() is not None, 90.0, poll=0.01)
+    finally:
+        executor.shutdown()
+        rclpy.shutdown(context=ctx)
+    assert plant.returncode == 0, procs.log('plant')
+    run = np.load(trace)
+    counts = dict(item.split('=') for item in run['rejected'])
+    sent = steps // 10
+    # a re-published step may be answered twice; every bad message is counted at least once
+    for kind in ('nonfinite', 'length', 'unknown_port'):
+        assert sent <= int(counts[f'tester/{kind}']) <= 2 * sent, counts
+    assert_allclose(run['u'][:, 1], np.arange(steps))     # every good answer applied
+    assert "rejected message from source 'tester'" in procs.log('plant')
