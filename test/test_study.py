@@ -1,0 +1,127 @@
+"""Study building blocks against independent computations (no ROS)."""
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from pentapod_damper.laws import ProofMassActuator, tcp_damper
+from pentapod_damper.scenario_laws import (continuous_dampers, read_sections,
+                                           scenario_laws)
+from pentapod_sim.closed_loop import simulate
+from pentapod_sim.demo_model import demo_model
+from pentapod_sim.exceptions import ConfigError
+from pentapod_sim.frf import closed_loop_frf
+from pentapod_sim.plant import DiscretePlant
+from pentapod_sim.study.analytic import (discrete_frf, improvement_share, pma_requirements)
+from pentapod_sim.study.config import load_study_config
+from pentapod_sim.study.runs import run_sections
+
+DT = 1.0 / 5000.0
+
+
+@pytest.fixture(scope='module')
+def plant():
+    return demo_model(n_modes=6, f_min=20.0, f_max=300.0, zeta=0.02, feedthrough=1e-8)
+
+
+@pytest.mark.parametrize('laws', [[], [tcp_damper(['x', 'y'], 3000.0)],
+                                  [ProofMassActuator(['x'], 5.0, 400.0, DT)]])
+def test_sampled_loop_frf_is_the_dtft_of_the_stepped_impulse_response(plant, laws):
+    """discrete_frf equals the DTFT of an impulse response stepped by the lockstep core."""
+    core = DiscretePlant(plant.discretize(DT))
+    n = 60000
+    excitation = np.zeros((n, len(core.input_names)))
+    excitation[0, core.input_names.index('tcp_force_x')] = 1.0
+    for law in laws:
+        law.reset()
+    response = simulate(core, laws, excitation)
+    freq = np.array([7.0, 33.0, 81.5, 140.0, 410.0])
+    z = np.exp(2j * np.pi * freq * DT)
+    powers = z[None, :] ** -np.arange(n)[:, None]
+    ana = discrete_frf(plant, laws, DT, freq, 'tcp_force_x')
+    for out in ('tcp_displacement_x', 'tcp_velocity_y', 'pma_mount_velocity_x'):
+        dtft = response.output(out) @ powers
+        np.testing.assert_allclose(ana.outputs[out], dtft, rtol=2e-3,
+                                   atol=2e-3 * np.abs(dtft).max())
+
+
+def test_sampled_loop_approaches_the_continuous_loop_at_low_frequency(plant):
+    """With the sample far above the modes, the one-sample delay hardly matters."""
+    dampers = {'tcp_force_x': 2000.0}
+    freq = np.array([5.0, 15.0, 25.0])
+    cont = closed_loop_frf(plant, dampers, freq).pair('tcp_displacement_x', 'tcp_force_x')
+    disc = discrete_frf(plant, [tcp_damper(['x'], 2000.0)], 1e-5, freq, 'tcp_force_x')
+    np.testing.assert_allclose(disc.outputs['tcp_displacement_x'], cont, rtol=1e-3)
+
+
+def test_pma_requirements_match_a_direct_harmonic_balance():
+    """Proof mass driven by a_m = g v: stroke = x_m - x, force = m g v (harmonic balance)."""
+    freq = np.array([5.0, 40.0, 300.0])
+    w = 2 * np.pi * freq
+    v = (0.3 + 0.4j) * np.ones(3)           # mount velocity per newton
+    mass, gain, amp = 5.0, 4000.0, 10.0
+    stroke, force = pma_requirements(v, freq, mass, gain, amp)
+    x_mount = amp * v / (1j * w)
+    x_mass = amp * gain * v / (1j * w) ** 2
+    np.testing.assert_allclose(stroke, np.abs(x_mass - x_mount), rtol=1e-12)
+    np.testing.assert_allclose(force, mass * gain * np.abs(amp * v), rtol=1e-12)
+
+
+def test_improvement_share():
+    assert improvement_share(10.0, 4.0, 2.0) == pytest.approx(0.75)
+    assert np.isnan(improvement_share(1.0, 1.0, 1.0))
+
+
+def test_scenario_files_give_the_papers_laws():
+    dt = 2e-4
+    laws = scenario_laws(read_sections(_scenario('pma_1kg')), dt)
+    assert continuous_dampers(laws) == {'pma_force_x': pytest.approx(20000.0)}
+    laws = scenario_laws(read_sections(_scenario('axial_damping')), dt)
+    assert continuous_dampers(laws) == {f'strut{i}_axial_force': pytest.approx(50000.0)
+                                        for i in range(1, 6)}
+    assert scenario_laws(read_sections(_scenario('baseline')), dt) == []
+
+
+def test_filtered_pma_has_no_viscous_equivalent():
+    law = ProofMassActuator(['x'], 1.0, 100.0, DT, highpass_hz=5.0)
+    with pytest.raises(ConfigError, match='no viscous equivalent'):
+        continuous_dampers([law])
+
+
+def test_run_file_applies_study_settings_and_adds_a_recorder(tmp_path):
+    cfg = load_study_config(duration=4.0)
+    doc = run_sections('pma_5kg', 'P1', tmp_path / 'm.npz', cfg, tmp_path / 'bag',
+                       {'model_hash': 'abc'})
+    plant = doc['plant']['ros__parameters']
+    assert plant['position'] == 'P1' and plant['duration'] == 4.0
+    assert plant['model_file'] == str(tmp_path / 'm.npz')
+    assert doc['exciter']['ros__parameters']['amplitude'] == cfg.amplitude
+    assert doc['/**']['ros__parameters']['sample_rate'] == cfg.sample_rate
+    rec = doc['recorder']['ros__parameters']
+    assert rec['bag_name'] == 'bag' and yaml.safe_load(rec['run_info'])['model_hash'] == 'abc'
+    assert doc['pma']['ros__parameters']['proof_mass'] == 5.0
+
+
+@pytest.mark.parametrize('override, message', [
+    ({'direction': 'w'}, "excitation.direction = 'w'"),
+    ({'band': (0.0, 5000.0)}, 'excitation.band'),
+    ({'duration': -1.0}, 'duration = -1.0'),
+    ({'scenarios': ('tcp_damping',)}, 'must start with baseline'),
+])
+def test_bad_study_config_names_the_value(override, message):
+    with pytest.raises(ConfigError, match=message.replace('(', r'\(').replace(')', r'\)')):
+        load_study_config(**override)
+
+
+def test_missing_key_is_named(tmp_path):
+    path = tmp_path / 'study.yaml'
+    doc = yaml.safe_load(Path(load_study_config.__globals__['default_path']()).read_text())
+    del doc['excitation']['seed']
+    path.write_text(yaml.safe_dump(doc))
+    with pytest.raises(ConfigError, match="missing key 'excitation.seed'"):
+        load_study_config(path)
+
+
+def _scenario(name: str) -> Path:
+    return Path(__file__).resolve().parents[1] / 'config' / 'scenarios' / f'{name}.yaml'
