@@ -53,6 +53,10 @@ class PmaNode(LockstepSource):
         """Advance the proof mass one step and return the force on the structure [N]."""
         return self.law.step(sensors)
 
+    def reset(self) -> None:
+        """Proof mass back to rest for a new plant run."""
+        self.law.reset()
+
     def after_publish(self, stamp, efforts) -> None:
         """Publish stroke, proof-mass velocity and force."""
         msg = JointState(name=self.joints, position=self.law.stroke.tolist(),

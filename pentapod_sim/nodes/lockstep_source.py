@@ -64,6 +64,9 @@ class LockstepSource(Node):
         """Return efforts for ``actuator_ports`` at this step (N or N m)."""
         raise NotImplementedError
 
+    def reset(self) -> None:
+        """Hook: back to the initial controller state (a new plant run started)."""
+
     def after_publish(self, stamp, efforts: np.ndarray) -> None:
         """Hook for extra publications (diagnostics) after a step was answered."""
 
@@ -85,7 +88,11 @@ class LockstepSource(Node):
             self.force_pub.publish(self._last[1])   # a re-published step: same answer
             return
         if ns < self._last[0]:
-            return                                   # an old step; already answered
+            # the plant only re-sends its current step, so time going back means a new run
+            self.get_logger().info(f'stamp went back to {ns} ns: new plant run, resetting')
+            self._last = (-1, None)
+            self._pending.clear()
+            self.reset()
         pending = self._pending.setdefault(ns, {})
         pending[topic] = msg
         if len(pending) < max(1, len(self.needs)):

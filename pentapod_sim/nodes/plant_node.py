@@ -54,6 +54,7 @@ class PlantNode(Node):
             lambda msg, name=name: self._on_force(name, msg), FORCE_QOS)
             for name in self.mixer.sources]
         self._last_warn = {}
+        self._next_refresh = 0.0
 
     def _declare(self) -> None:
         """Declare every parameter (docs/nodes.md) into ``self.p``."""
@@ -112,11 +113,21 @@ class PlantNode(Node):
         return n
 
     # -- communication ---------------------------------------------------------------------
+    def refresh_subscribers(self) -> None:
+        """Note which output topics have subscribers (publishing costs ~80 us each here)."""
+        self._active = [(pub, lay) for pub, lay in self.state_pubs
+                        if pub.get_subscription_count() > 0]
+        self._clock_active = self.clock_pub.get_subscription_count() > 0
+        self._next_refresh = time.monotonic() + 0.25
+
     def publish_outputs(self, y: np.ndarray) -> None:
-        """Publish /clock and the state topics of step k."""
+        """Publish /clock and the state topics of step k (topics with subscribers only)."""
+        if time.monotonic() > self._next_refresh:
+            self.refresh_subscribers()
         stamp = stamp_msg(stamp_ns(self.core.k, self.dt))
-        self.clock_pub.publish(Clock(clock=stamp))
-        for pub, lay in self.state_pubs:
+        if self._clock_active:
+            self.clock_pub.publish(Clock(clock=stamp))
+        for pub, lay in self._active:
             pos, vel = lay.values(y)
             msg = JointState(name=lay.joints, position=pos.tolist(), velocity=vel.tolist())
             msg.header.stamp = stamp
@@ -147,11 +158,11 @@ class PlantNode(Node):
             raise RunError(f'force source(s) {", ".join(missing())} did not appear within '
                            f'startup_timeout = {self.p["startup_timeout"]} s')
 
-    def run_lockstep(self, executor, trace) -> None:
+    def run_lockstep(self, executor, trace, n_steps: int | None = None) -> None:
         """Each step: publish y_k, wait for every source's u_k, advance."""
         core, mixer = self.core, self.mixer
         resend, timeout = self.p['resend_period'], self.p['source_timeout']
-        for k in range(self.n_steps):
+        for k in range(self.n_steps if n_steps is None else n_steps):
             y = core.outputs()
             self.publish_outputs(y)
             start = last_sent = time.monotonic()
@@ -164,6 +175,7 @@ class PlantNode(Node):
                                    f'for {now - start:.3g} s at step {k} (t = '
                                    f'{core.time:.6g} s); source_timeout = {timeout} s')
                 if now - last_sent > resend:
+                    self.refresh_subscribers()
                     self.publish_outputs(y)
                     last_sent = now
             u = mixer.total()
@@ -171,21 +183,29 @@ class PlantNode(Node):
             core.advance(u)
 
     def run_realtime(self, executor, trace) -> LatenessStats:
-        """Wall-clock paced steps with the newest force of each source held."""
+        """
+        Wall-clock paced steps with the newest force of each source held.
+
+        Step 0 waits for every source as in lockstep (discovery, first messages); the wall
+        clock starts at step 1.
+        """
         core, mixer, dt = self.core, self.mixer, self.dt
         stats = LatenessStats(self.n_steps, dt)
-        t0 = time.monotonic()
+        self.run_lockstep(executor, trace, n_steps=1)
+        t0 = time.monotonic() - dt
         next_report = t0 + self.p['report_period']
-        for k in range(self.n_steps):
+        for k in range(1, self.n_steps):
             target = t0 + k * dt
             now = time.monotonic()
+            spun = now < target
             while now < target:
                 executor.spin_once(timeout_sec=target - now)
                 now = time.monotonic()
+            if not spun:     # late: still take in what arrived
+                executor.spin_once(timeout_sec=0.0)
             stats.add(k, now - target)
             y = core.outputs()
             self.publish_outputs(y)
-            executor.spin_once(timeout_sec=0.0)
             u = mixer.total()
             trace.record(k, y, u)
             core.advance(u)

@@ -1,0 +1,241 @@
+"""
+Benchmarks of the plant core and the lockstep / real-time ROS runs.
+
+* Offline, demo model of 100 modes (200 states, 21 inputs, 39 outputs), random TCP force:
+  open loop and closed loop (TCP and strut dampers) with our stepping core and our lfilter
+  fast path, against ``control.forced_response`` and ``scipy.signal.dlsim`` on the same
+  discrete system.
+* Lockstep through ROS (separate processes, DDS on localhost): plant + 1 and + 3 controller
+  nodes, steps/s, against a bare rclpy ping-pong between two processes with the same message
+  sizes and the default executor (rclpy.spin).
+* Real-time mode with one damper node at 1, 5 and 10 kHz: achieved rate, lateness p50/p99,
+  overruns.
+
+Full: 100k offline steps, 20k lockstep steps, 5 s real time; quick: 20k, 3k, 1 s.
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+import random
+import subprocess
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+import control  # noqa: E402
+import scipy.signal  # noqa: E402
+
+from pentapod_damper.laws import strut_bending_damper, tcp_damper  # noqa: E402
+from pentapod_sim.closed_loop import (closed_loop_matrices, excitation_matrix,  # noqa: E402
+                                      feedback_gain, simulate, simulate_linear)
+from pentapod_sim.demo_model import demo_model  # noqa: E402
+from pentapod_sim.plant import DiscretePlant  # noqa: E402
+
+RATE = 5000.0
+TCP = ['tcp_force_x', 'tcp_force_y', 'tcp_force_z']
+
+PINGPONG = r'''
+import sys, time
+import rclpy
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState
+role, n = sys.argv[1], int(sys.argv[2])
+qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+rclpy.init()
+node = Node('bench_' + role)
+if role == 'pong':
+    pub = node.create_publisher(JointState, '/bench/back', qos)
+    def echo(msg):
+        out = JointState(name=['tcp_force_x', 'tcp_force_y', 'tcp_force_z'],
+                         effort=[1.0, 2.0, 3.0])
+        out.header.stamp = msg.header.stamp
+        pub.publish(out)
+    node.create_subscription(JointState, '/bench/out', echo, qos)
+    try:
+        rclpy.spin(node)
+    except BaseException:
+        pass
+else:
+    got = []
+    pub = node.create_publisher(JointState, '/bench/out', qos)
+    node.create_subscription(JointState, '/bench/back', lambda m: got.append(1), qos)
+    names = ['strut%d_%s' % (i, k) for i in range(1, 6) for k in ('b2', 'b3', 'ax')]
+    while pub.get_subscription_count() == 0 or node.count_publishers('/bench/back') == 0:
+        rclpy.spin_once(node, timeout_sec=0.05)
+    time.sleep(1.0)
+    def round_trip():
+        before = len(got)
+        msg = JointState(name=names, position=[0.0] * 15, velocity=[0.0] * 15)
+        pub.publish(msg)
+        t = time.monotonic()
+        while len(got) == before:
+            rclpy.spin_once(node, timeout_sec=0.2)
+            if time.monotonic() - t > 0.2:
+                pub.publish(msg)
+                t = time.monotonic()
+    for _ in range(100):
+        round_trip()
+    t0 = time.perf_counter()
+    for _ in range(n):
+        round_trip()
+    print(n / (time.perf_counter() - t0))
+rclpy.try_shutdown()
+'''
+
+
+def _row(name, value, unit, baseline, baseline_value, higher_better=True, note=''):
+    ratio = (value / baseline_value if higher_better else baseline_value / value) \
+        if baseline_value else float('nan')
+    return {'name': name, 'value': value, 'unit': unit, 'baseline': baseline,
+            'baseline_value': baseline_value, 'ratio': ratio, 'note': note}
+
+
+def _timed(func) -> float:
+    t0 = time.perf_counter()
+    func()
+    return time.perf_counter() - t0
+
+
+def offline_rows(n_steps: int) -> list[dict]:
+    """Open and closed loop: our core vs control.forced_response and scipy.signal.dlsim."""
+    model = demo_model(100, seed=1)
+    plant = DiscretePlant(model.discretize(1 / RATE))
+    rng = np.random.default_rng(0)
+    exc = excitation_matrix(plant, TCP, 100 * rng.standard_normal((n_steps, 3)), n_steps)
+    laws = [tcp_damper(['x', 'y', 'z'], 20000.0), strut_bending_damper([1, 2, 3, 4, 5], 2e3)]
+    rows = []
+    for label, use_laws in (('open loop', []), ('closed loop', laws)):
+        a, b, c_y, _, _ = closed_loop_matrices(plant, feedback_gain(plant, use_laws))
+        sys_d = control.ss(a, b, c_y, plant.d if use_laws == [] else np.zeros_like(plant.d),
+                           1 / RATE)
+        t_fr = _timed(lambda: control.forced_response(sys_d, U=exc.T))
+        t_dl = _timed(lambda: scipy.signal.dlsim((a, b, c_y, np.zeros_like(plant.d),
+                                                  1 / RATE), exc))
+        plant.reset()
+        t_step = _timed(lambda: simulate(plant, use_laws, exc))
+        plant.reset()
+        t_fast = _timed(lambda: simulate_linear(plant, use_laws, exc))
+        note = f'{n_steps} steps, 200 states, 21 in, 39 out'
+        rows += [
+            _row(f'offline {label}, stepping core', n_steps / t_step, 'steps/s',
+                 'control.forced_response', n_steps / t_fr, note=note),
+            _row(f'offline {label}, lfilter fast path', n_steps / t_fast, 'steps/s',
+                 'control.forced_response', n_steps / t_fr, note=note),
+            _row(f'offline {label}, lfilter fast path', n_steps / t_fast, 'steps/s',
+                 'scipy.signal.dlsim', n_steps / t_dl, note=note)]
+    return rows
+
+
+class Session:
+    """Node processes on a private ROS domain; all killed at the end."""
+
+    def __init__(self, folder: Path):
+        self.folder = folder
+        self.env = dict(os.environ, ROS_DOMAIN_ID=str(random.randint(101, 200)),
+                        ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
+        self.procs = []
+
+    def start(self, args: list[str], log: str) -> subprocess.Popen:
+        proc = subprocess.Popen([sys.executable] + args, env=self.env, text=True,
+                                stdout=subprocess.PIPE if log == 'pipe' else
+                                open(self.folder / log, 'w'), stderr=subprocess.STDOUT)
+        self.procs.append(proc)
+        return proc
+
+    def node(self, module: str, name: str, *params: str) -> subprocess.Popen:
+        args = ['-m', module, '--ros-args', '-r', f'__node:={name}']
+        for p in params:
+            args += ['-p', p]
+        return self.start(args, f'{name}.log')
+
+    def close(self):
+        for proc in self.procs:
+            if proc.poll() is None:
+                proc.terminate()
+        for proc in self.procs:
+            try:
+                proc.wait(timeout=5)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+
+
+def plant_run(folder: Path, model_file: Path, n_controllers: int, steps: int,
+              timing: str = 'lockstep', rate: float = RATE) -> dict:
+    """Run the plant node with n damper nodes; return the figures of its trace file."""
+    session = Session(folder)
+    trace = folder / f'trace_{timing}_{n_controllers}_{int(rate)}.npz'
+    try:
+        names = [f'damper{i}' for i in range(n_controllers)]
+        for i, name in enumerate(names):
+            session.node('pentapod_damper.nodes.damper_node', name, f'bending_struts:=[{i + 1}]',
+                         'bending_gain:=100.0')
+        plant = session.node('pentapod_sim.nodes.plant_node', 'plant',
+                             f'model_file:={model_file}', f'steps:={steps}',
+                             f'sample_rate:={rate}', f'timing:={timing}',
+                             'sources:=[' + ','.join(names) + ']', f"output_file:='{trace}'",
+                             'startup_timeout:=60.0')
+        if plant.wait(timeout=300) != 0:
+            raise RuntimeError((folder / 'plant.log').read_text())
+    finally:
+        session.close()
+    with np.load(trace) as data:
+        return {k: float(data[k]) for k in data.files if data[k].shape == ()}
+
+
+def pingpong(folder: Path, n: int) -> float:
+    """Round trips/s of a bare rclpy ping-pong (default executor) between two processes."""
+    session = Session(folder)
+    try:
+        session.start(['-c', PINGPONG, 'pong', str(n)], 'pong.log')
+        ping = session.start(['-c', PINGPONG, 'ping', str(n)], 'pipe')
+        out, _ = ping.communicate(timeout=300)
+        return float(out.strip().splitlines()[-1])
+    finally:
+        session.close()
+
+
+def ros_rows(quick: bool) -> list[dict]:
+    """Lockstep steps/s and real-time figures."""
+    steps = 3000 if quick else 20000
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp)
+        model_file = demo_model(100, seed=1).save(folder / 'model.npz')
+        base = pingpong(folder, steps)
+        for n_ctrl in (1, 3):
+            res = plant_run(folder, model_file, n_ctrl, steps)
+            rows.append(_row(f'lockstep plant + {n_ctrl} controller node(s)',
+                             steps / res['wall_time'], 'steps/s',
+                             'rclpy ping-pong, 2 processes, default executor', base,
+                             note=f'{steps} steps, 200 states; each step: /clock + 3 state '
+                                  f'messages out, {n_ctrl} answer(s) in'))
+        seconds = 1.0 if quick else 5.0
+        for rate in (1000.0, 5000.0, 10000.0):
+            res = plant_run(folder, model_file, 1, int(seconds * rate), 'realtime', rate)
+            rows.append(_row(f'realtime {rate / 1000:g} kHz achieved rate',
+                             res['achieved_rate'], 'Hz', 'target', rate,
+                             note=f'lateness p50 {res["lateness_p50"] * 1e6:.0f} us, '
+                                  f'p99 {res["lateness_p99"] * 1e6:.0f} us, max '
+                                  f'{res["lateness_max"] * 1e6:.0f} us, '
+                                  f'{int(res["overruns"])} overruns of '
+                                  f'{int(seconds * rate)} steps (plant + 1 damper)'))
+    return rows
+
+
+def run(quick: bool) -> list[dict]:
+    """All plant benchmarks (quick: about a minute)."""
+    return offline_rows(20000 if quick else 100000) + ros_rows(quick)
+
+
+if __name__ == '__main__':
+    for r in run('--quick' in sys.argv):
+        print(f'{r["name"]}: {r["value"]:.4g} {r["unit"]} | {r["baseline"]}: '
+              f'{r["baseline_value"]:.4g} | ratio {r["ratio"]:.3g} | {r["note"]}')
