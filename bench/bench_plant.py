@@ -215,8 +215,8 @@ def ros_rows(quick: bool) -> list[dict]:
             rows.append(_row(f'lockstep plant + {n_ctrl} controller node(s)',
                              steps / res['wall_time'], 'steps/s',
                              'rclpy ping-pong, 2 processes, default executor', base,
-                             note=f'{steps} steps, 200 states; each step: /clock + 3 state '
-                                  f'messages out, {n_ctrl} answer(s) in'))
+                             note=f'{steps} steps, 200 states; each step: strut_states out '
+                                  f'(the only subscribed topic), {n_ctrl} answer(s) in'))
         seconds = 1.0 if quick else 5.0
         for rate in (1000.0, 5000.0, 10000.0):
             res = plant_run(folder, model_file, 1, int(seconds * rate), 'realtime', rate)
