@@ -142,7 +142,7 @@ def _struts_and_joints(mesh: _Mesh, state: StrutState, bracket_col: dict[int, in
         frame = state.frames[i]
         e1 = frame[0]
         b_pt, w_pt = layout.bp_joints[i], state.wp_joints[i]
-        overhang = m.struts.tube_length - state.lengths[i]
+        overhang = m.struts.tube_length[i] - state.lengths[i]
         ring = mesh.node(b_pt, f'bp_ring{s}')
         mesh.member(bracket_col[i], ring, m.frame.bp_bracket, vertical, 'frame', 'frame')
         gimbal = mesh.node(b_pt, f'gimbal{s}')

@@ -58,8 +58,8 @@ class Layout:
         Radius of each WP joint ring about the spindle axis [m].
     wp_height : (5,) ndarray
         Height of each WP joint above the TCP along the spindle axis [m].
-    stroke_min, stroke_max : float
-        Limits of the active strut length (BP joint to WP joint) [m].
+    stroke_min, stroke_max : (5,) ndarray
+        Limits of the active length (BP joint to WP joint) of each strut [m].
     bp_angle_max, wp_angle_max : float
         Limits of the BP cardan angles and of the WP joint angle [rad].
     home_pose : (5,) ndarray
@@ -69,8 +69,8 @@ class Layout:
     bp_joints: Array
     wp_radius: Array
     wp_height: Array
-    stroke_min: float
-    stroke_max: float
+    stroke_min: Array
+    stroke_max: Array
     bp_angle_max: float
     wp_angle_max: float
     home_pose: Array
@@ -86,7 +86,8 @@ def layout_from_params(machine: MachineParams) -> Layout:
     return Layout(bp_joints=bp_xyz,
                   wp_radius=np.full(N_STRUTS, machine.wp_joints.radius),
                   wp_height=nose + np.asarray(machine.wp_joints.height),
-                  stroke_min=machine.struts.stroke_min, stroke_max=machine.struts.stroke_max,
+                  stroke_min=np.asarray(machine.struts.stroke_min, dtype=float),
+                  stroke_max=np.asarray(machine.struts.stroke_max, dtype=float),
                   bp_angle_max=bp.angle_max, wp_angle_max=machine.wp_joints.angle_max,
                   home_pose=machine.home_pose.as_array())
 
@@ -204,13 +205,13 @@ def check_reachable(layout: Layout, state: StrutState) -> None:
     """
     for i in range(N_STRUTS):
         length = state.lengths[i]
-        if length < layout.stroke_min:
+        if length < layout.stroke_min[i]:
             raise UnreachablePoseError(
-                f'strut {i + 1}: length {length:.4f} m below stroke_min {layout.stroke_min} m '
+                f'strut {i + 1}: length {length:.4f} m below stroke_min {layout.stroke_min[i]} m '
                 f'at pose {state.pose.tolist()}')
-        if length > layout.stroke_max:
+        if length > layout.stroke_max[i]:
             raise UnreachablePoseError(
-                f'strut {i + 1}: length {length:.4f} m above stroke_max {layout.stroke_max} m '
+                f'strut {i + 1}: length {length:.4f} m above stroke_max {layout.stroke_max[i]} m '
                 f'at pose {state.pose.tolist()}')
         for k in range(2):
             ang = state.bp_angles[i, k]

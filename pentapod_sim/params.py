@@ -26,9 +26,17 @@ NON_NEGATIVE = 'non-negative'
 ANY = 'any'
 
 
-def _f(unit: str, rule: str = POSITIVE, length: int | None = None) -> typing.Any:
-    """Declare a float (or fixed-length float tuple) field with unit and range rule."""
-    return field(metadata={'unit': unit, 'rule': rule, 'length': length})
+def _f(unit: str, rule: str = POSITIVE, length: int | None = None,
+       per_strut: bool = False) -> typing.Any:
+    """
+    Declare a float (or fixed-length float tuple) field with unit and range rule.
+
+    ``per_strut=True``: a tuple of 5 values (struts 1..5); the YAML may give one number for all.
+    """
+    if per_strut:
+        length = 5
+    return field(metadata={'unit': unit, 'rule': rule, 'length': length,
+                           'per_strut': per_strut})
 
 
 @dataclass(frozen=True)
@@ -117,11 +125,16 @@ class FeedDriveParams:
 
 @dataclass(frozen=True)
 class StrutParams:
-    """Strut tube: length, stroke limits [m], section, screw mass [kg/m], shear factor [-]."""
+    """
+    Strut tubes: lengths, stroke limits [m], section, screw mass [kg/m], shear factor [-].
 
-    tube_length: float = _f('m')
-    stroke_min: float = _f('m')
-    stroke_max: float = _f('m')
+    ``tube_length``, ``stroke_min`` and ``stroke_max`` are tuples for struts 1..5 (the YAML may
+    give one number for all struts).
+    """
+
+    tube_length: tuple = _f('m', per_strut=True)
+    stroke_min: tuple = _f('m', per_strut=True)
+    stroke_max: tuple = _f('m', per_strut=True)
     section: RhsSection
     screw_mass_per_length: float = _f('kg/m', NON_NEGATIVE)
     shear_factor: float = _f('-')
@@ -198,6 +211,8 @@ def _check_number(value: typing.Any, rule: str, path: str) -> float:
 def _parse_value(value: typing.Any, meta: dict, path: str, is_int: bool) -> typing.Any:
     """Check one leaf value against its metadata; return float, int or tuple of floats."""
     length = meta.get('length')
+    if meta.get('per_strut') and isinstance(value, (int, float)) and not isinstance(value, bool):
+        value = [value] * length          # one number for all struts
     if length is not None:
         if not isinstance(value, (list, tuple)) or len(value) != length:
             raise ConfigError(f'{path}: expected a list of {length} numbers, got {value!r}')
@@ -248,12 +263,13 @@ def _build(cls: type, data: typing.Any, path: str) -> typing.Any:
 def _check_consistency(m: MachineParams) -> None:
     """Cross-field checks that a single-value rule cannot express."""
     s = m.struts
-    if s.stroke_min >= s.stroke_max:
-        raise ConfigError(f'struts.stroke_min {s.stroke_min!r} must be < struts.stroke_max '
-                          f'{s.stroke_max!r}')
-    if s.stroke_max >= s.tube_length:
-        raise ConfigError(f'struts.stroke_max {s.stroke_max!r} must be < struts.tube_length '
-                          f'{s.tube_length!r} (the tube must pass through the BP joint)')
+    for i, (lo, hi, tube) in enumerate(zip(s.stroke_min, s.stroke_max, s.tube_length)):
+        if lo >= hi:
+            raise ConfigError(f'struts.stroke_min {lo!r} must be < struts.stroke_max {hi!r} '
+                              f'(strut {i + 1})')
+        if hi >= tube:
+            raise ConfigError(f'struts.stroke_max {hi!r} must be < struts.tube_length {tube!r} '
+                              f'(strut {i + 1}; the tube must pass through the BP joint)')
     for name in ('column', 'ring', 'spoke', 'bp_bracket'):
         _check_section(getattr(m.frame, name), f'frame.{name}')
     _check_section(s.section, 'struts.section')

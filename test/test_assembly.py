@@ -67,9 +67,9 @@ def test_total_mass_equals_parts_and_hand_sum(machine, model):
     s = machine.struts
     sec = rhs_section(s.section.width, s.section.height, s.section.thickness)
     dens = machine.materials.steel.density
-    assert model.mass_parts['struts'] == pytest.approx(5 * s.tube_length * dens * sec.area)
+    assert model.mass_parts['struts'] == pytest.approx(sum(s.tube_length) * dens * sec.area)
     assert model.mass_parts['ball_screws'] == pytest.approx(
-        5 * s.tube_length * s.screw_mass_per_length)
+        sum(s.tube_length) * s.screw_mass_per_length)
     assert model.mass_parts['gimbals'] == pytest.approx(5 * machine.bp_joints.gimbal_mass)
     assert model.mass_parts['platform'] == machine.platform.mass
     assert model.mass_parts['bed'] == machine.frame.bed_mass
@@ -143,8 +143,8 @@ def test_struts_remeshed_per_pose(machine):
             wp_end = p[f'strut{i + 1}_wp_end']
             assert at_bp == pytest.approx(layout.bp_joints[i])
             assert np.linalg.norm(rear - at_bp) == pytest.approx(
-                machine.struts.tube_length - state.lengths[i])
-            assert np.linalg.norm(wp_end - rear) == pytest.approx(machine.struts.tube_length)
+                machine.struts.tube_length[i] - state.lengths[i])
+            assert np.linalg.norm(wp_end - rear) == pytest.approx(machine.struts.tube_length[i])
 
 
 def test_refinement_grows_dof_and_converges(machine):
@@ -170,9 +170,12 @@ def test_calibration_targets_of_the_default_model(model):
     bed = model.point('bed')[:3] @ phi
     energy = {g: np.einsum('ij,ij->j', phi, model.stiffness_groups[g] @ phi) / w2
               for g in GROUPS}
-    frame_like = energy['frame'] + energy['installation'] > 0.8
+    frame_energy = energy['frame'] + energy['installation']
+    frame_like = frame_energy > 0.8
     x_modes = f[frame_like & (np.abs(bed[0]) > 0.5 * np.abs(bed).max(axis=0))]
-    z_modes = f[frame_like & (np.abs(bed[2]) > 0.5 * np.abs(bed).max(axis=0))]
+    # the vertical frame mode mixes with strut bending near 67 Hz (struts 1/2 and 5 bend at
+    # 30-70 Hz): it may split into neighbours, each with a smaller frame + foot energy share
+    z_modes = f[(frame_energy > 0.4) & (np.abs(bed[2]) > 0.5 * np.abs(bed).max(axis=0))]
     assert 25.0 < x_modes.min() < 29.0
     assert np.any((z_modes > 62.0) & (z_modes < 72.0))
     assert f.min() > 15.0
