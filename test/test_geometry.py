@@ -76,3 +76,14 @@ def test_unreachable_poses_name_strut_and_limit(layout):
     tight = layout.__class__(**{**layout.__dict__, 'bp_angle_max': np.radians(5.0)})
     with pytest.raises(UnreachablePoseError, match=r'BP cardan angle \d = .* deg exceeds'):
         solve_pose(tight, load_positions()['P2'])
+
+
+def test_stroke_limits_apply_per_strut(layout):
+    """A limit lowered for strut 5 only rejects P1 with strut 5 named (its length is 1.379 m)."""
+    lengths = inverse_kinematics(layout, load_positions()['P1']).lengths
+    stroke_max = np.array(layout.stroke_max, dtype=float)
+    stroke_max[4] = lengths[4] - 0.01
+    tight = layout.__class__(**{**layout.__dict__, 'stroke_max': stroke_max})
+    with pytest.raises(UnreachablePoseError, match=r'strut 5: length 1\.37\d+ m above stroke_max'):
+        solve_pose(tight, load_positions()['P1'])
+    solve_pose(layout, load_positions()['P1'])

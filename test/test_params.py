@@ -87,3 +87,19 @@ def test_positions_degrees_and_radians(tmp_path):
     path.write_text('positions:\n  A: {x: 0.1, y: 0, z: 0.8, a_deg: 90}\n')
     with pytest.raises(ConfigError, match=r'positions\.A\.b: missing key'):
         load_positions(path)
+
+
+def test_per_strut_tube_and_stroke_accept_one_number_or_five(raw):
+    one = machine_from_dict(_set(_set(_set(raw, 'struts.tube_length', 2.4),
+                                      'struts.stroke_max', 1.8), 'struts.stroke_min', 0.7))
+    assert one.struts.tube_length == (2.4,) * 5
+    assert one.struts.stroke_max == (1.8,) * 5 and one.struts.stroke_min == (0.7,) * 5
+    five = machine_from_dict(_set(raw, 'struts.tube_length', [2.6, 2.6, 1.9, 1.9, 2.5]))
+    assert five.struts.tube_length == (2.6, 2.6, 1.9, 1.9, 2.5)
+    with pytest.raises(ConfigError, match=r'struts\.tube_length: expected a list of 5'):
+        machine_from_dict(_set(raw, 'struts.tube_length', [2.6, 2.6]))
+    # strut 3's tube too short for its own stroke: the message names the strut
+    short = _set(raw, 'struts.tube_length', [2.65, 2.65, 1.20, 1.93, 2.50])
+    with pytest.raises(ConfigError, match=r'struts\.stroke_max 1\.4 must be < struts\.tube_length '
+                                          r'1\.2 \(strut 3'):
+        machine_from_dict(short)
