@@ -19,6 +19,7 @@ from pathlib import Path
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 
 import yaml
@@ -95,12 +96,11 @@ def scenario_nodes(path: str | Path) -> list[ScenarioNode]:
     return sorted(nodes, key=lambda n: n.executable == 'plant')
 
 
-def node_command(node: ScenarioNode, params_file: Path, overrides: list[str]) -> list[str]:
+def node_command(node: ScenarioNode, params_files: list[Path]) -> list[str]:
     """Command line of one node process (``python -m module --ros-args ...``)."""
-    cmd = [sys.executable, '-m', node.module, '--ros-args', '-r', f'__node:={node.name}',
-           '--params-file', str(params_file)]
-    for item in overrides:
-        cmd += ['-p', item]
+    cmd = [sys.executable, '-m', node.module, '--ros-args', '-r', f'__node:={node.name}']
+    for path in params_files:       # a later file wins (a -p rule would lose to the file)
+        cmd += ['--params-file', str(path)]
     return cmd
 
 
@@ -118,16 +118,21 @@ def stop(procs: dict[str, subprocess.Popen], grace: float = 5.0) -> None:
             proc.wait()
 
 
-def run_scenario(path: Path, plant_overrides: list[str], timeout: float,
+def run_scenario(path: Path, plant_overrides: dict, timeout: float,
                  env: dict | None = None) -> int:
     """Start the nodes of a scenario, wait for the plant, stop the rest; return exit code."""
     nodes = scenario_nodes(path)
     procs: dict[str, subprocess.Popen] = {}
+    tmp = tempfile.TemporaryDirectory(prefix='pentapod_scenario_')
     try:
         for node in nodes:
-            extra = plant_overrides if node.executable == 'plant' else []
+            files = [path]
+            if node.executable == 'plant' and plant_overrides:
+                files.append(Path(tmp.name) / 'plant_overrides.yaml')
+                files[-1].write_text(yaml.safe_dump(
+                    {node.name: {'ros__parameters': plant_overrides}}))
             LOG.info('starting %s (%s)', node.name, node.module)
-            procs[node.name] = subprocess.Popen(node_command(node, path, extra), env=env)
+            procs[node.name] = subprocess.Popen(node_command(node, files), env=env)
         plant = procs[nodes[-1].name]
         end = time.monotonic() + timeout
         while plant.poll() is None:
@@ -142,6 +147,7 @@ def run_scenario(path: Path, plant_overrides: list[str], timeout: float,
         failed = [n for n, p in procs.items() if p.poll() not in (None, 0)]
     finally:
         stop(procs)
+        tmp.cleanup()
     if code is None:
         return 2
     if code == 0 and failed:
@@ -171,10 +177,10 @@ def main(argv=None) -> int:
             for node in scenario_nodes(path):
                 print(f'{node.name}: {node.executable} ({node.module})')
             return 0
-        overrides = [f'{key}:={value}' for key, value in (
+        overrides = {key: value for key, value in (
             ('steps', args.steps), ('duration', args.duration), ('timing', args.timing),
             ('model_file', args.model_file), ('output_file', args.output_file))
-            if value is not None]
+            if value is not None}
         env = dict(os.environ)
         if args.domain_id is not None:
             env['ROS_DOMAIN_ID'] = str(args.domain_id)

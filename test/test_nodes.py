@@ -303,6 +303,7 @@ plant:
     model_file: {model_file}
     steps: 400
     sources: [exciter, damper_tcp]
+    output_file: ''      # the runner's --output-file must win over this
     startup_timeout: 60.0
 exciter:
   ros__parameters:
