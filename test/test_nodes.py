@@ -324,3 +324,20 @@ damper_tcp:
     names = list(run['output_names'])
     v = run['y'][:, names.index('tcp_velocity_y')]
     assert_allclose(run['u'][1:, 1], -100.0 * v[1:], rtol=1e-12, atol=1e-15)
+
+
+@pytest.mark.parametrize(('module', 'params', 'named'), [
+    ('pentapod_sim.nodes.plant_node', ['timing:=fast'], "'timing'"),
+    ('pentapod_sim.nodes.plant_node', ['sample_rate:=-5.0'], "'sample_rate'"),
+    ('pentapod_damper.nodes.damper_node', ['bending_struts:=[7]'], 'strut number 7'),
+    ('pentapod_damper.nodes.pma_node', ['proof_mass:=0.0'], "'proof_mass'"),
+    ('pentapod_sim.nodes.exciter_node', ['kind:=hammer'], "'hammer'"),
+])
+def test_bad_parameters_stop_node_with_named_error(ros_env, tmp_path, module, params, named):
+    model_file = demo_model(2).save(tmp_path / 'model.npz')
+    cmd = [sys.executable, '-m', module, '--ros-args', '-p', f'model_file:={model_file}']
+    for p in params:
+        cmd += ['-p', p]
+    proc = subprocess.run(cmd, env=ros_env, capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 1
+    assert named in proc.stderr, proc.stderr

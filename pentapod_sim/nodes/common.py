@@ -8,6 +8,7 @@ not), falling back to the SingleThreadedExecutor if it is missing.
 from __future__ import annotations
 
 import logging
+import os
 import sys
 import time
 from typing import Callable
@@ -91,7 +92,12 @@ def stamp_to_ns(stamp: Time) -> int:
 
 
 def make_executor(context=None):
-    """EventsExecutor if rclpy has it, else SingleThreadedExecutor (optional context)."""
+    """EventsExecutor if rclpy has it, else SingleThreadedExecutor (optional context).
+
+    ``PENTAPOD_EXECUTOR=single`` in the environment selects the SingleThreadedExecutor.
+    """
+    if os.environ.get('PENTAPOD_EXECUTOR', 'events') == 'single':
+        return SingleThreadedExecutor(context=context)
     try:
         from rclpy.experimental import EventsExecutor
         return EventsExecutor(context=context)
