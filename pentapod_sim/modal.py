@@ -314,7 +314,7 @@ def _assemble_blocks(lam_blocks: list, phi_blocks: list, n_keep: int | None):
     return lam, phi, blocks
 
 
-def _normalise_and_check(K, M, lam, phi, blocks, chunk: int = 64,
+def _normalise_and_check(K, M, lam, phi, blocks, chunk: int = 16,
                          edge_modes: int = 12) -> dict:
     """Mass-normalise in place; return max residual and M-orthogonality errors."""
     resid = 0.0
