@@ -23,6 +23,7 @@ import rclpy
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rcl_interfaces.msg import ParameterDescriptor
 from sensor_msgs.msg import JointState
 
 # Reliable with some depth, like the plant (nothing may be dropped in lockstep).
@@ -34,8 +35,11 @@ class ExampleController(Node):
 
     def __init__(self):
         super().__init__('example_controller')
-        self.gain = self.declare_parameter('gain', 1000.0).value       # [N s/m]
-        name = self.declare_parameter('source_name', 'example').value
+        # every parameter with a descriptor that states its unit
+        self.gain = self.declare_parameter('gain', 1000.0, ParameterDescriptor(
+            description='damping of the TCP in x [N s/m]')).value
+        name = self.declare_parameter('source_name', 'example', ParameterDescriptor(
+            description='answers on /pentapod/forces/<source_name>', read_only=True)).value
         self.pub = self.create_publisher(JointState, '/pentapod/forces/' + name, QOS)
         self.sub = self.create_subscription(JointState, '/pentapod/tcp_state',
                                             self.on_state, QOS)
