@@ -35,7 +35,7 @@ DENSE_LIMIT = 400
 
 #: ARPACK convergence tolerance (relative, on the shift-inverted Ritz values); results are
 #: checked afterwards by their residual ||K phi - omega^2 M phi|| / ||K phi||.
-LANCZOS_TOL = 1e-10
+LANCZOS_TOL = 1e-8
 
 #: Modes asked for per window, relative to the modes it should deliver (overlap margin).
 WINDOW_PAD = 1.3
@@ -341,7 +341,7 @@ def _normalise_and_check(K, M, lam, phi, blocks, chunk: int = 16,
 
 
 def solve_modes(K: sp.spmatrix, M: sp.spmatrix, *, n_modes: int | None = None,
-                f_max: float | None = None, modes_per_window: int = 30,
+                f_max: float | None = None, modes_per_window: int = 45,
                 progress: Progress | None = None, tol_check: float = 1e-6) -> ModalResult:
     """
     Compute the lowest undamped modes of ``K phi = omega^2 M phi``.
