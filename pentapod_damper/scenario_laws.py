@@ -18,7 +18,7 @@ from pentapod_damper.laws import (ProofMassActuator, strut_axial_damper, strut_b
 from pentapod_sim.exceptions import ConfigError
 
 #: Defaults of the damper node's gains [N m s/rad, N s/m, N s/m] (same as the node's).
-DAMPER_DEFAULTS = {'bending_gain': 20000.0, 'axial_gain': 50000.0, 'tcp_gain': 20000.0}
+DAMPER_DEFAULTS = {'bending_gain': 1000.0, 'axial_gain': 50000.0, 'tcp_gain': 20000.0}
 #: Defaults of the PMA node (same as the node's).
 PMA_DEFAULTS = {'directions': ['x'], 'proof_mass': 5.0, 'gain': 4000.0, 'highpass_hz': 0.0,
                 'stroke_limit': 0.0, 'force_limit': 0.0}

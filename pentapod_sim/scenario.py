@@ -28,6 +28,9 @@ from pentapod_sim.exceptions import ConfigError
 
 LOG = logging.getLogger(__name__)
 
+#: Wall time [s] the plant gets to end by itself after another node died.
+EARLY_EXIT_GRACE = 10.0
+
 #: node-name prefix -> (python module, executable name of setup.py)
 NODE_KINDS = {
     'plant': ('pentapod_sim.nodes.plant_node', 'plant'),
@@ -118,6 +121,27 @@ def stop(procs: dict[str, subprocess.Popen], grace: float = 5.0) -> None:
             proc.wait()
 
 
+def drain_recorders(path: Path, nodes: list[ScenarioNode], procs: dict[str, subprocess.Popen],
+                    limit: float = 120.0) -> None:
+    """
+    Let recorders with ``stop_when_idle`` finish writing before the run is stopped.
+
+    A recorder may still be working through its queue when the plant ends; it closes its bag
+    and exits by itself once idle. After ``limit`` seconds it is stopped like the others
+    (its bag is still complete then, only messages still queued are not in it).
+    """
+    data = yaml.safe_load(Path(path).read_text(encoding='utf-8')) or {}
+    idle = [n.name for n in nodes if n.executable == 'recorder' and float(
+        (data.get(n.name) or {}).get('ros__parameters', {}).get('stop_when_idle', 0)) > 0]
+    end = time.monotonic() + limit
+    for name in idle:
+        try:
+            procs[name].wait(timeout=max(0.1, end - time.monotonic()))
+        except subprocess.TimeoutExpired:
+            LOG.warning('recorder %s still busy %.0f s after the plant ended; stopping it',
+                        name, limit)
+
+
 def run_scenario(path: Path, plant_overrides: dict, timeout: float,
                  env: dict | None = None) -> int:
     """Start the nodes of a scenario, wait for the plant, stop the rest; return exit code."""
@@ -135,15 +159,21 @@ def run_scenario(path: Path, plant_overrides: dict, timeout: float,
             procs[node.name] = subprocess.Popen(node_command(node, files), env=env)
         plant = procs[nodes[-1].name]
         end = time.monotonic() + timeout
+        reported: set = set()
         while plant.poll() is None:
-            dead = [n for n, p in procs.items() if p.poll() not in (None, 0)]
+            dead = {n for n, p in procs.items() if p.poll() not in (None, 0)} - reported
             if dead:
-                LOG.error('node(s) %s exited early with an error', ', '.join(dead))
+                # a dead source stops a lockstep plant with a named error; give it the time
+                LOG.error('node(s) %s exited early with an error', ', '.join(sorted(dead)))
+                reported |= dead
+                end = min(end, time.monotonic() + EARLY_EXIT_GRACE)
             if time.monotonic() > end:
                 LOG.error('plant did not finish within %.0f s; stopping', timeout)
                 break
             time.sleep(0.2)
         code = plant.poll()
+        if code == 0:
+            drain_recorders(path, nodes, procs)
         failed = [n for n, p in procs.items() if p.poll() not in (None, 0)]
     finally:
         stop(procs)

@@ -33,7 +33,7 @@ class DamperNode(LockstepSource):
                            read_only=True, array='integer[]')
         dirs = declare(d, 'tcp_directions', [''], 'TCP damper directions (x, y, z)',
                        read_only=True, array='string[]')
-        gains = {'bending_gain': declare(d, 'bending_gain', 2000.0, 'bending damping '
+        gains = {'bending_gain': declare(d, 'bending_gain', 1000.0, 'bending damping '
                                          '[N m s/rad]', low=0.0, high=MAX_GAIN),
                  'axial_gain': declare(d, 'axial_gain', 50000.0, 'axial damping [N s/m]',
                                        low=0.0, high=MAX_GAIN),

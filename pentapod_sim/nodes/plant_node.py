@@ -13,6 +13,7 @@ from __future__ import annotations
 import time
 
 import numpy as np
+from rclpy.duration import Duration
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
@@ -90,8 +91,19 @@ class PlantNode(Node):
                                      'this wall time [s]', low=0.1, high=3600.0),
             'output_file': declare(d, 'output_file', '', 'write y_k, u_k of every step to '
                                    'this .npz at the end (empty: no file)', read_only=True),
+            'wait_for_subscribers': declare(d, 'wait_for_subscribers', [''], 'node names '
+                                            '(e.g. a recorder) that must subscribe to an '
+                                            'output topic before step 0', read_only=True,
+                                            array='string[]'),
+            'subscriber_settle': declare(d, 'subscriber_settle', 0.5, 'wall time [s] '
+                                         'spun after the wait_for_subscribers nodes appeared',
+                                         low=0.0, high=60.0),
+            'ack_timeout': declare(d, 'ack_timeout', 10.0, 'max wall time [s] to wait at '
+                                   'the end until subscribers acknowledged every message',
+                                   low=0.0, high=3600.0),
         }
         self.p['sources'] = [s for s in self.p['sources'] if s]
+        self.p['wait_for_subscribers'] = [s for s in self.p['wait_for_subscribers'] if s]
         if self.p['timing'] not in ('lockstep', 'realtime'):
             raise ConfigError(f"parameter 'timing' must be 'lockstep' or 'realtime', got "
                               f"{self.p['timing']!r}")
@@ -157,6 +169,40 @@ class PlantNode(Node):
         if not spin_until(executor, lambda: not missing(), self.p['startup_timeout']):
             raise RunError(f'force source(s) {", ".join(missing())} did not appear within '
                            f'startup_timeout = {self.p["startup_timeout"]} s')
+
+    def output_topics(self) -> list[str]:
+        """Topics the plant publishes every step (/clock and the state topics)."""
+        return [self.clock_pub.topic_name] + [pub.topic_name for pub, _ in self.state_pubs]
+
+    def wait_for_subscribers(self, executor) -> None:
+        """
+        Wait until each node of ``wait_for_subscribers`` subscribes to an output topic.
+
+        Then spin ``subscriber_settle`` seconds more, so that the node's other subscriptions
+        (to this plant and to the sources) are matched too: a recorder started with the run
+        thus receives step 0. RunError names a node that did not appear.
+        """
+        wanted = self.p['wait_for_subscribers']
+
+        def missing():
+            seen = {i.node_name for topic in self.output_topics()
+                    for i in self.get_subscriptions_info_by_topic(topic)}
+            return [n for n in wanted if n not in seen]
+        if not wanted:
+            return
+        if not spin_until(executor, lambda: not missing(), self.p['startup_timeout']):
+            raise RunError(f'subscriber node(s) {", ".join(missing())} did not appear within '
+                           f'startup_timeout = {self.p["startup_timeout"]} s')
+        spin_until(executor, lambda: False, self.p['subscriber_settle'])
+        self.refresh_subscribers()
+
+    def wait_for_acks(self) -> None:
+        """Block until every subscriber acknowledged every message (reliable QoS)."""
+        timeout = Duration(seconds=self.p['ack_timeout'])
+        for pub in [self.clock_pub] + [pub for pub, _ in self.state_pubs]:
+            if pub.get_subscription_count() and not pub.wait_for_all_acked(timeout):
+                self.get_logger().warn(f'{pub.topic_name}: not every message acknowledged '
+                                       f'within ack_timeout = {self.p["ack_timeout"]} s')
 
     def run_lockstep(self, executor, trace, n_steps: int | None = None) -> None:
         """Each step: publish y_k, wait for every source's u_k, advance."""
@@ -243,6 +289,7 @@ def run(node: PlantNode, executor) -> None:
     """Wait for the sources, run the configured number of steps, log a summary."""
     trace = Trace(node.n_steps, node.core, bool(node.p['output_file']))
     node.wait_for_sources(executor)
+    node.wait_for_subscribers(executor)
     node.get_logger().info(f'{node.p["timing"]} run of {node.n_steps} steps with sources '
                            f'{list(node.mixer.sources) or "none"}')
     extra = {}
@@ -257,6 +304,7 @@ def run(node: PlantNode, executor) -> None:
             extra = stats.as_dict()
     finally:
         wall = time.monotonic() - wall
+        node.wait_for_acks()
         node.get_logger().info(f'ran {node.core.k} steps in {wall:.3f} s wall '
                                f'({node.core.k / max(wall, 1e-9):.0f} steps/s); '
                                + node.mixer.reject_summary())

@@ -16,16 +16,19 @@ import datetime
 import importlib
 from pathlib import Path
 import struct
+import time
 
 import rclpy
 from rclpy.clock import Clock, ClockType
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rcl_interfaces.msg import ParameterDescriptor, ParameterType
 import yaml
 
 from pentapod_sim.exceptions import BagError
+from pentapod_sim.nodes.common import make_executor
 from pentapod_sim.recording import BagWriter, qos_profile
 from pentapod_sim.recording.msgdefs import has_header_stamp
 
@@ -53,18 +56,25 @@ class RecorderNode(Node):
     def __init__(self, **kwargs):
         super().__init__('recorder', **kwargs)
         desc = ParameterDescriptor
-        self.declare_parameter('topics', [], desc(
+        self.declare_parameter('topics', Parameter.Type.STRING_ARRAY, desc(
             type=ParameterType.PARAMETER_STRING_ARRAY,
             description='topics to record; empty: every /pentapod/* topic and /clock'))
         self.declare_parameter('output_dir', 'out/bags', desc(description='folder of bags'))
         self.declare_parameter('bag_name', '', desc(description='bag folder name'))
         self.declare_parameter('run_info', '', desc(
             description='YAML mapping stored in custom_data (model hash, pose, scenario)'))
-        self.declare_parameter('queue_depth', 1000, desc(description='subscription depth'))
+        self.declare_parameter('queue_depth', 100000, desc(
+            description='subscription depth (messages held while the writer catches up)'))
         self.declare_parameter('discovery_period', 0.2, desc(description='[s], wall time'))
         self.declare_parameter('flush_period', 0.5, desc(description='[s], wall time'))
+        self.declare_parameter('stop_when_idle', 0.0, desc(
+            description='[s] wall time without messages after which the recorder closes the '
+                        'bag and exits (0 = run until SIGINT/SIGTERM)'))
+        self.stop_when_idle = float(self.get_parameter('stop_when_idle').value)
+        self.last_message = None
+        self.duplicates = {}
         param = self.get_parameter
-        self.wanted = list(param('topics').value or [])
+        self.wanted = [t for t in (param('topics').value or []) if t]
         name = param('bag_name').value or datetime.datetime.now(
             datetime.timezone.utc).strftime('run_%Y%m%d_%H%M%S')
         run_info = yaml.safe_load(param('run_info').value or '{}') or {}
@@ -137,20 +147,34 @@ class RecorderNode(Node):
             if not registered:
                 self._register(topic, msg_type)
                 registered.append(True)
+            self.last_message = time.monotonic()
             if stamped:
                 sec, nanosec = struct.unpack_from('<iI', data, 4)
-                write(topic, data, sec * 1_000_000_000 + nanosec, received)
+                stamp = sec * 1_000_000_000 + nanosec
+                if last_stamp and last_stamp[0] == stamp and last_data[0] == data:
+                    self.duplicates[topic] = self.duplicates.get(topic, 0) + 1
+                    return  # a lockstep plant re-sends a step while it waits: keep one copy
+                last_stamp[:], last_data[:] = [stamp], [data]
+                write(topic, data, stamp, received)
             else:
                 write(topic, data, received, received)
+        last_stamp, last_data = [], []
         return on_message
 
     def flush(self) -> None:
         """Push the open chunk to disk and rewrite metadata.yaml."""
         self.writer.flush()
 
+    def idle(self) -> bool:
+        """True once messages came and none arrived for ``stop_when_idle`` seconds."""
+        return (self.stop_when_idle > 0 and self.last_message is not None
+                and time.monotonic() - self.last_message > self.stop_when_idle)
+
     def close(self) -> None:
         """Finish the bag (summary, footer, metadata.yaml)."""
         self.writer.close()
+        if self.duplicates:
+            self.get_logger().info(f'skipped re-sent copies of a step: {self.duplicates}')
         if self.context.ok():  # after a signal the rosout publisher is gone
             self.get_logger().info(f'closed {self.writer.path}: {self.writer.topic_counts()}')
 
@@ -163,8 +187,11 @@ def main(argv=None) -> int:
     """Run the recorder until SIGINT/SIGTERM; the bag is closed on the way out."""
     rclpy.init(args=argv)
     node = RecorderNode()
+    executor = make_executor()
+    executor.add_node(node)
     try:
-        rclpy.spin(node)
+        while rclpy.ok() and not node.idle():
+            executor.spin_once(timeout_sec=0.05)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:

@@ -75,6 +75,14 @@ def _resolvent_columns(a: np.ndarray, b: np.ndarray, z: np.ndarray) -> np.ndarra
     return np.stack([np.linalg.solve(zf * eye - a, b) for zf in z], axis=1)
 
 
+def spectral_radius(plant: PlantModel, laws: Sequence, dt: float) -> float:
+    """Largest |eigenvalue| of the sampled closed loop (>= 1: not asymptotically stable)."""
+    core = DiscretePlant(plant.discretize(dt))
+    gain = feedback_gain(core, laws) if laws else np.zeros((len(core.input_names),
+                                                             len(core.output_names)))
+    return float(np.max(np.abs(np.linalg.eigvals(closed_loop_matrices(core, gain)[0]))))
+
+
 def discrete_frf(plant: PlantModel, laws: Sequence, dt: float, freq_hz: npt.ArrayLike,
                  input_: str) -> DiscreteFrf:
     """

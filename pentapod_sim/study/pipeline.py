@@ -19,8 +19,9 @@ from pentapod_sim.analysis.bag_reader import open_bag
 from pentapod_sim.analysis.frf import frf_from_series
 from pentapod_sim.plant_model import build_plant, PlantModel
 from pentapod_sim.scenario import resolve
+from pentapod_sim.exceptions import ConfigError
 from pentapod_sim.study.analytic import (continuous_frf, discrete_frf, DiscreteFrf,
-                                         pma_requirements)
+                                         pma_requirements, spectral_radius)
 from pentapod_sim.study.config import StudyConfig
 from pentapod_sim.study.runs import RunResult
 
@@ -88,6 +89,12 @@ def scenario_analytic(model: PositionModel, scenario: str, cfg: StudyConfig,
     sections = read_sections(resolve(scenario))
     laws = scenario_laws(sections, 1.0 / cfg.sample_rate)
     dampers = continuous_dampers(laws)
+    rho = spectral_radius(model.plant, laws, 1.0 / cfg.sample_rate)
+    if rho >= 1.0:
+        raise ConfigError(f'scenario {scenario!r} at {model.position} is unstable at '
+                          f'sample_rate = {cfg.sample_rate:g} Hz with its one-sample '
+                          f'controller delay (spectral radius {rho:.4g}); lower its gains or '
+                          'raise the sample rate')
     cont = continuous_frf(model.plant, dampers, freq, f'tcp_displacement_{d}',
                           f'tcp_force_{d}')
     disc = discrete_frf(model.plant, laws, 1.0 / cfg.sample_rate, welch_freq(cfg),
@@ -118,8 +125,7 @@ def measure(run: RunResult, cfg: StudyConfig) -> Measured:
     force = bag.series(f'/pentapod/excitation.force.{d}')
     tcp = frf_from_series(force, bag.series(f'/pentapod/tcp_state.position.tcp_{d}'),
                           'random', cfg.nperseg)
-    counts = {t: bag.topic(t).count for t in ('/pentapod/tcp_state', '/pentapod/excitation',
-                                              '/clock')}
+    counts = {t: bag.topic(t).count for t in ('/pentapod/tcp_state', '/pentapod/excitation')}
     result = Measured(run, tcp.freq, tcp.H, tcp.coherence, n_messages=counts)
     if run.scenario.startswith('pma'):
         stroke = frf_from_series(force, bag.series(f'/pentapod/pma/state.position.pma_{d}'),
