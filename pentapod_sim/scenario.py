@@ -143,10 +143,16 @@ def drain_recorders(path: Path, nodes: list[ScenarioNode], procs: dict[str, subp
 
 
 def run_scenario(path: Path, plant_overrides: dict, timeout: float,
-                 env: dict | None = None) -> int:
-    """Start the nodes of a scenario, wait for the plant, stop the rest; return exit code."""
+                 env: dict | None = None, log_dir: Path | None = None) -> int:
+    """
+    Start the nodes of a scenario, wait for the plant, stop the rest; return exit code.
+
+    With ``log_dir`` each node's stdout and stderr go to ``log_dir/<node>.log`` instead of
+    this process's terminal.
+    """
     nodes = scenario_nodes(path)
     procs: dict[str, subprocess.Popen] = {}
+    logs: list = []
     tmp = tempfile.TemporaryDirectory(prefix='pentapod_scenario_')
     try:
         for node in nodes:
@@ -156,7 +162,14 @@ def run_scenario(path: Path, plant_overrides: dict, timeout: float,
                 files[-1].write_text(yaml.safe_dump(
                     {node.name: {'ros__parameters': plant_overrides}}))
             LOG.info('starting %s (%s)', node.name, node.module)
-            procs[node.name] = subprocess.Popen(node_command(node, files), env=env)
+            out = None
+            if log_dir is not None:
+                Path(log_dir).mkdir(parents=True, exist_ok=True)
+                out = open(Path(log_dir) / f'{node.name}.log', 'w')  # noqa: SIM115
+                logs.append(out)
+            procs[node.name] = subprocess.Popen(node_command(node, files), env=env,
+                                                stdout=out, stderr=subprocess.STDOUT if out
+                                                else None)
         plant = procs[nodes[-1].name]
         end = time.monotonic() + timeout
         reported: set = set()
@@ -178,6 +191,8 @@ def run_scenario(path: Path, plant_overrides: dict, timeout: float,
     finally:
         stop(procs)
         tmp.cleanup()
+        for stream in logs:
+            stream.close()
     if code is None:
         return 2
     if code == 0 and failed:

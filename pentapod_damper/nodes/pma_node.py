@@ -45,6 +45,7 @@ class PmaNode(LockstepSource):
         self.setup(self.law.sensor_ports, self.law.actuator_ports)
         self.joints = [p.replace('pma_force_', 'pma_') for p in self.law.actuator_ports]
         self.state_pub = self.create_publisher(JointState, PMA_STATE_TOPIC, INFO_QOS)
+        self.info_pubs.append(self.state_pub)
         self.get_logger().info(f'PMA m_a = {self.law.mass} kg, g = {self.law.gain} 1/s '
                                f'(b = {self.law.mass * self.law.gain:.6g} N s/m) on '
                                f'{self.law.actuator_ports}')

@@ -22,8 +22,12 @@ from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescr
 
 from pentapod_sim.exceptions import ConfigError, RunError
 
+#: History of the state and information streams. A reliable writer drops its oldest
+#: unacknowledged message when the history is full, so the depth must cover how far a slow
+#: reader (a recorder on a busy machine) can fall behind: 10000 steps.
+STREAM_DEPTH = 10000
 #: Plant outputs (states, /clock): reliable, deep enough that lockstep never drops a step.
-STATE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
+STATE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=STREAM_DEPTH,
                        reliability=ReliabilityPolicy.RELIABLE,
                        durability=DurabilityPolicy.VOLATILE)
 #: Forces from sources: reliable; a source sends one message per step.
@@ -31,7 +35,7 @@ FORCE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
                        reliability=ReliabilityPolicy.RELIABLE,
                        durability=DurabilityPolicy.VOLATILE)
 #: Diagnostics streams (PMA state, excitation): reliable, moderate depth.
-INFO_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
+INFO_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=STREAM_DEPTH,
                       reliability=ReliabilityPolicy.RELIABLE,
                       durability=DurabilityPolicy.VOLATILE)
 

@@ -64,6 +64,7 @@ class ExciterNode(LockstepSource):
             raise ConfigError(f'exciter parameters: {err}') from None
         self.setup([], TCP_PORTS)
         self.wrench_pub = self.create_publisher(WrenchStamped, EXCITATION_TOPIC, INFO_QOS)
+        self.info_pubs.append(self.wrench_pub)
         self.get_logger().info(f'{spec.kind} excitation, {spec.amplitude} N along '
                                f'{self.signal.direction.tolist()}')
 

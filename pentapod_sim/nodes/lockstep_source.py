@@ -37,6 +37,12 @@ class LockstepSource(Node):
         super().__init__(default_name, **kwargs)
         self.source_name = declare(self, 'source_name', self.get_name(), 'publishes forces on '
                                    '/pentapod/forces/<source_name>', read_only=True)
+        self.wait_for = [n for n in declare(
+            self, 'wait_for_subscribers', [''], 'node names (e.g. a recorder) that must be '
+            'subscribed and matched to this node\'s information topics before it answers '
+            'step 0 (the plant re-sends step 0 meanwhile)', read_only=True, array='string[]')
+            if n]
+        self.info_pubs: list = []   # subclasses add their diagnostic publishers
         self.rejected = {}
         self.answered = 0
         self._last_warn = 0.0
@@ -80,6 +86,16 @@ class LockstepSource(Node):
             self.get_logger().warn(f'rejected state message: {reason} '
                                    f'({self.rejected[kind]} so far)')
 
+    def subscribers_ready(self) -> bool:
+        """True once every ``wait_for_subscribers`` node is matched on every info topic."""
+        for pub in self.info_pubs:
+            graph = self.get_subscriptions_info_by_topic(pub.topic_name)
+            names = {info.node_name for info in graph}
+            if any(n not in names for n in self.wait_for) or (
+                    pub.get_subscription_count() < len(graph)):
+                return False
+        return True
+
     def _on_state(self, topic: str, msg) -> None:
         """Collect the messages of one stamp; answer when all needed topics are in."""
         stamp = msg.clock if topic == CLOCK_TOPIC else msg.header.stamp
@@ -93,6 +109,8 @@ class LockstepSource(Node):
             self._last = (-1, None)
             self._pending.clear()
             self.reset()
+        if self.answered == 0 and self.wait_for and not self.subscribers_ready():
+            return   # not answering yet: the plant re-sends this step after resend_period
         pending = self._pending.setdefault(ns, {})
         pending[topic] = msg
         if len(pending) < max(1, len(self.needs)):

@@ -184,10 +184,16 @@ class PlantNode(Node):
         """
         wanted = self.p['wait_for_subscribers']
 
+        pubs = [self.clock_pub] + [pub for pub, _ in self.state_pubs]
+
         def missing():
-            seen = {i.node_name for topic in self.output_topics()
-                    for i in self.get_subscriptions_info_by_topic(topic)}
-            return [n for n in wanted if n not in seen]
+            seen, unmatched = set(), []
+            for pub in pubs:
+                graph = self.get_subscriptions_info_by_topic(pub.topic_name)
+                seen |= {i.node_name for i in graph}
+                if pub.get_subscription_count() < len(graph):
+                    unmatched.append(pub.topic_name)
+            return [n for n in wanted if n not in seen] + [f'match on {t}' for t in unmatched]
         if not wanted:
             return
         if not spin_until(executor, lambda: not missing(), self.p['startup_timeout']):

@@ -20,15 +20,13 @@ import time
 
 import rclpy
 from rclpy.clock import Clock, ClockType
-from rclpy.executors import ExternalShutdownException
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
-from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rcl_interfaces.msg import ParameterDescriptor, ParameterType
 import yaml
 
 from pentapod_sim.exceptions import BagError
-from pentapod_sim.nodes.common import make_executor
 from pentapod_sim.recording import BagWriter, qos_profile
 from pentapod_sim.recording.msgdefs import has_header_stamp
 
@@ -56,7 +54,7 @@ class RecorderNode(Node):
     def __init__(self, **kwargs):
         super().__init__('recorder', **kwargs)
         desc = ParameterDescriptor
-        self.declare_parameter('topics', Parameter.Type.STRING_ARRAY, desc(
+        self.declare_parameter('topics', [''], desc(
             type=ParameterType.PARAMETER_STRING_ARRAY,
             description='topics to record; empty: every /pentapod/* topic and /clock'))
         self.declare_parameter('output_dir', 'out/bags', desc(description='folder of bags'))
@@ -187,7 +185,9 @@ def main(argv=None) -> int:
     """Run the recorder until SIGINT/SIGTERM; the bag is closed on the way out."""
     rclpy.init(args=argv)
     node = RecorderNode()
-    executor = make_executor()
+    # the default executor: rclpy's EventsExecutor did not fire the steady-clock discovery and
+    # flush timers here
+    executor = SingleThreadedExecutor()
     executor.add_node(node)
     try:
         while rclpy.ok() and not node.idle():

@@ -31,6 +31,20 @@ RECORDED_TOPICS = ['/pentapod/tcp_state', '/pentapod/excitation', '/pentapod/pma
 DIRECTIONS = {'x': [1.0, 0.0, 0.0], 'y': [0.0, 1.0, 0.0], 'z': [0.0, 0.0, 1.0]}
 
 
+class _QuotingDumper(yaml.SafeDumper):
+    """YAML dumper that quotes every string: rcl reads a bare ``y`` or ``n`` as a boolean."""
+
+
+_QuotingDumper.add_representer(
+    str, lambda dumper, value: dumper.represent_scalar('tag:yaml.org,2002:str', value,
+                                                       style="'"))
+
+
+def dump_params(doc: dict) -> str:
+    """A ROS 2 parameter file's text with every string quoted."""
+    return yaml.dump(doc, Dumper=_QuotingDumper, sort_keys=False)
+
+
 @dataclass
 class RunResult:
     """Outcome of one run: where its bag is and how long it took (wall time [s])."""
@@ -72,9 +86,11 @@ def run_sections(scenario: str, position: str, model_file: Path, cfg: StudyConfi
         if name.startswith('plant'):
             params.update(position=position, model_file=str(model_file), duration=duration,
                           timing='lockstep', steps=0, output_file='')
-            params['wait_for_subscribers'] = ['recorder']
         elif name.startswith('exciter'):
             params = excitation_params(cfg, kind)
+        # nothing is published before the recorder is matched (plant: step 0; sources: their
+        # first answer), so the bag holds every step
+        params['wait_for_subscribers'] = ['recorder']
         doc[name] = {'ros__parameters': params}
     doc['recorder'] = {'ros__parameters': {
         'topics': RECORDED_TOPICS, 'output_dir': str(bag_dir.parent), 'bag_name': bag_dir.name,
@@ -108,14 +124,17 @@ def run_on_testbed(scenario: str, position: str, model_file: Path, model_hash: s
     info['scenario_parameters'] = {k: v for k, v in doc.items() if k != 'recorder'}
     doc['recorder']['ros__parameters']['run_info'] = yaml.safe_dump(info, sort_keys=False)
     params_file = run_dir / 'scenario.yaml'
-    params_file.write_text(yaml.safe_dump(doc, sort_keys=False))
+    params_file.write_text(dump_params(doc))
     env = dict(os.environ, ROS_LOG_DIR=str(run_dir / 'ros_log'))
     t0 = time.perf_counter()
-    code = run_scenario(params_file, {}, timeout, env)
+    code = run_scenario(params_file, {}, timeout, env, log_dir=run_dir / 'logs')
     wall = time.perf_counter() - t0
     if code != 0:
-        raise RunError(f'run {name} failed (exit code {code}); parameters in {params_file}, '
-                       f'node logs in {run_dir / "ros_log"}')
+        errors = [line.strip() for log in sorted((run_dir / 'logs').glob('*.log'))
+                  for line in log.read_text(errors='replace').splitlines()
+                  if line.startswith('error:')]
+        raise RunError(f'run {name} failed (exit code {code}): {"; ".join(errors) or "?"}; '
+                       f'parameters in {params_file}, node logs in {run_dir / "logs"}')
     if not (bag_dir / 'metadata.yaml').is_file():
         raise RunError(f'run {name}: the recorder left no complete bag in {bag_dir}')
     steps = int(round((cfg.duration if kind == 'random' else cfg.step_duration)
