@@ -5,6 +5,9 @@ Usage::
 
     python bench/run_all.py [--quick] [--only modal,plant] [--out bench/RESULTS.md]
 
+The rows of each topic are also kept in ``bench/results/<topic>.json``; the Markdown table is
+built from the latest rows of every topic, so ``--only`` refreshes part of it.
+
 Each ``bench/bench_<topic>.py`` module has ``run(quick: bool) -> list[dict]`` returning rows with
 ``name``, ``value``, ``unit``, ``baseline``, ``baseline_value``, ``ratio`` (> 1: ours is better)
 and ``note``. Ratios compare against a baseline measured in the same run on the same input, so
@@ -14,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import importlib.util
+import json
 import math
 from pathlib import Path
 import platform
@@ -22,6 +26,7 @@ import time
 import traceback
 
 HERE = Path(__file__).resolve().parent
+RESULTS = HERE / 'results'
 COLUMNS = ('benchmark', 'ours', 'baseline', 'baseline figure', 'ratio', 'note')
 
 
@@ -77,11 +82,21 @@ def main(argv: list[str] | None = None) -> int:
             failed.append(topic)
             continue
         for r in results:
-            rows.append(_row(topic, r))
-            print('   ', ' | '.join(rows[-1]), flush=True)
-        print(f'[bench] {topic} done in {time.perf_counter() - t0:.1f} s', flush=True)
+            print('   ', ' | '.join(_row(topic, r)), flush=True)
+        elapsed = time.perf_counter() - t0
+        print(f'[bench] {topic} done in {elapsed:.1f} s', flush=True)
+        RESULTS.mkdir(exist_ok=True)
+        (RESULTS / f'{topic}.json').write_text(json.dumps(
+            {'quick': args.quick, 'date': time.strftime('%Y-%m-%d %H:%M'), 'seconds': elapsed,
+             'rows': results}, indent=1, default=float))
+    for path in sorted(RESULTS.glob('*.json')):
+        saved = json.loads(path.read_text())
+        mode = 'quick' if saved['quick'] else 'full'
+        rows += [_row(path.stem, dict(r, note=f"{r.get('note', '')} [{mode}, {saved['date']}]"))
+                 for r in saved['rows']]
     table = _table(rows)
-    header = (f'Benchmarks ({"quick" if args.quick else "full"}), {time.strftime("%Y-%m-%d %H:%M")}, '
+    made = time.strftime('%Y-%m-%d %H:%M')
+    header = (f'Benchmarks (latest run of each topic; table made {made}), '
               f'{platform.processor() or platform.machine()}, Python {platform.python_version()}')
     print('\n' + header + '\n\n' + table)
     if failed:
