@@ -21,6 +21,7 @@ EXECUTABLES = {
     'pma': 'pentapod_damper.nodes.pma_node:main',
     'example_controller': 'pentapod_damper.nodes.example_controller:main',
     'scenario': 'pentapod_sim.scenario:main',
+    'study': 'pentapod_sim.study.__main__:main',
 }
 
 
@@ -46,7 +47,6 @@ setup(
     maintainer_email='maintainers@pentapod-testbed.invalid',
     description='Virtual pentapod machine-tool testbed: FE model, modal plant, dampers, MCAP.',
     license='Apache-2.0',
-    tests_require=['pytest'],
     entry_points={
         'console_scripts': [f'{name} = {target}' for name, target in EXECUTABLES.items()],
     },
