@@ -49,7 +49,7 @@ def baseline_frf_plot(freq: np.ndarray, curves: Mapping[str, np.ndarray],
         ax_m.axvline(f, color='grey', lw=0.4, alpha=0.5)
     ax_m.set_ylim(top=top)
     ax_m.legend(loc='upper right')
-    ax_m.text(0.01, 0.02, f'{np.sum(mode_freqs <= freq[-1])} modes in the model below '
+    ax_m.text(0.01, 0.02, f'{np.sum(mode_freqs <= freq[-1])} modes of the reduced model below '
               f'{freq[-1]:.0f} Hz (grey lines)', transform=ax_m.transAxes, fontsize=8)
     return _save(fig, path)
 
