@@ -167,6 +167,33 @@ class Session:
                 proc.wait()
 
 
+def _vm_hwm(pid: int) -> float:
+    """Peak resident set size of a running process [bytes] (VmHWM of /proc/<pid>/status)."""
+    try:
+        for line in Path(f'/proc/{pid}/status').read_text().splitlines():
+            if line.startswith('VmHWM:'):
+                return float(line.split()[1]) * 1024.0
+    except OSError:
+        pass
+    return 0.0
+
+
+def wait_rss(proc: subprocess.Popen, timeout: float) -> tuple[int, float]:
+    """
+    Wait for a child, sampling its peak RSS until it ends; return (exit code, bytes).
+
+    VmHWM is the process's own high-water mark (ru_maxrss of a child would include the
+    parent's memory at fork time on Linux).
+    """
+    end, peak = time.monotonic() + timeout, 0.0
+    while proc.poll() is None:
+        peak = max(peak, _vm_hwm(proc.pid))
+        if time.monotonic() > end:
+            raise subprocess.TimeoutExpired(proc.args, timeout)
+        time.sleep(0.02)
+    return proc.returncode, peak
+
+
 def plant_run(folder: Path, model_file: Path, n_controllers: int, steps: int,
               timing: str = 'lockstep', rate: float = RATE) -> dict:
     """Run the plant node with n damper nodes; return the figures of its trace file."""
@@ -182,22 +209,27 @@ def plant_run(folder: Path, model_file: Path, n_controllers: int, steps: int,
                              f'sample_rate:={rate}', f'timing:={timing}',
                              'sources:=[' + ','.join(names) + ']', f"output_file:='{trace}'",
                              'startup_timeout:=60.0')
-        if plant.wait(timeout=300) != 0:
+        code, rss = wait_rss(plant, 300)
+        if code != 0:
             raise RuntimeError((folder / 'plant.log').read_text())
     finally:
         session.close()
     with np.load(trace) as data:
-        return {k: float(data[k]) for k in data.files if data[k].shape == ()}
+        return dict({k: float(data[k]) for k in data.files if data[k].shape == ()}, rss=rss)
 
 
-def pingpong(folder: Path, n: int) -> float:
-    """Round trips/s of a bare rclpy ping-pong (default executor) between two processes."""
+def pingpong(folder: Path, n: int) -> tuple[float, float]:
+    """
+    Bare rclpy ping-pong (default executor) between two processes.
+
+    Returns round trips/s and the peak RSS of the pong process [bytes].
+    """
     session = Session(folder)
     try:
-        session.start(['-c', PINGPONG, 'pong', str(n)], 'pong.log')
+        pong = session.start(['-c', PINGPONG, 'pong', str(n)], 'pong.log')
         ping = session.start(['-c', PINGPONG, 'ping', str(n)], 'pipe')
         out, _ = ping.communicate(timeout=300)
-        return float(out.strip().splitlines()[-1])
+        return float(out.strip().splitlines()[-1]), _vm_hwm(pong.pid)
     finally:
         session.close()
 
@@ -209,9 +241,14 @@ def ros_rows(quick: bool) -> list[dict]:
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
         model_file = demo_model(100, seed=1).save(folder / 'model.npz')
-        base = pingpong(folder, steps)
+        base, base_rss = pingpong(folder, steps)
         for n_ctrl in (1, 3):
             res = plant_run(folder, model_file, n_ctrl, steps)
+            if n_ctrl == 1:
+                rows.append(_row('plant node peak RSS (lockstep run)', res['rss'] / 2 ** 20,
+                                 'MiB', 'bare rclpy node (ping-pong pong)', base_rss / 2 ** 20,
+                                 higher_better=False, note='VmHWM of the process; the '
+                                 'plant imports numpy, scipy and python-control'))
             rows.append(_row(f'lockstep plant + {n_ctrl} controller node(s)',
                              steps / res['wall_time'], 'steps/s',
                              'rclpy ping-pong, 2 processes, default executor', base,
