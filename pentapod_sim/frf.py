@@ -21,6 +21,7 @@ import numpy.typing as npt
 import scipy.linalg as spla
 
 from pentapod_sim.exceptions import ConfigError, PortError
+from pentapod_sim.figures import save_figure
 from pentapod_sim.plant_model import PlantModel
 from pentapod_sim.ports import collocated_output
 
@@ -283,11 +284,5 @@ def dc_gain_plot(gains: npt.ArrayLike, freq_hz: npt.ArrayLike, path: str | Path,
     return _save(fig, path)
 
 
-def _save(fig, path: str | Path) -> Path:
-    import matplotlib.pyplot as plt
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+def _save(fig, path) -> Path:
+    return save_figure(fig, path)

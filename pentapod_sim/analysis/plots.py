@@ -12,6 +12,8 @@ matplotlib.use('Agg')
 import matplotlib.pyplot as plt  # noqa: E402  (backend must be chosen first)
 import numpy as np  # noqa: E402
 
+from pentapod_sim.figures import save_figure  # noqa: E402
+
 
 def frf_plot(results: Sequence, path, analytic: Optional[tuple] = None,
              resonances: Optional[Sequence] = None, fmin: float = 0.0,
@@ -139,9 +141,4 @@ def amplitude_plot(freq: np.ndarray, amplitudes: dict, units: dict, path,
 
 
 def _save(fig, path) -> Path:
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)

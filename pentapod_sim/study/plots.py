@@ -10,17 +10,16 @@ matplotlib.use('Agg')
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from pentapod_sim.figures import save_figure  # noqa: E402
+
 #: Fixed colour per scenario, so every figure reads the same way.
 COLORS = {'baseline': 'black', 'strut_damping_all': 'tab:blue', 'strut_damping_12': 'tab:cyan',
           'axial_damping': 'tab:green', 'tcp_damping': 'tab:red', 'pma_5kg': 'tab:purple',
           'pma_1kg': 'tab:orange'}
 
 
-def _save(fig, path: Path) -> Path:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+def _save(fig, path) -> Path:
+    return save_figure(fig, path, tight=False)
 
 
 def _mag_axes(title: str, unit: str):
