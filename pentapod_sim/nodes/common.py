@@ -109,6 +109,18 @@ def make_executor(context=None):
         return SingleThreadedExecutor(context=context)
 
 
+def subscribers_of(node, publisher) -> tuple[set, bool]:
+    """
+    Names of the nodes subscribed to a publisher's topic, and whether all are matched.
+
+    The names come from the ROS graph; ``matched`` is True when the publisher's DDS
+    matches cover every subscription the graph shows, i.e. a message published now reaches
+    each of them.
+    """
+    graph = node.get_subscriptions_info_by_topic(publisher.topic_name)
+    return {info.node_name for info in graph}, publisher.get_subscription_count() >= len(graph)
+
+
 def spin_until(executor, done: Callable[[], bool], timeout: float,
                poll: float = 0.05) -> bool:
     """Spin until ``done()`` or ``timeout`` [s] of wall time; return ``done()``."""

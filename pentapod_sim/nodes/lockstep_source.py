@@ -19,7 +19,7 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
 from pentapod_sim.nodes.common import (declare, FORCE_QOS, FORCE_TOPIC_PREFIX, STATE_QOS,
-                                       stamp_msg, stamp_to_ns)
+                                       stamp_msg, stamp_to_ns, subscribers_of)
 from pentapod_sim.state_topics import port_location
 
 CLOCK_TOPIC = '/clock'
@@ -89,10 +89,8 @@ class LockstepSource(Node):
     def subscribers_ready(self) -> bool:
         """True once every ``wait_for_subscribers`` node is matched on every info topic."""
         for pub in self.info_pubs:
-            graph = self.get_subscriptions_info_by_topic(pub.topic_name)
-            names = {info.node_name for info in graph}
-            if any(n not in names for n in self.wait_for) or (
-                    pub.get_subscription_count() < len(graph)):
+            names, matched = subscribers_of(self, pub)
+            if not matched or any(n not in names for n in self.wait_for):
                 return False
         return True
 

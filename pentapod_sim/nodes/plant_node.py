@@ -20,7 +20,8 @@ from sensor_msgs.msg import JointState
 
 from pentapod_sim.exceptions import ConfigError, RunError
 from pentapod_sim.nodes.common import (declare, FORCE_QOS, FORCE_TOPIC_PREFIX, run_node,
-                                       spin_until, STATE_QOS, stamp_msg, stamp_to_ns)
+                                       spin_until, STATE_QOS, stamp_msg, stamp_to_ns,
+                                       subscribers_of)
 from pentapod_sim.nodes.realtime_stats import LatenessStats
 from pentapod_sim.plant import (DEFAULT_MAX_STATE_NORM, DiscretePlant, ForceMixer,
                                 load_or_build_model, parse_sources)
@@ -189,9 +190,9 @@ class PlantNode(Node):
         def missing():
             seen, unmatched = set(), []
             for pub in pubs:
-                graph = self.get_subscriptions_info_by_topic(pub.topic_name)
-                seen |= {i.node_name for i in graph}
-                if pub.get_subscription_count() < len(graph):
+                names, matched = subscribers_of(self, pub)
+                seen |= names
+                if not matched:
                     unmatched.append(pub.topic_name)
             return [n for n in wanted if n not in seen] + [f'match on {t}' for t in unmatched]
         if not wanted:

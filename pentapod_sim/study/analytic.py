@@ -57,30 +57,25 @@ class DiscreteFrf:
         Plant output port -> FRF [output unit / input unit].
     efforts : dict of str to (F,) complex ndarray
         Plant input port -> total effort u (external plus controller) per unit input.
+    spectral_radius : float
+        Largest |eigenvalue| of the closed loop (>= 1: not asymptotically stable).
     """
 
     freq: np.ndarray
     outputs: dict
     efforts: dict
+    spectral_radius: float
 
 
-def _resolvent_columns(a: np.ndarray, b: np.ndarray, z: np.ndarray) -> np.ndarray:
-    """(n, F) columns ``(z_f I - a)^-1 b`` for one input column ``b``."""
-    lam, vec = np.linalg.eig(a)
+def _resolvent_columns(a: np.ndarray, b: np.ndarray, z: np.ndarray,
+                       lam: np.ndarray, vec: np.ndarray) -> np.ndarray:
+    """(n, F) columns ``(z_f I - a)^-1 b`` for one input column ``b``; a = V diag(lam) V^-1."""
     if np.isfinite(np.linalg.cond(vec)) and np.linalg.cond(vec) < MAX_COND:
         right = np.linalg.solve(vec, b.astype(complex))
         return vec @ (right[:, None] / (z[None, :] - lam[:, None]))
     # defective or ill-conditioned closed loop: one dense solve per frequency
     eye = np.eye(a.shape[0])
     return np.stack([np.linalg.solve(zf * eye - a, b) for zf in z], axis=1)
-
-
-def spectral_radius(plant: PlantModel, laws: Sequence, dt: float) -> float:
-    """Largest |eigenvalue| of the sampled closed loop (>= 1: not asymptotically stable)."""
-    core = DiscretePlant(plant.discretize(dt))
-    gain = feedback_gain(core, laws) if laws else np.zeros((len(core.input_names),
-                                                             len(core.output_names)))
-    return float(np.max(np.abs(np.linalg.eigvals(closed_loop_matrices(core, gain)[0]))))
 
 
 def discrete_frf(plant: PlantModel, laws: Sequence, dt: float, freq_hz: npt.ArrayLike,
@@ -109,14 +104,16 @@ def discrete_frf(plant: PlantModel, laws: Sequence, dt: float, freq_hz: npt.Arra
     a, b, c_y, c_u, augmented = closed_loop_matrices(core, gain)
     j = core.input_names.index(input_)
     z = np.exp(2j * np.pi * freq * dt)
-    x = _resolvent_columns(a, b[:, j], z)
+    lam, vec = np.linalg.eig(a)
+    x = _resolvent_columns(a, b[:, j], z, lam, vec)
     unit = np.zeros(len(core.input_names))
     unit[j] = 1.0
     u = c_u @ x + unit[:, None]
     y = c_y @ x
     if not augmented and core.has_feedthrough:
         y = y + (core.d @ u) / z[None, :]
-    return DiscreteFrf(freq, dict(zip(core.output_names, y)), dict(zip(core.input_names, u)))
+    return DiscreteFrf(freq, dict(zip(core.output_names, y)), dict(zip(core.input_names, u)),
+                       float(np.max(np.abs(lam))))
 
 
 def pma_requirements(mount_velocity: npt.ArrayLike, freq_hz: npt.ArrayLike, mass: float,

@@ -21,7 +21,7 @@ from pentapod_sim.plant_model import build_plant, PlantModel
 from pentapod_sim.scenario import resolve
 from pentapod_sim.exceptions import ConfigError
 from pentapod_sim.study.analytic import (continuous_frf, discrete_frf, DiscreteFrf,
-                                         pma_requirements, spectral_radius)
+                                         pma_requirements)
 from pentapod_sim.study.config import StudyConfig
 from pentapod_sim.study.runs import RunResult
 
@@ -89,7 +89,9 @@ def scenario_analytic(model: PositionModel, scenario: str, cfg: StudyConfig,
     sections = read_sections(resolve(scenario))
     laws = scenario_laws(sections, 1.0 / cfg.sample_rate)
     dampers = continuous_dampers(laws)
-    rho = spectral_radius(model.plant, laws, 1.0 / cfg.sample_rate)
+    disc = discrete_frf(model.plant, laws, 1.0 / cfg.sample_rate, welch_freq(cfg),
+                        f'tcp_force_{d}')
+    rho = disc.spectral_radius
     if rho >= 1.0:
         raise ConfigError(f'scenario {scenario!r} at {model.position} is unstable at '
                           f'sample_rate = {cfg.sample_rate:g} Hz with its one-sample '
@@ -97,8 +99,6 @@ def scenario_analytic(model: PositionModel, scenario: str, cfg: StudyConfig,
                           'raise the sample rate')
     cont = continuous_frf(model.plant, dampers, freq, f'tcp_displacement_{d}',
                           f'tcp_force_{d}')
-    disc = discrete_frf(model.plant, laws, 1.0 / cfg.sample_rate, welch_freq(cfg),
-                        f'tcp_force_{d}')
     pma = {}
     for name, params in sections.items():
         if name.startswith('pma'):

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import logging
 import os
 from pathlib import Path
+import shutil
 import time
 from typing import Any
 
@@ -92,9 +93,10 @@ def run_sections(scenario: str, position: str, model_file: Path, cfg: StudyConfi
         # first answer), so the bag holds every step
         params['wait_for_subscribers'] = ['recorder']
         doc[name] = {'ros__parameters': params}
+    info = dict(run_info, scenario_parameters=dict(doc))   # the nodes' sections, as run
     doc['recorder'] = {'ros__parameters': {
         'topics': RECORDED_TOPICS, 'output_dir': str(bag_dir.parent), 'bag_name': bag_dir.name,
-        'run_info': yaml.safe_dump(run_info, sort_keys=False), 'stop_when_idle': 2.0}}
+        'run_info': yaml.safe_dump(info, sort_keys=False), 'stop_when_idle': 2.0}}
     return doc
 
 
@@ -113,16 +115,11 @@ def run_on_testbed(scenario: str, position: str, model_file: Path, model_hash: s
     run_dir = out_dir / 'runs' / name
     bag_dir = run_dir / 'bag'
     run_dir.mkdir(parents=True, exist_ok=True)
-    if bag_dir.exists():
-        for path in sorted(bag_dir.rglob('*'), reverse=True):
-            path.unlink() if path.is_file() else path.rmdir()
-        bag_dir.rmdir()
+    shutil.rmtree(bag_dir, ignore_errors=True)   # a bag of an earlier run of this name
     info = {'study_run': name, 'scenario': scenario, 'position': position,
             'excitation': kind, 'model_file': str(model_file), 'model_hash': model_hash,
             'sample_rate': cfg.sample_rate, 'package_version': __version__}
     doc = run_sections(scenario, position, model_file, cfg, bag_dir, info, kind)
-    info['scenario_parameters'] = {k: v for k, v in doc.items() if k != 'recorder'}
-    doc['recorder']['ros__parameters']['run_info'] = yaml.safe_dump(info, sort_keys=False)
     params_file = run_dir / 'scenario.yaml'
     params_file.write_text(dump_params(doc))
     env = dict(os.environ, ROS_LOG_DIR=str(run_dir / 'ros_log'))
