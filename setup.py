@@ -1,28 +1,41 @@
 """Packaging of the pentapod testbed (ament_python: builds with colcon and installs with pip)."""
 from glob import glob
 import os
+import runpy
 
 from setuptools import find_packages, setup
 
 PACKAGE = 'pentapod_testbed'
+HERE = os.path.dirname(os.path.abspath(__file__))
 
-# One table for every executable: `ros2 run pentapod_testbed <name>`.
-# Each entry is also shipped as the launcher `scripts/<name>` into lib/<package>/, because pip
-# ignores setup.cfg's script_dir and `ros2 run` looks only there (test/test_packaging.py checks
-# that both agree).
-EXECUTABLES = {
-    'recorder': 'pentapod_sim.nodes.recorder_node:main',
-    'analyze': 'pentapod_sim.cli.analyze:main',
-    'modes': 'pentapod_sim.cli.modes:main',
-    'statespace': 'pentapod_sim.cli.statespace:main',
-    'plant': 'pentapod_sim.nodes.plant_node:main',
-    'exciter': 'pentapod_sim.nodes.exciter_node:main',
-    'damper': 'pentapod_damper.nodes.damper_node:main',
-    'pma': 'pentapod_damper.nodes.pma_node:main',
-    'example_controller': 'pentapod_damper.nodes.example_controller:main',
-    'scenario': 'pentapod_sim.scenario:main',
-    'study': 'pentapod_sim.study.__main__:main',
-}
+# The executables are listed once, in pentapod_sim/executables.py (read here without importing
+# the package). Each also gets a launcher in lib/<package>/ made at build time: `ros2 run` looks
+# only there, and pip ignores setup.cfg's script_dir (colcon honours it).
+EXECUTABLES = runpy.run_path(os.path.join(HERE, 'pentapod_sim', 'executables.py'))['EXECUTABLES']
+LAUNCHER = """#!/usr/bin/env python3
+\"\"\"Launcher of `ros2 run {package} {name}`.\"\"\"
+import sys
+
+from {module} import {function}
+
+sys.exit({function}())
+"""
+
+
+def _launchers() -> list:
+    """Write one launcher per executable into build/launchers; return their relative paths."""
+    folder = os.path.join('build', 'launchers')     # relative: colcon requires it
+    os.makedirs(os.path.join(HERE, folder), exist_ok=True)
+    paths = []
+    for name, target in EXECUTABLES.items():
+        module, function = target.split(':')
+        path = os.path.join(folder, name)
+        with open(os.path.join(HERE, path), 'w', encoding='utf-8') as stream:
+            stream.write(LAUNCHER.format(package=PACKAGE, name=name, module=module,
+                                         function=function))
+        os.chmod(os.path.join(HERE, path), 0o755)
+        paths.append(path)
+    return paths
 
 
 def _files(pattern: str) -> list:
@@ -39,7 +52,7 @@ setup(
         ('share/' + PACKAGE + '/config', _files('config/*.yaml')),
         ('share/' + PACKAGE + '/config/scenarios', _files('config/scenarios/*.yaml')),
         ('share/' + PACKAGE + '/launch', _files('launch/*.launch.py')),
-        ('lib/' + PACKAGE, ['scripts/' + name for name in EXECUTABLES]),
+        ('lib/' + PACKAGE, _launchers()),
     ],
     install_requires=['setuptools'],
     zip_safe=True,

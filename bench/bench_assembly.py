@@ -1,5 +1,5 @@
 """
-Benchmark of the FE model assembly (pentapod_sim.assembly.build_model).
+Benchmark of the FE model assembly (pentapod_sim.fe.assembly.build_model).
 
 Rows: DOF count and wall time at the default mesh and at "paper scale" (~800,000 DOF), and
 a same-input comparison of the vectorised COO assembly against the textbook per-element loop
@@ -15,9 +15,9 @@ import numpy as np
 import scipy.sparse as sp
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))   # run from a checkout
-from pentapod_sim import beam  # noqa: E402
-from pentapod_sim.assembly import build_model  # noqa: E402
-from pentapod_sim.params import load_machine  # noqa: E402
+from pentapod_sim.fe import beam  # noqa: E402
+from pentapod_sim.fe.assembly import build_model  # noqa: E402
+from pentapod_sim.fe.params import load_machine  # noqa: E402
 
 PAPER_SCALE_ELEMENT_SIZE = 0.00037   # m, gives about 803,000 DOF
 
@@ -62,19 +62,19 @@ def run(quick: bool) -> list[dict]:
                                         [('paper scale', PAPER_SCALE_ELEMENT_SIZE)])
     for label, size in sizes:
         model, seconds = _timed(build_model, machine, 'P1', size)
-        rows.append(dict(name=f'build_model P1 {label} ({model.n_dof} DOF)', value=seconds,
-                         unit='s', baseline=None, baseline_value=None, ratio=None,
-                         note=f'{model.meta["n_beam_elements"]} beam elements'))
+        rows.append({'name': f'build_model P1 {label} ({model.n_dof} DOF)', 'value': seconds,
+                         'unit': 's', 'baseline': None, 'baseline_value': None, 'ratio': None,
+                         'note': f'{model.meta["n_beam_elements"]} beam elements'})
     n_el = 500 if quick else 3000
     k, dofs = _line_elements(n_el)
     n = 6 * (n_el + 1)
     ours, t_ours = _timed(_assemble_coo, k, dofs, n)
     ref, t_ref = _timed(_assemble_loop, k, dofs, n)
     agree = abs(ours - ref).max() <= 1e-9 * abs(ref).max()
-    rows.append(dict(name=f'beam assembly, {n_el} elements', value=t_ours, unit='s',
-                     baseline='per-element loop into lil_matrix', baseline_value=t_ref,
-                     ratio=t_ref / t_ours,
-                     note='same matrix' if agree else 'MATRICES DIFFER'))
+    rows.append({'name': f'beam assembly, {n_el} elements', 'value': t_ours, 'unit': 's',
+                     'baseline': 'per-element loop into lil_matrix', 'baseline_value': t_ref,
+                     'ratio': t_ref / t_ours,
+                     'note': 'same matrix' if agree else 'MATRICES DIFFER'})
     return rows
 
 

@@ -1,5 +1,7 @@
 """
-Modal solver benchmark: spectrum slicing (``pentapod_sim.modal.solve_modes``) against a plain
+Modal solver benchmark: spectrum slicing against a plain shift-invert eigsh.
+
+Spectrum slicing (``pentapod_sim.modal.solver.solve_modes``) against a plain
 ``scipy.sparse.linalg.eigsh(K, k, M, sigma=0)`` on the same pentapod FE model (position P1).
 
 Each case runs in its own Python process so that its peak resident memory (``ru_maxrss``,
@@ -32,8 +34,8 @@ def _one_case(kind: str, element_size: float | None, n_modes: int) -> dict:
     import numpy as np
     import scipy.sparse.linalg as spla
 
-    from pentapod_sim import assembly, params
-    from pentapod_sim.modal import solve_modes
+    from pentapod_sim.fe import assembly, params
+    from pentapod_sim.modal.solver import solve_modes
 
     model = assembly.build_model(params.load_machine(), 'P1', element_size=element_size)
     t0 = time.perf_counter()

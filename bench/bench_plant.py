@@ -27,20 +27,25 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / 'test'))   # test fixtures: the random modal demo plant
 
 import control  # noqa: E402
 import scipy.signal  # noqa: E402
 
+from fixtures.demo_model import demo_model  # noqa: E402
 from pentapod_damper.laws import strut_bending_damper, tcp_damper  # noqa: E402
-from pentapod_sim.closed_loop import (closed_loop_matrices, excitation_matrix,  # noqa: E402
-                                      feedback_gain, simulate, simulate_linear)
-from pentapod_sim.demo_model import demo_model  # noqa: E402
-from pentapod_sim.plant import DiscretePlant  # noqa: E402
+from pentapod_sim.sim.closed_loop import (  # noqa: E402
+    closed_loop_matrices,
+    excitation_matrix,
+    feedback_gain,
+    simulate,
+)
+from pentapod_sim.sim.stepping import DiscretePlant  # noqa: E402
 
 RATE = 5000.0
 TCP = ['tcp_force_x', 'tcp_force_y', 'tcp_force_z']
 
-PINGPONG = r'''
+PINGPONG = r"""
 import sys, time
 import rclpy
 from rclpy.node import Node
@@ -87,7 +92,7 @@ else:
         round_trip()
     print(n / (time.perf_counter() - t0))
 rclpy.try_shutdown()
-'''
+"""
 
 
 def _row(name, value, unit, baseline, baseline_value, higher_better=True, note=''):
@@ -120,15 +125,11 @@ def offline_rows(n_steps: int) -> list[dict]:
                                                   1 / RATE), exc))
         plant.reset()
         t_step = _timed(lambda: simulate(plant, use_laws, exc))
-        plant.reset()
-        t_fast = _timed(lambda: simulate_linear(plant, use_laws, exc))
         note = f'{n_steps} steps, 200 states, 21 in, 39 out'
         rows += [
             _row(f'offline {label}, stepping core', n_steps / t_step, 'steps/s',
                  'control.forced_response', n_steps / t_fr, note=note),
-            _row(f'offline {label}, lfilter fast path', n_steps / t_fast, 'steps/s',
-                 'control.forced_response', n_steps / t_fr, note=note),
-            _row(f'offline {label}, lfilter fast path', n_steps / t_fast, 'steps/s',
+            _row(f'offline {label}, stepping core', n_steps / t_step, 'steps/s',
                  'scipy.signal.dlsim', n_steps / t_dl, note=note)]
     return rows
 

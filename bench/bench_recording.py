@@ -21,34 +21,35 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / 'test'))   # test fixtures: CDR encoders of the bench's messages
 
 from mcap.writer import CompressionType, Writer  # noqa: E402
 
-from pentapod_sim.recording import (  # noqa: E402
-    BagWriter, encode_joint_state, encode_wrench_stamped, message_definition)
+from fixtures.cdr import encode_joint_state, encode_wrench_stamped  # noqa: E402
+from pentapod_sim.recording import BagWriter, message_definition  # noqa: E402
 
 STATE, EXCITATION = '/pentapod/tcp_state', '/pentapod/excitation'
 
-OURS = r'''
+OURS = r"""
 import sys, time
 import numpy as np
 from pentapod_sim.analysis.bag_reader import open_bag
-from pentapod_sim.analysis.frf import frf_from_series
+from pentapod_sim.analysis.estimation import frf_from_series
 t0 = time.perf_counter()
 bag = open_bag(sys.argv[1], ['/pentapod/excitation', '/pentapod/tcp_state'])
 res = frf_from_series(bag.series('/pentapod/excitation.force.x'),
                       bag.series('/pentapod/tcp_state.position.tcp_x'), 'random', 8192)
 print(time.perf_counter() - t0, abs(res.H[100]),
       [l.split()[1] for l in open('/proc/self/status') if l.startswith('VmHWM:')][0])
-'''
+"""
 
-ROSBAGS = r'''
+ROSBAGS = r"""
 import sys, time
 from pathlib import Path
 import numpy as np
 from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_typestore
-from pentapod_sim.analysis.frf import estimate_frf
+from pentapod_sim.analysis.estimation import estimate_frf
 t0 = time.perf_counter()
 force, disp = [], []
 with AnyReader([Path(sys.argv[1])], default_typestore=get_typestore(Stores.ROS2_JAZZY)) as r:
@@ -61,7 +62,7 @@ with AnyReader([Path(sys.argv[1])], default_typestore=get_typestore(Stores.ROS2_
 res = estimate_frf(np.array(force), np.array(disp), 1000.0, 'random', 8192)
 print(time.perf_counter() - t0, abs(res.H[100]),
       [l.split()[1] for l in open('/proc/self/status') if l.startswith('VmHWM:')][0])
-'''
+"""
 
 
 def _payloads(n: int) -> tuple:
@@ -139,22 +140,23 @@ def run(quick: bool) -> list:
             ours_s = min(ours_s, _write_ours(tmp / 'ours', states, wrenches))
             bare_s = min(bare_s, _write_bare(tmp / 'bare.mcap', states, wrenches))
         rate, bare_rate = 2 * n / ours_s, 2 * n / bare_s
-        rows.append(dict(name='write rate (JointState + WrenchStamped)', value=rate,
-                         unit='msg/s', baseline='bare mcap Writer', baseline_value=bare_rate,
-                         ratio=rate / bare_rate,
-                         note='best of 2; ours adds metadata.yaml, flush+fsync every 0.5 s'))
+        rows.append({'name': 'write rate (JointState + WrenchStamped)', 'value': rate,
+                         'unit': 'msg/s', 'baseline': 'bare mcap Writer',
+                         'baseline_value': bare_rate,
+                         'ratio': rate / bare_rate,
+                         'note': 'best of 2; ours adds metadata.yaml, flush+fsync every 0.5 s'})
         del states, wrenches
         ours = _run_child(OURS, tmp / 'ours')
         base = _run_child(ROSBAGS, tmp / 'ours')
         if not np.isclose(ours[2], base[2], rtol=1e-9):
             raise RuntimeError(f'readers disagree: |H| {ours[2]} vs {base[2]}')
-        rows.append(dict(name=f'load {n:.0e} samples + FRF', value=ours[0], unit='s',
-                         baseline='rosbags AnyReader + deserialize', baseline_value=base[0],
-                         ratio=base[0] / ours[0], note=f'{2 * n} messages, same FRF code'))
-        rows.append(dict(name=f'peak RSS load {n:.0e} samples + FRF', value=ours[1],
-                         unit='MB', baseline='rosbags AnyReader + deserialize',
-                         baseline_value=base[1], ratio=base[1] / ours[1],
-                         note='whole reader process (its own VmHWM)'))
+        rows.append({'name': f'load {n:.0e} samples + FRF', 'value': ours[0], 'unit': 's',
+                         'baseline': 'rosbags AnyReader + deserialize', 'baseline_value': base[0],
+                         'ratio': base[0] / ours[0], 'note': f'{2 * n} messages, same FRF code'})
+        rows.append({'name': f'peak RSS load {n:.0e} samples + FRF', 'value': ours[1],
+                         'unit': 'MB', 'baseline': 'rosbags AnyReader + deserialize',
+                         'baseline_value': base[1], 'ratio': base[1] / ours[1],
+                         'note': 'whole reader process (its own VmHWM)'})
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     return rows

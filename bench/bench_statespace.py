@@ -1,5 +1,5 @@
 """
-Benchmark of the modal plant (pentapod_sim.plant_model, pentapod_sim.frf).
+Benchmark of the modal plant (pentapod_sim.plant.model, pentapod_sim.plant.frf).
 
 Rows, all on the P1 plant with every mode below 750 Hz (same input for ours and baseline):
 the modal-sum FRF against ``control.frequency_response`` of the same state space, the per-mode
@@ -18,10 +18,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))   # run from a c
 import control  # noqa: E402
 import scipy.signal as signal  # noqa: E402
 
-from pentapod_sim import frf  # noqa: E402
-from pentapod_sim.assembly import build_model  # noqa: E402
-from pentapod_sim.params import load_machine  # noqa: E402
-from pentapod_sim.plant_model import load_reduction_config, plant_from_fe  # noqa: E402
+from pentapod_sim.fe.assembly import build_model  # noqa: E402
+from pentapod_sim.fe.params import load_machine  # noqa: E402
+from pentapod_sim.plant import frf  # noqa: E402
+from pentapod_sim.plant.build import load_reduction_config, plant_from_fe
 
 
 def _best(func, repeat: int) -> float:

@@ -3,19 +3,18 @@ Launch a testbed scenario: ``ros2 launch pentapod_testbed testbed.launch.py scen
 
 The scenario is a ROS parameter file of config/scenarios (or a path). Every node section of
 it becomes one Node of package pentapod_testbed; the executable follows from the node name's
-prefix exactly as in :mod:`pentapod_sim.scenario` (same table), and every node gets the
-whole file as its parameter file (so ``/**`` entries reach all nodes). The launch ends when
-the plant ends.
+prefix exactly as in :mod:`pentapod_sim.scenario.runner` (same parser and table), and every
+node gets the whole file as its parameter file (so ``/**`` entries reach all nodes). The
+launch ends when the plant ends.
 """
-from launch import LaunchDescription
-from launch.actions import (DeclareLaunchArgument, EmitEvent, OpaqueFunction,
-                            RegisterEventHandler)
+from launch.actions import DeclareLaunchArgument, EmitEvent, OpaqueFunction, RegisterEventHandler
 from launch.event_handlers import OnProcessExit
 from launch.events import Shutdown
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
-from pentapod_sim.scenario import resolve, scenario_nodes
+from launch import LaunchDescription
+from pentapod_sim.scenario.files import read_scenario, resolve
 
 
 def _nodes(context):
@@ -27,7 +26,7 @@ def _nodes(context):
         if value:
             overrides[key] = int(value) if key == 'steps' else float(value)
     actions = []
-    for node in scenario_nodes(path):
+    for node in read_scenario(path).nodes:
         params = [str(path)] + ([overrides] if node.executable == 'plant' and overrides
                                 else [])
         action = Node(package='pentapod_testbed', executable=node.executable, name=node.name,

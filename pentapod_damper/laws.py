@@ -18,8 +18,8 @@ import numpy as np
 import numpy.typing as npt
 import scipy.signal
 
-from pentapod_sim.exceptions import ConfigError
-from pentapod_sim.ports import AXES, collocated_output, N_STRUTS
+from pentapod_sim.errors import ConfigError
+from pentapod_sim.plant.ports import AXES, collocated_output, N_STRUTS
 
 LOG = logging.getLogger(__name__)
 
@@ -47,7 +47,7 @@ class ViscousDamper:
     Notes
     -----
     The sensor of each actuator is its collocated velocity output
-    (:func:`pentapod_sim.ports.collocated_output`), so the law only removes energy.
+    (:func:`pentapod_sim.plant.ports.collocated_output`), so the law only removes energy.
     """
 
     def __init__(self, actuator_ports: Sequence[str], gains: float | Sequence[float]):

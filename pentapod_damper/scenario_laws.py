@@ -8,46 +8,22 @@ the offline closed loop) and ROS runs of one scenario cannot drift apart.
 """
 from __future__ import annotations
 
-from pathlib import Path
 from typing import Any, Mapping
 
-import yaml
-
-from pentapod_damper.laws import (ProofMassActuator, strut_axial_damper, strut_bending_damper,
-                                  tcp_damper, ViscousDamper)
-from pentapod_sim.exceptions import ConfigError
+from pentapod_damper.laws import (
+    ProofMassActuator,
+    strut_axial_damper,
+    strut_bending_damper,
+    tcp_damper,
+    ViscousDamper,
+)
+from pentapod_sim.errors import ConfigError
 
 #: Defaults of the damper node's gains [N m s/rad, N s/m, N s/m] (same as the node's).
 DAMPER_DEFAULTS = {'bending_gain': 1000.0, 'axial_gain': 50000.0, 'tcp_gain': 20000.0}
 #: Defaults of the PMA node (same as the node's).
 PMA_DEFAULTS = {'directions': ['x'], 'proof_mass': 5.0, 'gain': 4000.0, 'highpass_hz': 0.0,
                 'stroke_limit': 0.0, 'force_limit': 0.0}
-
-
-def read_sections(path: str | Path) -> dict[str, dict[str, Any]]:
-    """
-    Parameters of every node of a scenario file, the ``/**`` section merged into each.
-
-    Raises
-    ------
-    ConfigError
-        If the file is not a mapping of ``<node>: {ros__parameters: {...}}``.
-    """
-    try:
-        doc = yaml.safe_load(Path(path).read_text())
-    except (OSError, yaml.YAMLError) as err:
-        raise ConfigError(f'cannot read scenario file {path}: {err}') from None
-    if not isinstance(doc, dict):
-        raise ConfigError(f'scenario file {path} is not a mapping of node sections')
-    shared = (doc.get('/**') or {}).get('ros__parameters', {})
-    sections = {}
-    for name, body in doc.items():
-        if name == '/**':
-            continue
-        if not isinstance(body, dict) or not isinstance(body.get('ros__parameters', {}), dict):
-            raise ConfigError(f'{path}: section {name!r} has no ros__parameters mapping')
-        sections[name] = {**shared, **(body.get('ros__parameters') or {})}
-    return sections
 
 
 def damper_laws(params: Mapping[str, Any]) -> list[ViscousDamper]:
@@ -82,7 +58,7 @@ def scenario_laws(sections: Mapping[str, Mapping[str, Any]], dt: float) -> list:
     Parameters
     ----------
     sections : mapping
-        Output of :func:`read_sections`.
+        ``Scenario.sections`` of :func:`pentapod_sim.scenario.files.read_scenario`.
     dt : float
         Plant sample time [s] (the PMA integrates its proof mass with it).
     """

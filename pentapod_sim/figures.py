@@ -22,7 +22,7 @@ def save_figure(fig, path: str | Path, tight: bool = True) -> Path:
     Path
         The written file.
     """
-    import matplotlib.pyplot as plt   # imported here: the numerical core loads without it
+    import matplotlib.pyplot as plt  # imported here: the numerical core loads without it
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     if tight:

@@ -3,7 +3,7 @@ import numpy as np
 import scipy.linalg as la
 import scipy.sparse as sp
 
-from pentapod_sim.fe_model import FEModel
+from pentapod_sim.fe.model import FEModel
 
 POINT_NAMES = (['tcp', 'pma_mount'] + [f'bp_ring{i}' for i in range(1, 6)]
                + [f'strut{i}_{p}' for i in range(1, 6) for p in ('wp_end', 'rear_end', 'at_bp')])

@@ -1,4 +1,4 @@
-"""Tests of the sparse FE model assembly (pentapod_sim.assembly)."""
+"""Tests of the sparse FE model assembly (pentapod_sim.fe.assembly)."""
 import dataclasses
 
 import numpy as np
@@ -6,11 +6,11 @@ import pytest
 import scipy.linalg as sla
 import scipy.sparse.linalg as spla
 
-from pentapod_sim.assembly import build_model, GROUPS
-from pentapod_sim.beam import rhs_section
-from pentapod_sim.exceptions import ConfigError, UnreachablePoseError
-from pentapod_sim.geometry import inverse_kinematics, layout_from_params
-from pentapod_sim.params import load_machine, load_positions
+from pentapod_sim.errors import ConfigError, UnreachablePoseError
+from pentapod_sim.fe.assembly import build_model, GROUPS
+from pentapod_sim.fe.beam import rhs_section
+from pentapod_sim.fe.geometry import inverse_kinematics, layout_from_params
+from pentapod_sim.fe.params import load_machine, load_positions
 
 COARSE = 0.35                                     # m, element size for dense eigen checks
 

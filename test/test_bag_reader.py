@@ -10,10 +10,11 @@ import numpy as np
 from numpy.testing import assert_allclose, assert_array_equal
 import pytest
 
-from pentapod_sim.analysis.bag_reader import Series, joint_unit, open_bag
-from pentapod_sim.analysis.frf import aligned
-from pentapod_sim.exceptions import BagError
-from pentapod_sim.recording import BagWriter, encode_joint_state, encode_wrench_stamped
+from fixtures.cdr import encode_joint_state, encode_wrench_stamped
+from pentapod_sim.analysis.bag_reader import joint_unit, open_bag, Series
+from pentapod_sim.analysis.estimation import aligned
+from pentapod_sim.errors import BagError
+from pentapod_sim.recording import BagWriter
 
 STATE = '/pentapod/strut_states'
 WRENCH = '/pentapod/excitation'

@@ -1,10 +1,10 @@
-"""Tests of the Timoshenko beam element against closed-form results (pentapod_sim.beam)."""
+"""Tests of the Timoshenko beam element against closed-form results (pentapod_sim.fe.beam)."""
 import numpy as np
 import pytest
 import scipy.linalg as sla
 
-from pentapod_sim import beam
-from pentapod_sim.exceptions import ConfigError
+from pentapod_sim.errors import ConfigError
+from pentapod_sim.fe import beam
 
 E, G, RHO = 2.1e11, 8.08e10, 7850.0
 LENGTH = 4.0

@@ -8,8 +8,8 @@ FRF, the threshold comes from the paper, not from a run of this code.
 import numpy as np
 import pytest
 
-from pentapod_sim.frf import damper_feedback, statespace_frf
-from pentapod_sim.plant_model import build_plant
+from pentapod_sim.plant.build import build_plant
+from pentapod_sim.plant.frf import damper_feedback, statespace_frf
 
 GAIN = 2.0e4            # N m s/rad, the paper's b
 BEND_IN = [f'strut{i}_bending_moment_{k}' for i in range(1, 6) for k in (2, 3)]

@@ -7,11 +7,18 @@ import pytest
 import scipy.linalg as sla
 import scipy.sparse as sp
 
-from pentapod_sim.causes import (analyse_causes, mass_mac, neuber_frequencies,
-                                 plot_energy_shares, plot_mode_distribution,
-                                 rigidified_stiffness, strain_energy_shares, tcp_directions)
-from pentapod_sim.fe_model import FEModel
-from pentapod_sim.modal import solve_modes
+from pentapod_sim.fe.model import FEModel
+from pentapod_sim.modal.causes import (
+    analyse_causes,
+    mass_mac,
+    neuber_frequencies,
+    plot_energy_shares,
+    plot_mode_distribution,
+    rigidified_stiffness,
+    strain_energy_shares,
+    tcp_directions,
+)
+from pentapod_sim.modal.solver import solve_modes
 
 M1, M2 = 50.0, 20.0            # kg
 K_SOFT, K_STIFF = 1.0e5, 1.0e8  # N/m: ground - m1 (soft), m1 - m2 (stiff)
@@ -197,8 +204,8 @@ class TestModesCommand:
     def test_table_csv_and_count_agree_with_plain_eigsh(self, tmp_path, capsys):
         import scipy.sparse.linalg as spla
 
-        from pentapod_sim import assembly, params
         from pentapod_sim.cli.modes import main
+        from pentapod_sim.fe import assembly, params
 
         assert main(['--position', 'P2', '--out', str(tmp_path), '--rows', '12']) == 0
         text = capsys.readouterr().out

@@ -4,8 +4,8 @@ from numpy.testing import assert_allclose
 import pytest
 import scipy.signal
 
-from pentapod_sim.excitation import Excitation, ExcitationSpec
-from pentapod_sim.exceptions import ConfigError
+from pentapod_sim.errors import ConfigError
+from pentapod_sim.sim.excitation import Excitation, ExcitationSpec
 
 DT = 1e-4
 

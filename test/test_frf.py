@@ -6,10 +6,11 @@ import numpy as np
 import pytest
 from statespace_fixtures import all_modes, small_model
 
-from pentapod_sim import frf, ports
-from pentapod_sim.exceptions import ConfigError, PortError
-from pentapod_sim.plant_model import from_modal_data, PlantModel
-from pentapod_sim.reduction import harmonic_response
+from pentapod_sim.errors import ConfigError, PortError
+from pentapod_sim.plant import frf, frf_plot, ports
+from pentapod_sim.plant.build import from_modal_data
+from pentapod_sim.plant.model import PlantModel
+from pentapod_sim.plant.reduction import harmonic_response
 
 INPUTS = ['tcp_force_x', 'strut2_bending_moment_2', 'strut1_axial_force']
 OUTPUTS = ['tcp_displacement_x', 'tcp_velocity_x', 'strut2_bending_rate_2',
@@ -106,9 +107,9 @@ def test_csv_and_plots(full, tmp_path):
                        'open:tcp_displacement_x/tcp_force_x:phase_deg']
     h = res.pair('tcp_displacement_x', 'tcp_force_x')
     np.testing.assert_allclose([float(r[1]) for r in rows[1:]], np.abs(h), rtol=1e-12)
-    png = frf.frf_plot([res], 'tcp_displacement_x', 'tcp_force_x', tmp_path / 'h.png',
+    png = frf_plot.frf_plot([res], 'tcp_displacement_x', 'tcp_force_x', tmp_path / 'h.png',
                        mode_freqs=[plant.frequencies_hz])
-    bars = frf.dc_gain_plot(plant.c_disp[0] * plant.b[:, 0] / plant.omega ** 2,
+    bars = frf_plot.dc_gain_plot(plant.c_disp[0] * plant.b[:, 0] / plant.omega ** 2,
                             plant.frequencies_hz, tmp_path / 'dc.png', limit=1e-9, keep=[0, 2])
     for p in (png, bars):
         assert p.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
@@ -118,7 +119,8 @@ def test_statespace_cli_writes_report_plots_and_plant(tmp_path):
     import json
 
     from pentapod_sim.cli.statespace import main
-    from pentapod_sim.plant_model import load_reduction_config, PlantModel
+    from pentapod_sim.plant.build import load_reduction_config
+    from pentapod_sim.plant.model import PlantModel
     assert main(['report', '--position', 'P1', '--out', str(tmp_path)]) == 0
     row = json.loads((tmp_path / 'reduction_report.json').read_text())[0]
     assert 0 < row['modes_kept'] < row['modes_computed']

@@ -6,7 +6,7 @@ from numpy.testing import assert_allclose
 import pytest
 from scipy import linalg, signal
 
-from pentapod_sim.analysis.frf import amplitude_spectrum, estimate_frf
+from pentapod_sim.analysis.estimation import amplitude_spectrum, estimate_frf
 from pentapod_sim.analysis.peaks import find_resonances, peak_reductions
 
 FS = 1000.0  # Hz
@@ -185,9 +185,9 @@ def test_amplitude_spectrum_recovers_sine_amplitude():
 
 
 @pytest.mark.parametrize('bad', [
-    dict(excitation='hammer'), dict(fs=-1.0), dict(u=np.zeros(100)), dict(u=np.ones(5))])
+    {'excitation': 'hammer'}, {'fs': -1.0}, {'u': np.zeros(100)}, {'u': np.ones(5)}])
 def test_bad_arguments_raise_value_error(bad):
-    kwargs = dict(u=np.ones(100), y=np.ones(100), fs=FS, excitation='random')
+    kwargs = {'u': np.ones(100), 'y': np.ones(100), 'fs': FS, 'excitation': 'random'}
     kwargs.update(bad)
     if len(kwargs['u']) != len(kwargs['y']):
         kwargs['y'] = np.ones(len(kwargs['u']))
@@ -198,8 +198,9 @@ def test_bad_arguments_raise_value_error(bad):
 def test_analyze_cli_end_to_end(tmp_path, random_record, capsys):
     import csv
 
+    from fixtures.cdr import encode_joint_state, encode_wrench_stamped
     from pentapod_sim.cli.analyze import main
-    from pentapod_sim.recording import BagWriter, encode_joint_state, encode_wrench_stamped
+    from pentapod_sim.recording import BagWriter
     force, x1 = random_record
     n = 16384 * 4
     with BagWriter(tmp_path / 'run', run_info={'scenario': 'random'}) as writer:

@@ -1,11 +1,16 @@
-"""Tests of the pentapod kinematics (pentapod_sim.geometry)."""
+"""Tests of the pentapod kinematics (pentapod_sim.fe.geometry)."""
 import numpy as np
 import pytest
 
-from pentapod_sim.exceptions import UnreachablePoseError
-from pentapod_sim.geometry import (forward_kinematics, inverse_kinematics, layout_from_params,
-                                   rotation, solve_pose)
-from pentapod_sim.params import load_machine, load_positions
+from pentapod_sim.errors import UnreachablePoseError
+from pentapod_sim.fe.geometry import (
+    forward_kinematics,
+    inverse_kinematics,
+    layout_from_params,
+    rotation,
+    solve_pose,
+)
+from pentapod_sim.fe.params import load_machine, load_positions
 
 
 @pytest.fixture(scope='module')

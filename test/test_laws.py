@@ -4,9 +4,14 @@ from numpy.testing import assert_allclose
 import pytest
 import scipy.signal
 
-from pentapod_damper.laws import (ProofMassActuator, strut_axial_damper, strut_bending_damper,
-                                  tcp_damper, ViscousDamper)
-from pentapod_sim.exceptions import ConfigError
+from pentapod_damper.laws import (
+    ProofMassActuator,
+    strut_axial_damper,
+    strut_bending_damper,
+    tcp_damper,
+    ViscousDamper,
+)
+from pentapod_sim.errors import ConfigError
 
 
 def test_viscous_dampers_use_collocated_rates():

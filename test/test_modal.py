@@ -5,13 +5,13 @@ import pytest
 import scipy.linalg as sla
 import scipy.sparse as sp
 
-from pentapod_sim.exceptions import ModalError
-from pentapod_sim.modal import (DENSE_LIMIT, factorize_shifted, inertia_count, solve_modes,
-                                sturm_count)
+from pentapod_sim.errors import ModalError
+from pentapod_sim.modal.solver import DENSE_LIMIT, solve_modes
+from pentapod_sim.modal.sturm import factorize_shifted, inertia_count, sturm_count
 
 
 def fixed_free_chain(n: int, k: float = 2.0e6, m: float = 3.0):
-    """n equal masses m [kg] in a row, springs k [N/m], first spring to ground, last mass free."""
+    """N equal masses m [kg] in a row, springs k [N/m], first spring to ground, last mass free."""
     main = np.full(n, 2.0 * k)
     main[-1] = k
     off = -k * np.ones(n - 1)

@@ -11,11 +11,11 @@ import numpy as np
 from numpy.testing import assert_allclose
 import pytest
 
+from fixtures.demo_model import demo_model
 from pentapod_damper.laws import ProofMassActuator, strut_bending_damper, tcp_damper
-from pentapod_sim.closed_loop import excitation_matrix, simulate
-from pentapod_sim.demo_model import demo_model
-from pentapod_sim.excitation import Excitation, ExcitationSpec
-from pentapod_sim.plant import DiscretePlant
+from pentapod_sim.sim.closed_loop import excitation_matrix, simulate
+from pentapod_sim.sim.excitation import Excitation, ExcitationSpec
+from pentapod_sim.sim.stepping import DiscretePlant
 
 RATE = 5000.0
 TCP = ['tcp_force_x', 'tcp_force_y', 'tcp_force_z']
@@ -151,8 +151,14 @@ def _drive_pma(env, n_steps, v_amp, omega):
     from rclpy.node import Node
     from sensor_msgs.msg import JointState
 
-    from pentapod_sim.nodes.common import (FORCE_QOS, make_executor, spin_until, STATE_QOS,
-                                           stamp_msg, stamp_to_ns)
+    from pentapod_sim.nodes.common import (
+        FORCE_QOS,
+        make_executor,
+        spin_until,
+        stamp_msg,
+        stamp_to_ns,
+        STATE_QOS,
+    )
     ctx = rclpy.Context()
     rclpy.init(context=ctx, domain_id=int(env['ROS_DOMAIN_ID']))
     try:
@@ -218,7 +224,7 @@ def test_killed_damper_stops_lockstep_run(procs, tmp_path):
     damper.kill()
     assert plant.wait(timeout=30) != 0
     log = procs.log('plant')
-    assert "damper_k silent" in log and 'source_timeout' in log, log
+    assert 'damper_k silent' in log and 'source_timeout' in log, log
 
 
 def test_bad_messages_rejected_and_counted(procs, ros_env, tmp_path):
@@ -228,8 +234,13 @@ def test_bad_messages_rejected_and_counted(procs, ros_env, tmp_path):
     from rosgraph_msgs.msg import Clock
     from sensor_msgs.msg import JointState
 
-    from pentapod_sim.nodes.common import (FORCE_QOS, make_executor, spin_until, STATE_QOS,
-                                           stamp_to_ns)
+    from pentapod_sim.nodes.common import (
+        FORCE_QOS,
+        make_executor,
+        spin_until,
+        stamp_to_ns,
+        STATE_QOS,
+    )
     model_file = demo_model(4, inputs=TCP).save(tmp_path / 'model.npz')
     steps, trace = 300, tmp_path / 'trace.npz'
     plant = procs.start('plant', 'pentapod_sim.nodes.plant_node',
@@ -291,10 +302,10 @@ def test_realtime_holds_newest_exciter_force(procs, tmp_path):
 
 
 def test_scenario_runner_end_to_end(ros_env, tmp_path):
-    """`python -m pentapod_sim.scenario file.yaml` starts, runs and stops every node."""
+    """`python -m pentapod_sim.scenario.runner file.yaml` starts, runs and stops every node."""
     model_file = demo_model(4).save(tmp_path / 'model.npz')
     scenario = tmp_path / 'mini.yaml'
-    scenario.write_text(f'''
+    scenario.write_text(f"""
 /**:
   ros__parameters:
     sample_rate: {RATE}
@@ -313,9 +324,9 @@ damper_tcp:
   ros__parameters:
     tcp_directions: ['x', 'y']
     tcp_gain: 100.0
-''')
+""")
     trace = tmp_path / 'trace.npz'
-    proc = subprocess.run([sys.executable, '-m', 'pentapod_sim.scenario', str(scenario),
+    proc = subprocess.run([sys.executable, '-m', 'pentapod_sim.scenario.runner', str(scenario),
                            '--output-file', str(trace), '--timeout', '120'], env=ros_env,
                           capture_output=True, text=True, timeout=180)
     assert proc.returncode == 0, proc.stdout + proc.stderr

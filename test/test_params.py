@@ -1,12 +1,12 @@
-"""Tests of the machine parameter schema and loaders (pentapod_sim.params)."""
+"""Tests of the machine parameter schema and loaders (pentapod_sim.fe.params)."""
 import copy
 import math
 
 import pytest
 import yaml
 
-from pentapod_sim.exceptions import ConfigError
-from pentapod_sim.params import config_dir, load_machine, load_positions, machine_from_dict
+from pentapod_sim.errors import ConfigError
+from pentapod_sim.fe.params import config_dir, load_machine, load_positions, machine_from_dict
 
 
 @pytest.fixture(scope='module')

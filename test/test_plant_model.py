@@ -7,10 +7,11 @@ import pytest
 import scipy.signal as signal
 from statespace_fixtures import all_modes, small_model
 
-from pentapod_sim import ports
-from pentapod_sim.exceptions import ConfigError, ModelFileError, PortError
-from pentapod_sim.plant_model import build_plant, from_modal_data, PlantModel
-from pentapod_sim.reduction import harmonic_response, static_compliance
+from pentapod_sim.errors import ConfigError, ModelFileError, PortError
+from pentapod_sim.plant import ports
+from pentapod_sim.plant.build import build_plant, from_modal_data
+from pentapod_sim.plant.model import PlantModel
+from pentapod_sim.plant.reduction import harmonic_response, static_compliance
 
 INPUTS = ['tcp_force_y', 'strut1_bending_moment_3', 'strut4_axial_force', 'pma_force_z']
 OUTPUTS = ['tcp_displacement_y', 'tcp_velocity_y', 'strut1_bending_3', 'strut1_bending_rate_3',
@@ -152,9 +153,9 @@ def test_select_unknown_port(full):
 
 
 def test_build_plant_static_gain_equals_fe_compliance():
-    from pentapod_sim.assembly import build_model
-    from pentapod_sim.params import load_machine
-    from pentapod_sim.plant_model import load_reduction_config
+    from pentapod_sim.fe.assembly import build_model
+    from pentapod_sim.fe.params import load_machine
+    from pentapod_sim.plant.build import load_reduction_config
     cfg = load_reduction_config()
     cfg['inputs'] = ['tcp_force_x', 'tcp_force_y', 'tcp_force_z', 'strut1_axial_force']
     cfg['outputs'] = ['tcp_displacement_x', 'tcp_displacement_y', 'tcp_displacement_z',
@@ -174,7 +175,7 @@ def test_build_plant_static_gain_equals_fe_compliance():
 
 @pytest.mark.parametrize('fmt', ['npz', 'csv'])
 def test_external_modal_data_gives_the_same_plant(full, tmp_path, fmt):
-    from pentapod_sim import modal_data
+    from pentapod_sim.plant import modal_data
     model, omega, phi, plant = full
     data = modal_data.from_fe_modes(model.points, model.strut_frames, omega / (2 * np.pi), phi)
     if fmt == 'npz':
@@ -192,7 +193,7 @@ def test_external_modal_data_gives_the_same_plant(full, tmp_path, fmt):
 
 
 def test_external_modal_data_errors(full, tmp_path):
-    from pentapod_sim import modal_data
+    from pentapod_sim.plant import modal_data
     model, omega, phi, _ = full
     data = modal_data.from_fe_modes(model.points, model.strut_frames, omega / (2 * np.pi), phi)
     path = modal_data.save_csv(data, tmp_path / 'modes.csv')
@@ -212,7 +213,7 @@ def test_external_modal_data_errors(full, tmp_path):
 
 
 def test_relevance_rules_are_united(full):
-    from pentapod_sim.plant_model import keep_by_relevance
+    from pentapod_sim.plant.build import keep_by_relevance
     plant = full[3]
     tcp = {'inputs': ['tcp_force_y'], 'outputs': ['tcp_displacement_y'], 'count': 3}
     strut = {'inputs': ['strut4_axial_force'], 'outputs': ['strut4_axial_displacement'],
@@ -227,7 +228,7 @@ def test_relevance_rules_are_united(full):
 
 
 def test_reduce_without_fe_compliance(full):
-    from pentapod_sim.plant_model import reduce_plant
+    from pentapod_sim.plant.build import reduce_plant
     plant = full[3]                       # from modal data: no C K^-1 B known
     small = reduce_plant(plant, [0, 2], static_correction=False)
     np.testing.assert_array_equal(small.omega, plant.omega[[0, 2]])

@@ -3,8 +3,8 @@ import numpy as np
 import pytest
 from statespace_fixtures import small_model
 
-from pentapod_sim import ports
-from pentapod_sim.exceptions import PortError
+from pentapod_sim.errors import PortError
+from pentapod_sim.plant import ports
 
 
 @pytest.fixture(scope='module')

@@ -22,7 +22,7 @@ from pentapod_sim.analysis.bag_reader import open_bag
 N_STEPS = 300
 DT_NS = 1_000_000  # 1 ms sim-time step
 
-PUBLISHER = r'''
+PUBLISHER = r"""
 import sys, time
 import rclpy
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
@@ -66,7 +66,7 @@ for k in range(n):
 time.sleep(0.5)
 node.destroy_node()
 rclpy.shutdown()
-'''
+"""
 
 
 @pytest.fixture()
@@ -101,7 +101,7 @@ def stop(proc: subprocess.Popen, sig: int) -> str:
 @pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM])
 def test_recorded_bag_is_read_by_rosbags_with_all_messages(tmp_path, ros_env, sig):
     from rosbags.highlevel import AnyReader
-    from rosbags.typesys import Stores, get_typestore
+    from rosbags.typesys import get_typestore, Stores
     recorder = start_recorder(ros_env, tmp_path, 'run')
     try:
         publish(ros_env)

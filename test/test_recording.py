@@ -9,12 +9,11 @@ from numpy.testing import assert_allclose
 import pytest
 import yaml
 
+from fixtures.cdr import encode_clock, encode_joint_state, encode_wrench_stamped
 from pentapod_sim.analysis.bag_reader import open_bag
 from pentapod_sim.analysis.cdr_arrays import joint_state_arrays, joint_state_layout
-from pentapod_sim.exceptions import BagError
-from pentapod_sim.recording import (
-    BagWriter, QOS_BEST_EFFORT, encode_clock, encode_joint_state, encode_wrench_stamped,
-    message_definition)
+from pentapod_sim.errors import BagError
+from pentapod_sim.recording import BagWriter, message_definition, QOS_BEST_EFFORT
 from pentapod_sim.recording.msgdefs import has_header_stamp
 
 TYPES = ['sensor_msgs/msg/JointState', 'geometry_msgs/msg/WrenchStamped',
@@ -75,7 +74,7 @@ def test_wrench_and_clock_cdr_match_rclpy(frame_id):
 
 @pytest.mark.parametrize('msg_type', TYPES)
 def test_message_definition_parses_like_the_rosbags_typestore(msg_type):
-    from rosbags.typesys import Stores, get_typestore, get_types_from_msg
+    from rosbags.typesys import get_types_from_msg, get_typestore, Stores
     store = get_typestore(Stores.ROS2_JAZZY)
     parsed = get_types_from_msg(message_definition(msg_type), msg_type)
     assert msg_type in parsed
@@ -142,7 +141,7 @@ def test_metadata_yaml_and_mcap_agree(tmp_path):
 def test_rosbags_and_mcap_ros2_read_our_bag(tmp_path):
     from mcap_ros2.decoder import DecoderFactory
     from rosbags.highlevel import AnyReader
-    from rosbags.typesys import Stores, get_typestore
+    from rosbags.typesys import get_typestore, Stores
     bag = tmp_path / 'run2'
     write_example(bag)
     with AnyReader([bag], default_typestore=get_typestore(Stores.ROS2_JAZZY)) as reader:

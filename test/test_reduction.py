@@ -3,9 +3,9 @@ import numpy as np
 import pytest
 from statespace_fixtures import all_modes, small_model
 
-from pentapod_sim import ports
-from pentapod_sim import reduction as red
-from pentapod_sim.exceptions import ConfigError
+from pentapod_sim.errors import ConfigError
+from pentapod_sim.plant import ports
+from pentapod_sim.plant import reduction as red
 
 INPUTS = ['tcp_force_x', 'tcp_force_y', 'strut1_bending_moment_2', 'strut2_axial_force']
 OUTPUTS = ['tcp_displacement_x', 'tcp_displacement_y', 'strut1_bending_2',
@@ -44,10 +44,10 @@ def test_select_by_absolute_relative_and_count():
     np.testing.assert_array_equal(red.select_modes(g, count=2), [0, 2])
 
 
-@pytest.mark.parametrize('kwargs', [dict(abs_limit=-1.0), dict(abs_limit=0.0),
-                                    dict(abs_limit=float('nan')), dict(abs_limit='5e-8'),
-                                    dict(rel_limit=1.5), dict(count=0), dict(count=2.5),
-                                    dict(), dict(abs_limit=1e-8, count=3)])
+@pytest.mark.parametrize('kwargs', [{'abs_limit': -1.0}, {'abs_limit': 0.0},
+                                    {'abs_limit': float('nan')}, {'abs_limit': '5e-8'},
+                                    {'rel_limit': 1.5}, {'count': 0}, {'count': 2.5},
+                                    {}, {'abs_limit': 1e-8, 'count': 3}])
 def test_bad_limits_name_the_value(kwargs):
     with pytest.raises(ConfigError) as info:
         red.select_modes(np.ones((3, 1, 1)), **kwargs)

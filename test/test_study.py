@@ -5,17 +5,17 @@ import numpy as np
 import pytest
 import yaml
 
+from fixtures.demo_model import demo_model
 from pentapod_damper.laws import ProofMassActuator, tcp_damper
-from pentapod_damper.scenario_laws import (continuous_dampers, read_sections,
-                                           scenario_laws)
-from pentapod_sim.closed_loop import simulate
-from pentapod_sim.demo_model import demo_model
-from pentapod_sim.exceptions import ConfigError
-from pentapod_sim.frf import closed_loop_frf
-from pentapod_sim.plant import DiscretePlant
-from pentapod_sim.study.analytic import (discrete_frf, improvement_share, pma_requirements)
-from pentapod_sim.study.config import load_study_config
-from pentapod_sim.study.runs import run_sections
+from pentapod_damper.scenario_laws import continuous_dampers, scenario_laws
+from pentapod_damper.study.analytic import discrete_frf, improvement_share, pma_requirements
+from pentapod_damper.study.config import load_study_config
+from pentapod_damper.study.runs import run_sections
+from pentapod_sim.errors import ConfigError
+from pentapod_sim.plant.frf import closed_loop_frf
+from pentapod_sim.scenario.files import read_scenario
+from pentapod_sim.sim.closed_loop import simulate
+from pentapod_sim.sim.stepping import DiscretePlant
 
 DT = 1.0 / 5000.0
 
@@ -75,12 +75,12 @@ def test_improvement_share():
 
 def test_scenario_files_give_the_papers_laws():
     dt = 2e-4
-    laws = scenario_laws(read_sections(_scenario('pma_1kg')), dt)
+    laws = scenario_laws(read_scenario(_scenario('pma_1kg')).sections, dt)
     assert continuous_dampers(laws) == {'pma_force_x': pytest.approx(20000.0)}
-    laws = scenario_laws(read_sections(_scenario('axial_damping')), dt)
+    laws = scenario_laws(read_scenario(_scenario('axial_damping')).sections, dt)
     assert continuous_dampers(laws) == {f'strut{i}_axial_force': pytest.approx(50000.0)
                                         for i in range(1, 6)}
-    assert scenario_laws(read_sections(_scenario('baseline')), dt) == []
+    assert scenario_laws(read_scenario(_scenario('baseline')).sections, dt) == []
 
 
 def test_filtered_pma_has_no_viscous_equivalent():

@@ -11,10 +11,10 @@ import random
 import numpy as np
 import pytest
 
-from pentapod_sim.demo_model import demo_model
-from pentapod_sim.study import pipeline
-from pentapod_sim.study.config import load_study_config
-from pentapod_sim.study.runs import run_on_testbed
+from fixtures.demo_model import demo_model
+from pentapod_damper.study import pipeline
+from pentapod_damper.study.config import load_study_config
+from pentapod_damper.study.runs import run_on_testbed
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 

@@ -5,9 +5,9 @@ import numpy as np
 from numpy.testing import assert_allclose
 import pytest
 
+from pentapod_sim.analysis.estimation import FrfResult
 from pentapod_sim.analysis.export import uff58_block, write_csv, write_uff58
-from pentapod_sim.analysis.frf import FrfResult
-from pentapod_sim.exceptions import BagError
+from pentapod_sim.errors import BagError
 
 
 def first_order_frf(n: int = 41, df: float = 0.25) -> FrfResult:

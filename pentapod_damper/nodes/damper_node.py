@@ -13,7 +13,7 @@ import numpy as np
 from rcl_interfaces.msg import SetParametersResult
 
 from pentapod_damper.laws import strut_axial_damper, strut_bending_damper, tcp_damper
-from pentapod_sim.exceptions import ConfigError
+from pentapod_sim.errors import ConfigError
 from pentapod_sim.nodes.common import declare, run_node
 from pentapod_sim.nodes.lockstep_source import LockstepSource
 
@@ -71,7 +71,7 @@ class DamperNode(LockstepSource):
         return SetParametersResult(successful=True)
 
     def compute(self, ns: int, sensors: np.ndarray) -> np.ndarray:
-        """u = -b * rate for every damper of this node."""
+        """U = -b * rate for every damper of this node."""
         return np.concatenate([law.step(sensors[sl]) for sl, law in self._slices])
 
 

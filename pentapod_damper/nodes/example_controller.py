@@ -19,15 +19,14 @@ This example is a TCP damper in x with gain ``gain`` [N s/m]: u = -gain * v_x.
 """
 import sys
 
+from rcl_interfaces.msg import ParameterDescriptor
 import rclpy
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
-from rclpy.qos import QoSProfile, ReliabilityPolicy
-from rcl_interfaces.msg import ParameterDescriptor
 from sensor_msgs.msg import JointState
 
-# Reliable with some depth, like the plant (nothing may be dropped in lockstep).
-QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+from pentapod_sim.interface import force_topic, TCP_STATE
+from pentapod_sim.nodes.common import FORCE_QOS, STATE_QOS
 
 
 class ExampleController(Node):
@@ -40,9 +39,8 @@ class ExampleController(Node):
             description='damping of the TCP in x [N s/m]')).value
         name = self.declare_parameter('source_name', 'example', ParameterDescriptor(
             description='answers on /pentapod/forces/<source_name>', read_only=True)).value
-        self.pub = self.create_publisher(JointState, '/pentapod/forces/' + name, QOS)
-        self.sub = self.create_subscription(JointState, '/pentapod/tcp_state',
-                                            self.on_state, QOS)
+        self.pub = self.create_publisher(JointState, force_topic(name), FORCE_QOS)
+        self.sub = self.create_subscription(JointState, TCP_STATE, self.on_state, STATE_QOS)
         self.last_stamp = None
         self.last_answer = None
 

@@ -1,6 +1,7 @@
 """
-Proof-mass actuator (PMA) node on the working platform (port pma_force_*, sensor
-pma_mount_velocity_*).
+Proof-mass actuator (PMA) node on the working platform.
+
+It acts on the ports pma_force_* and senses pma_mount_velocity_*.
 
 The ideal law of :class:`pentapod_damper.laws.ProofMassActuator`: the proof mass m_a [kg] is
 accelerated by g v (g [1/s], v the mount velocity, optionally high-passed), the structure gets
@@ -15,7 +16,8 @@ from __future__ import annotations
 from sensor_msgs.msg import JointState
 
 from pentapod_damper.laws import ProofMassActuator
-from pentapod_sim.nodes.common import declare, INFO_QOS, PMA_STATE_TOPIC, run_node
+from pentapod_sim.interface import PMA_STATE
+from pentapod_sim.nodes.common import declare, INFO_QOS, run_node
 from pentapod_sim.nodes.lockstep_source import LockstepSource
 
 
@@ -44,7 +46,7 @@ class PmaNode(LockstepSource):
                                 read_only=True, low=0.0, high=1e9))
         self.setup(self.law.sensor_ports, self.law.actuator_ports)
         self.joints = [p.replace('pma_force_', 'pma_') for p in self.law.actuator_ports]
-        self.state_pub = self.create_publisher(JointState, PMA_STATE_TOPIC, INFO_QOS)
+        self.state_pub = self.create_publisher(JointState, PMA_STATE, INFO_QOS)
         self.info_pubs.append(self.state_pub)
         self.get_logger().info(f'PMA m_a = {self.law.mass} kg, g = {self.law.gain} 1/s '
                                f'(b = {self.law.mass * self.law.gain:.6g} N s/m) on '

@@ -3,7 +3,7 @@ Read rosbag2 MCAP bags (ours or any ros2 profile MCAP) ROS-free into numpy array
 
 The MCAP is read sequentially (``mcap.stream_reader.StreamReader``), not through its summary,
 so a bag cut short by a crash still yields every complete chunk; the loss is reported with a
-warning. Files that are not MCAP raise :class:`pentapod_sim.exceptions.BagError`.
+warning. Files that are not MCAP raise :class:`pentapod_sim.errors.BagError`.
 
 Field specifications (``TOPIC.FIELD``; topic names contain no dots):
 
@@ -31,7 +31,7 @@ import yaml
 from pentapod_sim.analysis import cdr_arrays
 from pentapod_sim.analysis.mcap_chunks import split_chunk
 from pentapod_sim.analysis.message_store import MessageStore
-from pentapod_sim.exceptions import BagError
+from pentapod_sim.errors import BagError
 
 LOGGER = logging.getLogger(__name__)
 STAMPED_TYPES = ('sensor_msgs/msg/JointState', 'geometry_msgs/msg/WrenchStamped',

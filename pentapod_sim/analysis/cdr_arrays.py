@@ -14,7 +14,7 @@ from typing import Optional
 import numpy as np
 
 from pentapod_sim.analysis.message_store import MessageStore
-from pentapod_sim.exceptions import BagError
+from pentapod_sim.errors import BagError
 
 JOINT_STATE_FIELDS = ('position', 'velocity', 'effort')
 HEADER = 4  # CDR encapsulation header bytes

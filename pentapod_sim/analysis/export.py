@@ -13,8 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-from pentapod_sim.analysis.frf import FrfResult
-from pentapod_sim.exceptions import BagError
+from pentapod_sim.analysis.estimation import FrfResult
+from pentapod_sim.errors import BagError
 
 FUNCTION_TYPE_FRF = 4
 ORDINATE_COMPLEX_DOUBLE = 6

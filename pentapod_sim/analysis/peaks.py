@@ -15,7 +15,7 @@ import warnings
 import numpy as np
 from scipy import signal
 
-from pentapod_sim.analysis.frf import FrfResult
+from pentapod_sim.analysis.estimation import FrfResult
 
 LOGGER = logging.getLogger(__name__)
 

@@ -28,7 +28,7 @@ def frf_plot(results: Sequence, path, analytic: Optional[tuple] = None,
     path : str or Path
         PNG file to write.
     analytic : (freq [Hz], H, label), optional
-        Reference FRF given as arrays (e.g. from pentapod_sim.frf), same unit as results.
+        Reference FRF given as arrays (e.g. from pentapod_sim.plant.frf), same unit as results.
     resonances : sequence of Resonance, optional
         Peaks to mark on the magnitude of the first result.
     fmin, fmax : float

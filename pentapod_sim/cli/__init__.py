@@ -45,8 +45,11 @@ def model_from_args(args: argparse.Namespace):
     ConfigError
         If a file or value is invalid, or the position name is unknown.
     """
-    from pentapod_sim import assembly, params   # heavy imports only when a model is built
-    from pentapod_sim.exceptions import ConfigError
+    from pentapod_sim.errors import ConfigError
+    from pentapod_sim.fe import (
+        assembly,
+        params,  # heavy imports only when a model is built
+    )
 
     machine = params.load_machine(args.machine)
     positions = params.load_positions(args.positions)

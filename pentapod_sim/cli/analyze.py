@@ -1,4 +1,4 @@
-"""
+r"""
 `analyze`: inspect recorded bags, estimate FRFs, identify peaks, export PNG/CSV/UFF58.
 
 Examples::
@@ -19,12 +19,13 @@ import sys
 
 import numpy as np
 
-from pentapod_sim.analysis.bag_reader import open_bag
-from pentapod_sim.analysis.export import write_csv, write_uff58
-from pentapod_sim.analysis.frf import EXCITATIONS, amplitude_spectrum, frf_from_series
-from pentapod_sim.analysis.peaks import find_resonances, peak_reductions
 from pentapod_sim.analysis import plots
-from pentapod_sim.exceptions import BagError
+from pentapod_sim.analysis.bag_reader import open_bag
+from pentapod_sim.analysis.estimation import amplitude_spectrum, EXCITATIONS, frf_from_series
+from pentapod_sim.analysis.export import write_csv, write_uff58
+from pentapod_sim.analysis.peaks import find_resonances, peak_reductions
+from pentapod_sim.errors import BagError
+from pentapod_sim.interface import PMA_STATE
 
 LOGGER = logging.getLogger('analyze')
 DEFAULT_OUT = Path('out') / 'analysis'
@@ -198,7 +199,7 @@ def build_parser() -> argparse.ArgumentParser:
     time_parser.add_argument('specs', nargs='+')
     amp = subs.add_parser('amplitudes', help='actuator stroke/force amplitude spectra')
     amp.add_argument('bag')
-    amp.add_argument('--topic', default='/pentapod/pma/state')
+    amp.add_argument('--topic', default=PMA_STATE)
     amp.add_argument('--nperseg', type=int, default=None)
     return parser
 

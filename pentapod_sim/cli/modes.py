@@ -22,11 +22,17 @@ from pathlib import Path
 import sys
 import time
 
-from pentapod_sim.causes import (DEFAULT_ALPHA, DEFAULT_ROTATION_LENGTH, analyse_causes,
-                                 plot_energy_shares, plot_mode_distribution)
 from pentapod_sim.cli import add_model_arguments, configure_logging, model_from_args
-from pentapod_sim.exceptions import ConfigError, ModalError, UnreachablePoseError
-from pentapod_sim.modal import solve_modes, sturm_count
+from pentapod_sim.errors import ConfigError, ModalError, UnreachablePoseError
+from pentapod_sim.modal.causes import (
+    analyse_causes,
+    DEFAULT_ALPHA,
+    DEFAULT_ROTATION_LENGTH,
+    plot_energy_shares,
+    plot_mode_distribution,
+)
+from pentapod_sim.modal.solver import solve_modes
+from pentapod_sim.modal.sturm import sturm_count
 
 LOGGER = logging.getLogger('modes')
 #: Frequency band of the paper's mode count [Hz].

@@ -23,10 +23,15 @@ import sys
 import numpy as np
 
 from pentapod_sim.cli import add_model_arguments, configure_logging, model_from_args
-from pentapod_sim.exceptions import ConfigError, ModelFileError, PortError
-from pentapod_sim import frf, reduction
-from pentapod_sim.plant_model import (from_modal_data, keep_by_relevance,
-                                      load_reduction_config, plant_from_fe, reduce_plant)
+from pentapod_sim.errors import ConfigError, ModelFileError, PortError
+from pentapod_sim.plant import frf, frf_plot, reduction
+from pentapod_sim.plant.build import (
+    from_modal_data,
+    keep_by_relevance,
+    load_reduction_config,
+    plant_from_fe,
+    reduce_plant,
+)
 
 LOGGER = logging.getLogger('statespace')
 DEFAULT_OUT = Path('out') / 'statespace'
@@ -54,7 +59,7 @@ def _plants(args):
 
 def _pair(args) -> tuple[str, str]:
     """(output, input) from --pair OUT/IN or the config's report_pair (PortError if unknown)."""
-    from pentapod_sim.ports import check_names
+    from pentapod_sim.plant.ports import check_names
     if args.pair:
         out, sep, inp = args.pair.partition('/')
         if not sep:
@@ -83,7 +88,7 @@ def _pair_rule(args) -> list[dict]:
 
 def _direct_check(fe, pair_all, f_max: float) -> dict:
     """Undamped modal plant (all modes + residual) vs a direct FE harmonic solve."""
-    from pentapod_sim.ports import input_matrix, output_matrices, ports
+    from pentapod_sim.plant.ports import input_matrix, output_matrices, ports
     freq = reduction.between_resonances(pair_all.frequencies_hz, f_max)
     b = input_matrix(ports(fe.points, fe.strut_frames, pair_all.input_names))
     c, _ = output_matrices(ports(fe.points, fe.strut_frames, pair_all.output_names))
@@ -151,7 +156,7 @@ def cmd_frf(args) -> int:
         results.append(frf.modal_frf(plant.select([inp], [out]), freq, label=position))
         marks.append(plant_all.frequencies_hz)
     stem = f'frf_{out}_{inp}_{"_".join(r.label for r in results)}'
-    png = frf.frf_plot(results, out, inp, args.out / f'{stem}.png', mode_freqs=marks,
+    png = frf_plot.frf_plot(results, out, inp, args.out / f'{stem}.png', mode_freqs=marks,
                        title=f'{out} / {inp} (ticks: modes)')
     csv_path = frf.frf_to_csv(results, [(out, inp)], args.out / f'{stem}.csv')
     print(f'wrote {png} and {csv_path}')
@@ -166,7 +171,7 @@ def cmd_dcgain(args) -> int:
         pair_all = plant_all.select([inp], [out])
         keep = keep_by_relevance(pair_all, [rule])
         gains = reduction.modal_dc_gains(pair_all.omega, pair_all.b, pair_all.c_disp)[:, 0, 0]
-        png = frf.dc_gain_plot(gains, pair_all.frequencies_hz,
+        png = frf_plot.dc_gain_plot(gains, pair_all.frequencies_hz,
                                args.out / f'dcgain_{out}_{inp}_{position}.png',
                                limit=rule.get('abs_limit'), keep=keep,
                                title=f'{position}: dc gain per mode, {out} / {inp}; '
@@ -204,7 +209,7 @@ def cmd_closed_loop(args) -> int:
         open_ = frf.modal_frf(plant, freq, label=f'{position} open loop')
         closed = frf.closed_loop_frf(plant, dampers, freq, label=f'{position} damped')
         stem = f'closed_loop_{out}_{inp}_{position}'
-        png = frf.frf_plot([open_, closed], out, inp, args.out / f'{stem}.png',
+        png = frf_plot.frf_plot([open_, closed], out, inp, args.out / f'{stem}.png',
                            title=f'{position}: {out} / {inp}, dampers: {len(dampers)}')
         frf.frf_to_csv([open_, closed], [(out, inp)], args.out / f'{stem}.csv')
         peak_o = np.abs(open_.pair(out, inp)).max()
@@ -217,8 +222,8 @@ def cmd_closed_loop(args) -> int:
 def cmd_build(args) -> int:
     """Build and save plant model files (from the FE model or from external modal data)."""
     if args.modal_data:
-        from pentapod_sim.modal_data import load_modal_data
-        from pentapod_sim.ports import INPUT_NAMES, OUTPUT_NAMES
+        from pentapod_sim.plant.modal_data import load_modal_data
+        from pentapod_sim.plant.ports import INPUT_NAMES, OUTPUT_NAMES
         data = load_modal_data(args.modal_data, args.strut_frames)
         inputs = list(INPUT_NAMES) if args.cfg['inputs'] == 'all' else args.cfg['inputs']
         outputs = list(OUTPUT_NAMES) if args.cfg['outputs'] == 'all' else args.cfg['outputs']

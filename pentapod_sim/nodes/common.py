@@ -14,34 +14,29 @@ import time
 from typing import Callable
 
 from builtin_interfaces.msg import Time
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType
 import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
-                                ParameterType)
 
-from pentapod_sim.exceptions import ConfigError, RunError
+from pentapod_sim import interface
+from pentapod_sim.errors import ConfigError, RunError
 
-#: History of the state and information streams. A reliable writer drops its oldest
-#: unacknowledged message when the history is full, so the depth must cover how far a slow
-#: reader (a recorder on a busy machine) can fall behind: 10000 steps.
-STREAM_DEPTH = 10000
+
+def qos(kind: str) -> QoSProfile:
+    """Rclpy QoS profile of a class of topics of :data:`pentapod_sim.interface.QOS`."""
+    spec = interface.QOS[kind]
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=spec.depth,
+                      reliability=ReliabilityPolicy[spec.reliability.upper()],
+                      durability=DurabilityPolicy[spec.durability.upper()])
+
+
 #: Plant outputs (states, /clock): reliable, deep enough that lockstep never drops a step.
-STATE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=STREAM_DEPTH,
-                       reliability=ReliabilityPolicy.RELIABLE,
-                       durability=DurabilityPolicy.VOLATILE)
+STATE_QOS = qos('state')
 #: Forces from sources: reliable; a source sends one message per step.
-FORCE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
-                       reliability=ReliabilityPolicy.RELIABLE,
-                       durability=DurabilityPolicy.VOLATILE)
-#: Diagnostics streams (PMA state, excitation): reliable, moderate depth.
-INFO_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=STREAM_DEPTH,
-                      reliability=ReliabilityPolicy.RELIABLE,
-                      durability=DurabilityPolicy.VOLATILE)
-
-FORCE_TOPIC_PREFIX = '/pentapod/forces/'
-EXCITATION_TOPIC = '/pentapod/excitation'
-PMA_STATE_TOPIC = '/pentapod/pma/state'
+FORCE_QOS = qos('force')
+#: Diagnostics streams (PMA state, excitation): reliable, deep.
+INFO_QOS = qos('info')
 
 _TYPES = {bool: ParameterType.PARAMETER_BOOL, int: ParameterType.PARAMETER_INTEGER,
           float: ParameterType.PARAMETER_DOUBLE, str: ParameterType.PARAMETER_STRING}

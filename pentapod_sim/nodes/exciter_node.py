@@ -4,7 +4,7 @@ Exciter node: a force at the TCP (impulse, step, sine, chirp, band-limited rando
 It is a lockstep force source: every /clock tick t_k it answers on /pentapod/forces/<name>
 (ports tcp_force_{x,y,z}, efforts [N]) and publishes the applied force on
 /pentapod/excitation (geometry_msgs/WrenchStamped, force [N], torque zero). The signal is
-:class:`pentapod_sim.excitation.Excitation` evaluated at step k = t_k / dt, so the offline
+:class:`pentapod_sim.sim.excitation.Excitation` evaluated at step k = t_k / dt, so the offline
 closed loop applies bit-identical forces.
 """
 from __future__ import annotations
@@ -13,11 +13,11 @@ import math
 
 from geometry_msgs.msg import WrenchStamped
 
-from pentapod_sim.exceptions import ConfigError
-from pentapod_sim.excitation import Excitation, ExcitationSpec, KINDS
-from pentapod_sim.nodes.common import declare, EXCITATION_TOPIC, INFO_QOS, run_node
+from pentapod_sim.errors import ConfigError
+from pentapod_sim.interface import EXCITATION, stamp_ns, step_of
+from pentapod_sim.nodes.common import declare, INFO_QOS, run_node
 from pentapod_sim.nodes.lockstep_source import LockstepSource
-from pentapod_sim.state_topics import stamp_ns, step_of
+from pentapod_sim.sim.excitation import Excitation, ExcitationSpec, KINDS
 
 TCP_PORTS = ['tcp_force_x', 'tcp_force_y', 'tcp_force_z']
 
@@ -63,7 +63,7 @@ class ExciterNode(LockstepSource):
         except ConfigError as err:
             raise ConfigError(f'exciter parameters: {err}') from None
         self.setup([], TCP_PORTS)
-        self.wrench_pub = self.create_publisher(WrenchStamped, EXCITATION_TOPIC, INFO_QOS)
+        self.wrench_pub = self.create_publisher(WrenchStamped, EXCITATION, INFO_QOS)
         self.info_pubs.append(self.wrench_pub)
         self.get_logger().info(f'{spec.kind} excitation, {spec.amplitude} N along '
                                f'{self.signal.direction.tolist()}')

@@ -18,11 +18,15 @@ from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
-from pentapod_sim.nodes.common import (declare, FORCE_QOS, FORCE_TOPIC_PREFIX, STATE_QOS,
-                                       stamp_msg, stamp_to_ns, subscribers_of)
-from pentapod_sim.state_topics import port_location
-
-CLOCK_TOPIC = '/clock'
+from pentapod_sim.interface import CLOCK, force_topic, port_location
+from pentapod_sim.nodes.common import (
+    declare,
+    FORCE_QOS,
+    stamp_msg,
+    stamp_to_ns,
+    STATE_QOS,
+    subscribers_of,
+)
 
 
 class LockstepSource(Node):
@@ -39,7 +43,7 @@ class LockstepSource(Node):
                                    '/pentapod/forces/<source_name>', read_only=True)
         self.wait_for = [n for n in declare(
             self, 'wait_for_subscribers', [''], 'node names (e.g. a recorder) that must be '
-            'subscribed and matched to this node\'s information topics before it answers '
+            "subscribed and matched to this node's information topics before it answers "
             'step 0 (the plant re-sends step 0 meanwhile)', read_only=True, array='string[]')
             if n]
         self.info_pubs: list = []   # subclasses add their diagnostic publishers
@@ -59,11 +63,11 @@ class LockstepSource(Node):
         self._pending: dict[int, dict[str, object]] = {}
         self._cache: dict[tuple[str, tuple], list] = {}
         self._last = (-1, None)   # (stamp ns, published message)
-        self.force_pub = self.create_publisher(JointState, FORCE_TOPIC_PREFIX + self.source_name,
+        self.force_pub = self.create_publisher(JointState, force_topic(self.source_name),
                                                FORCE_QOS)
-        topics = list(self.needs) or [CLOCK_TOPIC]
+        topics = list(self.needs) or [CLOCK]
         self.subs = [self.create_subscription(
-            Clock if t == CLOCK_TOPIC else JointState, t,
+            Clock if t == CLOCK else JointState, t,
             lambda msg, t=t: self._on_state(t, msg), STATE_QOS) for t in topics]
 
     def compute(self, stamp_ns: int, sensors: np.ndarray) -> np.ndarray:
@@ -96,7 +100,7 @@ class LockstepSource(Node):
 
     def _on_state(self, topic: str, msg) -> None:
         """Collect the messages of one stamp; answer when all needed topics are in."""
-        stamp = msg.clock if topic == CLOCK_TOPIC else msg.header.stamp
+        stamp = msg.clock if topic == CLOCK else msg.header.stamp
         ns = stamp_to_ns(stamp)
         if ns == self._last[0]:
             self.force_pub.publish(self._last[1])   # a re-published step: same answer
@@ -118,7 +122,7 @@ class LockstepSource(Node):
             del self._pending[old]
         sensors = np.empty(len(self.sensor_ports))
         for t, msg_t in pending.items():
-            if t != CLOCK_TOPIC and not self._extract(t, msg_t, sensors):
+            if t != CLOCK and not self._extract(t, msg_t, sensors):
                 return
         efforts = np.asarray(self.compute(ns, sensors), dtype=float)
         out = JointState(name=self.actuator_ports, effort=efforts.tolist())

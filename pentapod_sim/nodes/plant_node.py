@@ -3,7 +3,7 @@ Plant node: integrates the modal plant and exchanges outputs and forces over ROS
 
 Every step k it publishes /clock and the state topics (y_k, stamp t_k), then applies the
 forces of its sources (/pentapod/forces/<source>) as u_k and steps x_{k+1} = A_d x_k + B_d u_k
-(:class:`pentapod_sim.plant.DiscretePlant`). Timing ``lockstep`` waits for every source's
+(:class:`pentapod_sim.sim.stepping.DiscretePlant`). Timing ``lockstep`` waits for every source's
 answer to step k (deterministic; a silent source stops the run naming it); ``realtime`` paces
 steps by the wall clock, holds the newest force of each source and reports the achieved rate,
 lateness percentiles and overruns. See docs/nodes.md.
@@ -18,14 +18,26 @@ from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
-from pentapod_sim.exceptions import ConfigError, RunError
-from pentapod_sim.nodes.common import (declare, FORCE_QOS, FORCE_TOPIC_PREFIX, run_node,
-                                       spin_until, STATE_QOS, stamp_msg, stamp_to_ns,
-                                       subscribers_of)
+from pentapod_sim.errors import ConfigError, RunError
+from pentapod_sim.interface import CLOCK, force_topic, stamp_ns, state_layouts, step_of
+from pentapod_sim.nodes.common import (
+    declare,
+    FORCE_QOS,
+    run_node,
+    spin_until,
+    stamp_msg,
+    stamp_to_ns,
+    STATE_QOS,
+    subscribers_of,
+)
 from pentapod_sim.nodes.realtime_stats import LatenessStats
-from pentapod_sim.plant import (DEFAULT_MAX_STATE_NORM, DiscretePlant, ForceMixer,
-                                load_or_build_model, parse_sources)
-from pentapod_sim.state_topics import stamp_ns, state_layouts, step_of
+from pentapod_sim.plant.build import load_or_build_model
+from pentapod_sim.sim.stepping import (
+    DEFAULT_MAX_STATE_NORM,
+    DiscretePlant,
+    ForceMixer,
+    parse_sources,
+)
 
 
 class PlantNode(Node):
@@ -47,12 +59,12 @@ class PlantNode(Node):
                  for n in self.p['sources']}
         self.mixer = ForceMixer(self.core.input_names, parse_sources(self.p['sources'], ports))
         self.n_steps = self._n_steps()
-        self.clock_pub = self.create_publisher(Clock, '/clock', STATE_QOS)
+        self.clock_pub = self.create_publisher(Clock, CLOCK, STATE_QOS)
         self.layouts = state_layouts(self.core.output_names)
         self.state_pubs = [(self.create_publisher(JointState, lay.topic, STATE_QOS), lay)
                            for lay in self.layouts]
         self.force_subs = [self.create_subscription(
-            JointState, FORCE_TOPIC_PREFIX + name,
+            JointState, force_topic(name),
             lambda msg, name=name: self._on_force(name, msg), FORCE_QOS)
             for name in self.mixer.sources]
         self._last_warn = {}
@@ -166,7 +178,7 @@ class PlantNode(Node):
         """Wait until every source topic has a publisher (RunError names the missing)."""
         def missing():
             return [s for s in self.mixer.sources
-                    if self.count_publishers(FORCE_TOPIC_PREFIX + s) == 0]
+                    if self.count_publishers(force_topic(s)) == 0]
         if not spin_until(executor, lambda: not missing(), self.p['startup_timeout']):
             raise RunError(f'force source(s) {", ".join(missing())} did not appear within '
                            f'startup_timeout = {self.p["startup_timeout"]} s')

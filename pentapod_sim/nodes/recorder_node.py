@@ -18,28 +18,24 @@ from pathlib import Path
 import struct
 import time
 
+from rcl_interfaces.msg import ParameterDescriptor, ParameterType
 import rclpy
 from rclpy.clock import Clock, ClockType
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rcl_interfaces.msg import ParameterDescriptor, ParameterType
 import yaml
 
-from pentapod_sim.exceptions import BagError
+from pentapod_sim import interface
+from pentapod_sim.errors import BagError
 from pentapod_sim.recording import BagWriter, qos_profile
 from pentapod_sim.recording.msgdefs import has_header_stamp
 
-DEFAULT_PREFIX = '/pentapod/'
 # topics of docs/architecture.md: subscribed at start (before any publisher exists), so that a
 # recorder started before the plant misses no step; others are found by discovery
-KNOWN_TOPICS = {
-    '/clock': 'rosgraph_msgs/msg/Clock',
-    '/pentapod/tcp_state': 'sensor_msgs/msg/JointState',
-    '/pentapod/strut_states': 'sensor_msgs/msg/JointState',
-    '/pentapod/excitation': 'geometry_msgs/msg/WrenchStamped',
-    '/pentapod/pma/state': 'sensor_msgs/msg/JointState',
-}
+KNOWN_TOPICS = {t: interface.TOPIC_TYPES[t] for t in (
+    interface.CLOCK, interface.TCP_STATE, interface.STRUT_STATES, interface.EXCITATION,
+    interface.PMA_STATE)}
 
 
 def message_class(msg_type: str):
@@ -94,7 +90,7 @@ class RecorderNode(Node):
     def _selected(self, topic: str) -> bool:
         if self.wanted:
             return topic in self.wanted
-        return topic.startswith(DEFAULT_PREFIX) or topic == '/clock'
+        return interface.is_testbed_topic(topic)
 
     def discover(self) -> None:
         """Subscribe to new selected topics with a publisher; follow best-effort publishers."""

@@ -15,15 +15,15 @@ metadata.yaml and as an MCAP metadata record named ``pentapod_run`` at the start
 import dataclasses
 import logging
 import os
-import time
 from pathlib import Path
+import time
 from typing import Mapping, Optional
 
 from mcap.writer import CompressionType, Writer
 import yaml
 
 from pentapod_sim import __version__
-from pentapod_sim.exceptions import BagError
+from pentapod_sim.errors import BagError
 from pentapod_sim.recording.msgdefs import message_definition
 
 LOGGER = logging.getLogger(__name__)

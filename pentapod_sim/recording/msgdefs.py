@@ -7,11 +7,11 @@ type a line of 80 '=' characters, a line ``MSG: pkg/msg/Type`` and that type's .
 import functools
 import logging
 import os
+from pathlib import Path
 import re
 import sys
-from pathlib import Path
 
-from pentapod_sim.exceptions import BagError
+from pentapod_sim.errors import BagError
 
 LOGGER = logging.getLogger(__name__)
 SEPARATOR = '=' * 80

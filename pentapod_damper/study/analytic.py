@@ -1,0 +1,161 @@
+"""
+Analytic FRFs of a scenario: the continuous closed loop and the sampled lockstep loop.
+
+The continuous FRF (:func:`pentapod_sim.plant.frf.closed_loop_frf`) is the paper's view: ideal
+viscous dampers. The discrete FRF is what the testbed runs: the zero-order-hold plant with the
+laws acting one sample late (docs/architecture.md), evaluated at ``z = exp(j w dt)``; a
+recorded lockstep run must match it up to estimation error.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+import numpy.typing as npt
+
+from pentapod_sim.plant.frf import closed_loop_frf, modal_frf
+from pentapod_sim.plant.model import PlantModel
+from pentapod_sim.sim.closed_loop import closed_loop_matrices, feedback_gain
+from pentapod_sim.sim.stepping import DiscretePlant
+
+#: Largest eigenvector condition number for the eigen-decomposition path.
+MAX_COND = 1e8
+
+
+def continuous_frf(plant: PlantModel, dampers: dict[str, float], freq_hz: npt.ArrayLike,
+                   output: str, input_: str) -> npt.NDArray[np.complex128]:
+    """
+    FRF ``output / input_`` of the continuous plant with ideal viscous ``dampers``.
+
+    Parameters
+    ----------
+    plant : PlantModel
+        Modal plant (SI units).
+    dampers : dict
+        Input port -> viscous gain [N s/m or N m s/rad]; empty for the open loop.
+    freq_hz : (F,) array_like
+        Frequencies [Hz].
+    output, input_ : str
+        Port names.
+    """
+    result = (closed_loop_frf(plant, dampers, freq_hz) if dampers
+              else modal_frf(plant, freq_hz))
+    return result.pair(output, input_)
+
+
+@dataclass
+class DiscreteFrf:
+    """
+    FRFs of the sampled closed loop from one external input.
+
+    Attributes
+    ----------
+    freq : (F,) ndarray
+        Frequencies [Hz].
+    outputs : dict of str to (F,) complex ndarray
+        Plant output port -> FRF [output unit / input unit].
+    efforts : dict of str to (F,) complex ndarray
+        Plant input port -> total effort u (external plus controller) per unit input.
+    spectral_radius : float
+        Largest |eigenvalue| of the closed loop (>= 1: not asymptotically stable).
+    """
+
+    freq: np.ndarray
+    outputs: dict
+    efforts: dict
+    spectral_radius: float
+
+
+def _resolvent_columns(a: np.ndarray, b: np.ndarray, z: np.ndarray,
+                       lam: np.ndarray, vec: np.ndarray) -> np.ndarray:
+    """(n, F) columns ``(z_f I - a)^-1 b`` for one input column ``b``; a = V diag(lam) V^-1."""
+    if np.isfinite(np.linalg.cond(vec)) and np.linalg.cond(vec) < MAX_COND:
+        right = np.linalg.solve(vec, b.astype(complex))
+        return vec @ (right[:, None] / (z[None, :] - lam[:, None]))
+    # defective or ill-conditioned closed loop: one dense solve per frequency
+    eye = np.eye(a.shape[0])
+    return np.stack([np.linalg.solve(zf * eye - a, b) for zf in z], axis=1)
+
+
+def discrete_frf(plant: PlantModel, laws: Sequence, dt: float, freq_hz: npt.ArrayLike,
+                 input_: str) -> DiscreteFrf:
+    """
+    FRFs of the lockstep closed loop (laws one sample late) from an external input.
+
+    Parameters
+    ----------
+    plant : PlantModel
+        Continuous modal plant; discretised here with zero-order hold at ``dt``.
+    laws : sequence
+        Memoryless linear laws (``linear_gain()`` not None), e.g. viscous dampers or an
+        unfiltered PMA; empty for the open loop.
+    dt : float
+        Sample time [s].
+    freq_hz : (F,) array_like
+        Frequencies [Hz], below the Nyquist frequency.
+    input_ : str
+        External input port (e.g. ``tcp_force_x``), added to the controllers' efforts.
+    """
+    freq = np.asarray(freq_hz, dtype=float)
+    core = DiscretePlant(plant.discretize(dt))
+    gain = feedback_gain(core, laws) if laws else np.zeros((len(core.input_names),
+                                                             len(core.output_names)))
+    a, b, c_y, c_u, augmented = closed_loop_matrices(core, gain)
+    j = core.input_names.index(input_)
+    z = np.exp(2j * np.pi * freq * dt)
+    lam, vec = np.linalg.eig(a)
+    x = _resolvent_columns(a, b[:, j], z, lam, vec)
+    unit = np.zeros(len(core.input_names))
+    unit[j] = 1.0
+    u = c_u @ x + unit[:, None]
+    y = c_y @ x
+    if not augmented and core.has_feedthrough:
+        y = y + (core.d @ u) / z[None, :]
+    return DiscreteFrf(freq, dict(zip(core.output_names, y)), dict(zip(core.input_names, u)),
+                       float(np.max(np.abs(lam))))
+
+
+def pma_requirements(mount_velocity: npt.ArrayLike, freq_hz: npt.ArrayLike, mass: float,
+                     gain: float, force_amplitude: float) -> tuple[np.ndarray, np.ndarray]:
+    """
+    Stroke and force amplitudes of an ideal PMA for a harmonic TCP force.
+
+    The proof mass is accelerated by ``g v`` (v: mount velocity), so its force on the
+    structure is ``m_a g v`` and its stroke relative to the mount is
+    ``|v| sqrt(1 + (g / w)^2) / w``.
+
+    Parameters
+    ----------
+    mount_velocity : (F,) array_like
+        Closed-loop FRF mount velocity / TCP force [m/(s N)].
+    freq_hz : (F,) array_like
+        Frequencies [Hz], > 0.
+    mass, gain : float
+        Proof mass m_a [kg] and gain g [1/s].
+    force_amplitude : float
+        Amplitude of the harmonic TCP force [N].
+
+    Returns
+    -------
+    stroke, force : (F,) ndarray
+        Amplitudes [m] and [N].
+    """
+    w = 2 * np.pi * np.asarray(freq_hz, dtype=float)
+    v = np.abs(np.asarray(mount_velocity)) * force_amplitude
+    return v * np.sqrt(1.0 + (gain / w) ** 2) / w, mass * gain * v
+
+
+def peak_and_rms(h: npt.ArrayLike, freq_hz: npt.ArrayLike, f_lo: float,
+                 f_hi: float) -> tuple[float, float]:
+    """Largest |H| and RMS of |H| over [f_lo, f_hi] Hz (uniform grid assumed)."""
+    freq = np.asarray(freq_hz)
+    band = (freq >= f_lo) & (freq <= f_hi)
+    mag = np.abs(np.asarray(h))[band]
+    return float(mag.max()), float(np.sqrt(np.mean(mag ** 2)))
+
+
+def improvement_share(base: float, partial: float, full: float) -> float:
+    """Share of the full improvement ``base - full`` that ``partial`` achieves (NaN if none)."""
+    gained = base - full
+    return float((base - partial) / gained) if gained > 0 else float('nan')

@@ -1,0 +1,174 @@
+"""
+Steps of the study: plant models, analytic FRFs, testbed runs, and what is measured from them.
+
+ROS appears only through :func:`pentapod_damper.study.runs.run_on_testbed`, which starts node
+processes; everything here reads and computes plain arrays.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+import logging
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from pentapod_damper.scenario_laws import continuous_dampers, scenario_laws
+from pentapod_damper.study.analytic import (
+    continuous_frf,
+    discrete_frf,
+    DiscreteFrf,
+    pma_requirements,
+)
+from pentapod_damper.study.config import StudyConfig
+from pentapod_damper.study.runs import RunResult
+from pentapod_sim.analysis.bag_reader import open_bag
+from pentapod_sim.analysis.estimation import frf_from_series
+from pentapod_sim.errors import ConfigError
+from pentapod_sim.interface import EXCITATION, PMA_STATE, TCP_STATE
+from pentapod_sim.plant.build import build_plant
+from pentapod_sim.plant.model import PlantModel
+from pentapod_sim.scenario.files import read_scenario
+
+LOG = logging.getLogger(__name__)
+
+
+@dataclass
+class PositionModel:
+    """The reduced plant of one position, saved for the plant node to load."""
+
+    position: str
+    plant: PlantModel
+    model_file: Path
+    model_hash: str
+
+
+@dataclass
+class ScenarioAnalytic:
+    """Analytic results of one scenario at one position (excited TCP direction d)."""
+
+    name: str
+    laws: list
+    dampers: dict
+    continuous: np.ndarray            # TCP displacement d / TCP force d [m/N]
+    discrete: DiscreteFrf             # sampled lockstep loop, every output and effort
+    pma: dict = field(default_factory=dict)   # mass, gain of an ideal PMA, if any
+
+
+@dataclass
+class Measured:
+    """What one testbed run's bag gives: the TCP FRF and, for PMA runs, stroke and force."""
+
+    run: RunResult
+    freq: np.ndarray
+    h: np.ndarray
+    coherence: np.ndarray
+    pma_stroke: np.ndarray | None = None      # stroke / TCP force [m/N]
+    pma_force: np.ndarray | None = None       # force / TCP force [N/N]
+    n_messages: dict = field(default_factory=dict)
+
+
+def prepare_model(position: str, out_dir: Path,
+                  say: Callable[[str], None]) -> PositionModel:
+    """Build the reduced plant of a position and save it (the plant node loads the file)."""
+    plant = build_plant(position, progress=say)
+    path = plant.save(out_dir / 'models' / f'plant_{position}.npz')
+    return PositionModel(position, plant, Path(path), plant.content_hash())
+
+
+def welch_freq(cfg: StudyConfig) -> np.ndarray:
+    """Frequency bins [Hz] of the measured FRFs (Welch segments of ``nperseg``), DC left out."""
+    freq = np.fft.rfftfreq(cfg.nperseg, 1.0 / cfg.sample_rate)
+    return freq[(freq > 0) & (freq <= cfg.f_max)]
+
+
+def scenario_analytic(model: PositionModel, scenario: str, cfg: StudyConfig,
+                      freq: np.ndarray) -> ScenarioAnalytic:
+    """
+    Closed-loop FRFs of a scenario from the TCP force.
+
+    The continuous FRF is evaluated on ``freq``; the sampled-loop FRF on the bins of the
+    measured FRFs (:func:`welch_freq`), so both can be compared bin by bin.
+    """
+    d = cfg.direction
+    sections = read_scenario(scenario).sections
+    laws = scenario_laws(sections, 1.0 / cfg.sample_rate)
+    dampers = continuous_dampers(laws)
+    disc = discrete_frf(model.plant, laws, 1.0 / cfg.sample_rate, welch_freq(cfg),
+                        f'tcp_force_{d}')
+    rho = disc.spectral_radius
+    if rho >= 1.0:
+        raise ConfigError(f'scenario {scenario!r} at {model.position} is unstable at '
+                          f'sample_rate = {cfg.sample_rate:g} Hz with its one-sample '
+                          f'controller delay (spectral radius {rho:.4g}); lower its gains or '
+                          'raise the sample rate')
+    cont = continuous_frf(model.plant, dampers, freq, f'tcp_displacement_{d}',
+                          f'tcp_force_{d}')
+    pma = {}
+    for name, params in sections.items():
+        if name.startswith('pma'):
+            pma = {'mass': float(params.get('proof_mass', 5.0)),
+                   'gain': float(params.get('gain', 4000.0)),
+                   'directions': list(params.get('directions', ['x']))}
+    return ScenarioAnalytic(scenario, laws, dampers, cont, disc, pma)
+
+
+def pma_curves(model: PositionModel, ana: ScenarioAnalytic, cfg: StudyConfig,
+               freq: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Analytic stroke [m] and force [N] amplitudes of the scenario's PMA (continuous loop)."""
+    d = cfg.direction
+    v = continuous_frf(model.plant, ana.dampers, freq, f'pma_mount_velocity_{d}',
+                       f'tcp_force_{d}')
+    return pma_requirements(v, freq, ana.pma['mass'], ana.pma['gain'],
+                            cfg.pma_force_amplitude)
+
+
+def measure(run: RunResult, cfg: StudyConfig) -> Measured:
+    """Estimate the TCP FRF (H1, Welch/Hann) and PMA stroke/force FRFs from a run's bag."""
+    d = cfg.direction
+    bag = open_bag(run.bag)
+    force = bag.series(f'{EXCITATION}.force.{d}')
+    tcp = frf_from_series(force, bag.series(f'{TCP_STATE}.position.tcp_{d}'),
+                          'random', cfg.nperseg)
+    counts = {t: bag.topic(t).count for t in (TCP_STATE, EXCITATION)}
+    result = Measured(run, tcp.freq, tcp.H, tcp.coherence, n_messages=counts)
+    if run.scenario.startswith('pma'):
+        stroke = frf_from_series(force, bag.series(f'{PMA_STATE}.position.pma_{d}'),
+                                 'random', cfg.nperseg)
+        effort = frf_from_series(force, bag.series(f'{PMA_STATE}.effort.pma_{d}'),
+                                 'random', cfg.nperseg)
+        result.pma_stroke, result.pma_force = stroke.H, effort.H
+    return result
+
+
+def deviation_db(measured: Measured, disc: DiscreteFrf, output: str, cfg: StudyConfig,
+                 f_lo: float) -> tuple[float, float]:
+    """
+    Largest |dB| difference between measured and sampled-loop analytic FRF.
+
+    Only bins in [f_lo, f_max] with coherence >= coherence_min count.
+
+    Returns
+    -------
+    max_db, share : float
+        Largest deviation [dB] and the share of the band's bins that were compared.
+    """
+    idx = np.searchsorted(measured.freq, disc.freq)
+    if np.any(idx >= measured.freq.size) or not np.allclose(measured.freq[idx], disc.freq):
+        raise ValueError('measured FRF bins differ from the analytic ones (nperseg, rate)')
+    h_mes, coh = measured.h[idx], measured.coherence[idx]
+    band = disc.freq >= f_lo
+    good = band & (coh >= cfg.coherence_min)
+    if not np.any(good):
+        return float('nan'), 0.0
+    diff = 20 * np.log10(np.abs(h_mes[good]) / np.abs(disc.outputs[output][good]))
+    return float(np.max(np.abs(diff))), float(good.sum() / band.sum())
+
+
+def step_series(run: RunResult, cfg: StudyConfig) -> tuple[np.ndarray, ...]:
+    """Time [s], stroke [m] and force [N] of the PMA in a step-response run."""
+    bag = open_bag(run.bag)
+    d = cfg.direction
+    stroke = bag.series(f'{PMA_STATE}.position.pma_{d}')
+    force = bag.series(f'{PMA_STATE}.effort.pma_{d}')
+    return stroke.time, stroke.values, force.values

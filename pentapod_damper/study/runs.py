@@ -1,0 +1,142 @@
+"""
+One study run on the testbed: write its parameter file, start the nodes, keep the bag.
+
+A run's parameter file is the scenario file (config/scenarios/<name>.yaml) with the study's
+settings applied (position, model file, sample rate, excitation) and a recorder node added;
+it is stored next to the bag, so every run can be repeated with
+``python -m pentapod_sim.scenario.runner <run folder>/scenario.yaml``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+import logging
+import os
+from pathlib import Path
+import shutil
+import time
+from typing import Any
+
+import yaml
+
+from pentapod_damper.study.config import StudyConfig
+from pentapod_sim import __version__
+from pentapod_sim.errors import RunError
+from pentapod_sim.interface import EXCITATION, PMA_STATE, TCP_STATE
+from pentapod_sim.scenario.files import read_scenario
+from pentapod_sim.scenario.runner import run_scenario
+
+LOG = logging.getLogger(__name__)
+
+#: Topics every study run records (the strut states are left out: each recorded topic costs
+#: the lockstep loop time, and the study's analysis does not need them).
+RECORDED_TOPICS = [TCP_STATE, EXCITATION, PMA_STATE]
+DIRECTIONS = {'x': [1.0, 0.0, 0.0], 'y': [0.0, 1.0, 0.0], 'z': [0.0, 0.0, 1.0]}
+
+
+class _QuotingDumper(yaml.SafeDumper):
+    """YAML dumper that quotes every string: rcl reads a bare ``y`` or ``n`` as a boolean."""
+
+
+_QuotingDumper.add_representer(
+    str, lambda dumper, value: dumper.represent_scalar('tag:yaml.org,2002:str', value,
+                                                       style="'"))
+
+
+def dump_params(doc: dict) -> str:
+    """A ROS 2 parameter file's text with every string quoted."""
+    return yaml.dump(doc, Dumper=_QuotingDumper, sort_keys=False)
+
+
+@dataclass
+class RunResult:
+    """Outcome of one run: where its bag is and how long it took (wall time [s])."""
+
+    name: str
+    position: str
+    scenario: str
+    bag: Path
+    params_file: Path
+    wall_time: float
+    steps: int
+
+
+def excitation_params(cfg: StudyConfig, kind: str = 'random') -> dict[str, Any]:
+    """Exciter parameters of a study run (random FRF run or PMA step run)."""
+    if kind == 'step':
+        return {'kind': 'step', 'amplitude': cfg.step_amplitude,
+                'direction': DIRECTIONS[cfg.direction], 'duration': 0.0, 'start_delay': 0.01}
+    return {'kind': 'random', 'amplitude': cfg.amplitude, 'direction': DIRECTIONS[cfg.direction],
+            'f_start': float(cfg.band[0]), 'f_end': float(cfg.band[1]),
+            'duration': cfg.duration, 'seed': cfg.seed}
+
+
+def run_sections(scenario: str, position: str, model_file: Path, cfg: StudyConfig,
+                 bag_dir: Path, run_info: dict, kind: str = 'random') -> dict:
+    """
+    Node sections of one run: the scenario's, with the study settings and a recorder.
+
+    Returns
+    -------
+    dict
+        A ROS 2 parameter file as a mapping (``node: {ros__parameters: {...}}``).
+    """
+    sections = read_scenario(scenario).sections
+    duration = cfg.duration if kind == 'random' else cfg.step_duration
+    doc: dict[str, Any] = {'/**': {'ros__parameters': {'sample_rate': cfg.sample_rate}}}
+    for name, params in sections.items():
+        params = {k: v for k, v in params.items() if k != 'sample_rate'}   # from /** only
+        if name.startswith('plant'):
+            params.update(position=position, model_file=str(model_file), duration=duration,
+                          timing='lockstep', steps=0, output_file='')
+        elif name.startswith('exciter'):
+            params = excitation_params(cfg, kind)
+        # nothing is published before the recorder is matched (plant: step 0; sources: their
+        # first answer), so the bag holds every step
+        params['wait_for_subscribers'] = ['recorder']
+        doc[name] = {'ros__parameters': params}
+    info = dict(run_info, scenario_parameters=dict(doc))   # the nodes' sections, as run
+    doc['recorder'] = {'ros__parameters': {
+        'topics': RECORDED_TOPICS, 'output_dir': str(bag_dir.parent), 'bag_name': bag_dir.name,
+        'run_info': yaml.safe_dump(info, sort_keys=False), 'stop_when_idle': 2.0}}
+    return doc
+
+
+def run_on_testbed(scenario: str, position: str, model_file: Path, model_hash: str,
+                   cfg: StudyConfig, out_dir: Path, kind: str = 'random',
+                   timeout: float = 600.0) -> RunResult:
+    """
+    Run one scenario at one position in lockstep and record it.
+
+    Raises
+    ------
+    RunError
+        If a node fails or the bag is missing; the message names the run and its log folder.
+    """
+    name = f'{position}_{scenario}' + ('' if kind == 'random' else f'_{kind}')
+    run_dir = out_dir / 'runs' / name
+    bag_dir = run_dir / 'bag'
+    run_dir.mkdir(parents=True, exist_ok=True)
+    shutil.rmtree(bag_dir, ignore_errors=True)   # a bag of an earlier run of this name
+    info = {'study_run': name, 'scenario': scenario, 'position': position,
+            'excitation': kind, 'model_file': str(model_file), 'model_hash': model_hash,
+            'sample_rate': cfg.sample_rate, 'package_version': __version__}
+    doc = run_sections(scenario, position, model_file, cfg, bag_dir, info, kind)
+    params_file = run_dir / 'scenario.yaml'
+    params_file.write_text(dump_params(doc))
+    env = dict(os.environ, ROS_LOG_DIR=str(run_dir / 'ros_log'))
+    t0 = time.perf_counter()
+    code = run_scenario(params_file, {}, timeout, env, log_dir=run_dir / 'logs')
+    wall = time.perf_counter() - t0
+    if code != 0:
+        errors = [line.strip() for log in sorted((run_dir / 'logs').glob('*.log'))
+                  for line in log.read_text(errors='replace').splitlines()
+                  if line.startswith('error:')]
+        raise RunError(f'run {name} failed (exit code {code}): {"; ".join(errors) or "?"}; '
+                       f'parameters in {params_file}, node logs in {run_dir / "logs"}')
+    if not (bag_dir / 'metadata.yaml').is_file():
+        raise RunError(f'run {name}: the recorder left no complete bag in {bag_dir}')
+    steps = int(round((cfg.duration if kind == 'random' else cfg.step_duration)
+                      * cfg.sample_rate))
+    LOG.info('run %s: %d steps in %.1f s wall time (%.0f steps/s)', name, steps, wall,
+             steps / wall)
+    return RunResult(name, position, scenario, bag_dir, params_file, wall, steps)

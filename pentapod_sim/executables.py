@@ -1,0 +1,31 @@
+"""
+The package's executables, listed once: ``ros2 run pentapod_testbed <name>``.
+
+setup.py reads this file (without importing the package) to make the console scripts and the
+``lib/pentapod_testbed`` launchers; the scenario runner and the launch file map scenario node
+names to executables with :data:`NODE_KINDS`. This file imports nothing.
+"""
+
+#: executable name -> ``module:function`` of its entry point
+EXECUTABLES = {
+    'plant': 'pentapod_sim.nodes.plant_node:main',
+    'exciter': 'pentapod_sim.nodes.exciter_node:main',
+    'recorder': 'pentapod_sim.nodes.recorder_node:main',
+    'damper': 'pentapod_damper.nodes.damper_node:main',
+    'pma': 'pentapod_damper.nodes.pma_node:main',
+    'example_controller': 'pentapod_damper.nodes.example_controller:main',
+    'scenario': 'pentapod_sim.scenario.runner:main',
+    'modes': 'pentapod_sim.cli.modes:main',
+    'statespace': 'pentapod_sim.cli.statespace:main',
+    'analyze': 'pentapod_sim.cli.analyze:main',
+    'study': 'pentapod_damper.study.__main__:main',
+}
+
+#: Node executables a scenario file may use; a node section named ``<kind>...`` runs the
+#: executable ``<kind>`` (the longest matching prefix wins).
+NODE_KINDS = ('plant', 'exciter', 'recorder', 'damper', 'pma', 'example_controller')
+
+
+def module_of(executable: str) -> str:
+    """Python module of an executable (for ``python -m``)."""
+    return EXECUTABLES[executable].split(':')[0]

@@ -1,0 +1,363 @@
+"""
+Machine parameter file (``config/machine.yaml``): schema, units and validation.
+
+Every parameter is a field of a frozen dataclass whose metadata holds its unit and its
+admissible range; :func:`load_machine` checks the YAML against that schema (missing keys,
+unknown keys, wrong types, values out of range) and raises
+:class:`pentapod_sim.errors.ConfigError` naming the key path and the bad value.
+Quantities in radians may be written in degrees in YAML by appending ``_deg`` to the key.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields, is_dataclass, replace
+import math
+import os
+from pathlib import Path
+import typing
+
+import numpy as np
+import yaml
+
+from pentapod_sim.errors import ConfigError
+from pentapod_sim.paths import config_dir
+
+POSITIVE = 'positive'
+NON_NEGATIVE = 'non-negative'
+ANY = 'any'
+
+
+def _f(unit: str, rule: str = POSITIVE, length: int | None = None,
+       per_strut: bool = False) -> typing.Any:
+    """
+    Declare a float (or fixed-length float tuple) field with unit and range rule.
+
+    ``per_strut=True``: a tuple of 5 values (struts 1..5); the YAML may give one number for all.
+    """
+    if per_strut:
+        length = 5
+    return field(metadata={'unit': unit, 'rule': rule, 'length': length,
+                           'per_strut': per_strut})
+
+
+@dataclass(frozen=True)
+class MeshParams:
+    """Beam meshing: target element length [m] and least elements per member [-]."""
+
+    element_size: float = _f('m')
+    min_elements_per_member: int = field(metadata={'unit': '-', 'rule': POSITIVE})
+
+
+@dataclass(frozen=True)
+class Material:
+    """Isotropic linear-elastic material: E [Pa], G [Pa], density [kg/m^3]."""
+
+    youngs_modulus: float = _f('Pa')
+    shear_modulus: float = _f('Pa')
+    density: float = _f('kg/m^3')
+
+
+@dataclass(frozen=True)
+class Materials:
+    """Named materials of the machine."""
+
+    steel: Material
+
+
+@dataclass(frozen=True)
+class RhsSection:
+    """Rectangular hollow section: outer width (local y) and height (local z), wall [m]."""
+
+    width: float = _f('m')
+    height: float = _f('m')
+    thickness: float = _f('m')
+
+
+@dataclass(frozen=True)
+class FrameParams:
+    """Machine frame: columns, rings, spokes, BP brackets and the lumped bed."""
+
+    column_radius: float = _f('m')
+    column_height: float = _f('m')
+    base_ring_z: float = _f('m')
+    column: RhsSection
+    ring: RhsSection
+    spoke: RhsSection
+    bp_bracket: RhsSection
+    bed_mass: float = _f('kg')
+    bed_z: float = _f('m')
+    bed_inertia: tuple = _f('kg m^2', length=3)
+
+
+@dataclass(frozen=True)
+class InstallationParams:
+    """Foundation springs of each of the five feet [N/m]."""
+
+    foot_stiffness_x: float = _f('N/m')
+    foot_stiffness_y: float = _f('N/m')
+    foot_stiffness_z: float = _f('N/m')
+
+
+@dataclass(frozen=True)
+class BpJointParams:
+    """BP cardan joints: layout, needle-bearing stiffness, gimbal mass and angle limit."""
+
+    radius: float = _f('m')
+    angles: tuple = _f('rad', ANY, length=5)
+    z: tuple = _f('m', ANY, length=5)
+    needle_axial_stiffness: float = _f('N/m')
+    needle_cardan1_stiffness: float = _f('N/m')
+    needle_cardan2_stiffness: float = _f('N/m')
+    torsion_stiffness: float = _f('N m/rad')
+    angle_max: float = _f('rad')
+    gimbal_mass: float = _f('kg')
+    gimbal_inertia: tuple = _f('kg m^2', length=3)
+
+
+@dataclass(frozen=True)
+class FeedDriveParams:
+    """Strut-gimbal link: nut (axial), guide (lateral), bending and torsion stiffness."""
+
+    nut_axial_stiffness: float = _f('N/m')
+    guide_lateral_stiffness: float = _f('N/m')
+    bending_stiffness: float = _f('N m/rad')
+    torsion_stiffness: float = _f('N m/rad')
+
+
+@dataclass(frozen=True)
+class StrutParams:
+    """
+    Strut tubes: lengths, stroke limits [m], section, screw mass [kg/m], shear factor [-].
+
+    ``tube_length``, ``stroke_min`` and ``stroke_max`` are tuples for struts 1..5 (the YAML may
+    give one number for all struts).
+    """
+
+    tube_length: tuple = _f('m', per_strut=True)
+    stroke_min: tuple = _f('m', per_strut=True)
+    stroke_max: tuple = _f('m', per_strut=True)
+    section: RhsSection
+    screw_mass_per_length: float = _f('kg/m', NON_NEGATIVE)
+    shear_factor: float = _f('-')
+
+
+@dataclass(frozen=True)
+class WpJointParams:
+    """WP cardan joints: ring radius [m], heights above the nose [m], stiffness, limit."""
+
+    radius: float = _f('m')
+    height: tuple = _f('m', ANY, length=5)
+    axial_stiffness: float = _f('N/m')
+    lateral_stiffness: float = _f('N/m')
+    torsion_stiffness: float = _f('N m/rad')
+    angle_max: float = _f('rad')
+
+
+@dataclass(frozen=True)
+class PlatformParams:
+    """Working platform (spindle housing) as a rigid body."""
+
+    mass: float = _f('kg')
+    cog_above_nose: float = _f('m', ANY)
+    inertia: tuple = _f('kg m^2', length=3)
+    tcp_below_nose: float = _f('m', NON_NEGATIVE)
+    pma_mount_above_tcp: float = _f('m', ANY)
+
+
+@dataclass(frozen=True)
+class Pose:
+    """Platform pose: TCP position x, y, z [m] and tilts a (about x), b (about y) [rad]."""
+
+    x: float = _f('m', ANY)
+    y: float = _f('m', ANY)
+    z: float = _f('m', ANY)
+    a: float = _f('rad', ANY)
+    b: float = _f('rad', ANY)
+
+    def as_array(self) -> np.ndarray:
+        """Return the pose as the array (x, y, z, a, b) [m, m, m, rad, rad]."""
+        return np.array([self.x, self.y, self.z, self.a, self.b])
+
+
+@dataclass(frozen=True)
+class MachineParams:
+    """All parameters of the pentapod machine model (see config/machine.yaml)."""
+
+    mesh: MeshParams
+    materials: Materials
+    frame: FrameParams
+    installation: InstallationParams
+    bp_joints: BpJointParams
+    feed_drives: FeedDriveParams
+    struts: StrutParams
+    wp_joints: WpJointParams
+    platform: PlatformParams
+    home_pose: Pose
+    source: str = field(default='', metadata={'internal': True})
+
+
+def _check_number(value: typing.Any, rule: str, path: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ConfigError(f'{path}: expected a number, got {value!r}')
+    value = float(value)
+    if not math.isfinite(value):
+        raise ConfigError(f'{path}: value {value!r} is not finite')
+    if rule == POSITIVE and value <= 0.0:
+        raise ConfigError(f'{path}: value {value!r} must be > 0')
+    if rule == NON_NEGATIVE and value < 0.0:
+        raise ConfigError(f'{path}: value {value!r} must be >= 0')
+    return value
+
+
+def _parse_value(value: typing.Any, meta: dict, path: str, is_int: bool) -> typing.Any:
+    """Check one leaf value against its metadata; return float, int or tuple of floats."""
+    length = meta.get('length')
+    if meta.get('per_strut') and isinstance(value, (int, float)) and not isinstance(value, bool):
+        value = [value] * length          # one number for all struts
+    if length is not None:
+        if not isinstance(value, (list, tuple)) or len(value) != length:
+            raise ConfigError(f'{path}: expected a list of {length} numbers, got {value!r}')
+        return tuple(_check_number(v, meta['rule'], f'{path}[{k}]')
+                     for k, v in enumerate(value))
+    if is_int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ConfigError(f'{path}: expected an integer, got {value!r}')
+        _check_number(value, meta['rule'], path)
+        return value
+    return _check_number(value, meta['rule'], path)
+
+
+def _build(cls: type, data: typing.Any, path: str) -> typing.Any:
+    """Build dataclass ``cls`` from a YAML mapping, validating every key recursively."""
+    if not isinstance(data, dict):
+        raise ConfigError(f'{path or "<root>"}: expected a mapping, got {data!r}')
+    hints = typing.get_type_hints(cls)
+    remaining = dict(data)
+    kwargs = {}
+    for fld in fields(cls):
+        if fld.metadata.get('internal'):
+            continue
+        key_path = f'{path}.{fld.name}' if path else fld.name
+        hint = hints[fld.name]
+        deg_key = fld.name + '_deg'
+        if fld.metadata.get('unit') == 'rad' and deg_key in remaining:
+            if fld.name in remaining:
+                raise ConfigError(f'{key_path}: give either {fld.name} or {deg_key}, not both')
+            value = _parse_value(remaining.pop(deg_key), fld.metadata,
+                                 f'{path}.{deg_key}' if path else deg_key, False)
+            kwargs[fld.name] = (tuple(math.radians(v) for v in value) if isinstance(value, tuple)
+                                else math.radians(value))
+            continue
+        if fld.name not in remaining:
+            raise ConfigError(f'{key_path}: missing key')
+        value = remaining.pop(fld.name)
+        if is_dataclass(hint):
+            kwargs[fld.name] = _build(hint, value, key_path)
+        else:
+            kwargs[fld.name] = _parse_value(value, fld.metadata, key_path, hint is int)
+    if remaining:
+        bad = ', '.join(f'{path}.{k}' if path else str(k) for k in remaining)
+        raise ConfigError(f'unknown key(s): {bad}')
+    return cls(**kwargs)
+
+
+def _check_consistency(m: MachineParams) -> None:
+    """Cross-field checks that a single-value rule cannot express."""
+    s = m.struts
+    for i, (lo, hi, tube) in enumerate(zip(s.stroke_min, s.stroke_max, s.tube_length)):
+        if lo >= hi:
+            raise ConfigError(f'struts.stroke_min {lo!r} must be < struts.stroke_max {hi!r} '
+                              f'(strut {i + 1})')
+        if hi >= tube:
+            raise ConfigError(f'struts.stroke_max {hi!r} must be < struts.tube_length {tube!r} '
+                              f'(strut {i + 1}; the tube must pass through the BP joint)')
+    for name in ('column', 'ring', 'spoke', 'bp_bracket'):
+        _check_section(getattr(m.frame, name), f'frame.{name}')
+    _check_section(s.section, 'struts.section')
+    if not 0.0 < m.frame.base_ring_z < m.frame.column_height:
+        raise ConfigError(f'frame.base_ring_z {m.frame.base_ring_z!r} must lie between 0 and '
+                          f'frame.column_height {m.frame.column_height!r}')
+    for i, z in enumerate(m.bp_joints.z):
+        if not m.frame.base_ring_z < z < m.frame.column_height:
+            raise ConfigError(f'bp_joints.z[{i}] {z!r} must lie between frame.base_ring_z and '
+                              f'frame.column_height')
+    if m.bp_joints.radius >= m.frame.column_radius:
+        raise ConfigError(f'bp_joints.radius {m.bp_joints.radius!r} must be < '
+                          f'frame.column_radius {m.frame.column_radius!r}')
+
+
+def _check_section(sec: RhsSection, path: str) -> None:
+    if 2.0 * sec.thickness >= min(sec.width, sec.height):
+        raise ConfigError(f'{path}.thickness {sec.thickness!r} is too large for a '
+                          f'{sec.width!r} x {sec.height!r} section')
+
+
+def _read_yaml(path: str | os.PathLike) -> typing.Any:
+    try:
+        with open(path, encoding='utf-8') as stream:
+            return yaml.safe_load(stream)
+    except OSError as err:
+        raise ConfigError(f'cannot read parameter file {path}: {err}') from None
+    except yaml.YAMLError as err:
+        raise ConfigError(f'parameter file {path} is not valid YAML: {err}') from None
+
+
+def machine_from_dict(data: dict, source: str = '<dict>') -> MachineParams:
+    """
+    Validate a parameter mapping (the parsed YAML) and return :class:`MachineParams`.
+
+    Raises
+    ------
+    ConfigError
+        Naming the key path and value of the first problem found.
+    """
+    params = _build(MachineParams, data, '')
+    _check_consistency(params)
+    return replace(params, source=source)
+
+
+def load_machine(path: str | os.PathLike | None = None) -> MachineParams:
+    """
+    Load and validate the machine parameter file.
+
+    Parameters
+    ----------
+    path : str or path-like, optional
+        YAML file; default ``machine.yaml`` in :func:`config_dir`.
+
+    Returns
+    -------
+    MachineParams
+        Frozen, validated parameters in SI units (angles in rad).
+    """
+    path = Path(path) if path is not None else config_dir() / 'machine.yaml'
+    return machine_from_dict(_read_yaml(path), source=str(path))
+
+
+def load_positions(path: str | os.PathLike | None = None) -> dict[str, np.ndarray]:
+    """
+    Load the named machine positions.
+
+    Parameters
+    ----------
+    path : str or path-like, optional
+        YAML file with a mapping ``positions: {name: {x, y, z, a|a_deg, b|b_deg}}``; an
+        optional ``description`` per entry is ignored. Default ``positions.yaml`` in
+        :func:`config_dir`.
+
+    Returns
+    -------
+    dict of str to (5,) ndarray
+        Pose x, y, z [m], a, b [rad] of the TCP for each name.
+    """
+    path = Path(path) if path is not None else config_dir() / 'positions.yaml'
+    data = _read_yaml(path)
+    if not isinstance(data, dict) or set(data) != {'positions'}:
+        raise ConfigError(f'{path}: expected a single top-level key "positions"')
+    if not isinstance(data['positions'], dict) or not data['positions']:
+        raise ConfigError(f'{path}: positions must be a non-empty mapping')
+    out = {}
+    for name, entry in data['positions'].items():
+        if isinstance(entry, dict):
+            entry = {k: v for k, v in entry.items() if k != 'description'}
+        out[str(name)] = _build(Pose, entry, f'positions.{name}').as_array()
+    return out

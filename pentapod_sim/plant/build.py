@@ -1,0 +1,294 @@
+"""
+From the FE model to the reduced plant of a machine position, and the cache of built plants.
+
+The chain is FE model (:mod:`pentapod_sim.fe`) -> modes (:mod:`pentapod_sim.modal`) -> ports
+-> relevance-based reduction with static correction (:mod:`pentapod_sim.plant.reduction`),
+configured by config/reduction.yaml. :func:`build_plant` runs it for one position;
+:func:`load_or_build_model` caches the result per configuration.
+"""
+from __future__ import annotations
+
+import hashlib
+import logging
+from pathlib import Path
+from typing import Callable, Mapping, Sequence
+
+import numpy as np
+import numpy.typing as npt
+import yaml
+
+from pentapod_sim import __version__
+from pentapod_sim.errors import ConfigError, ModelFileError
+from pentapod_sim.fe.assembly import build_model
+from pentapod_sim.fe.params import load_machine
+from pentapod_sim.modal.solver import solve_modes
+from pentapod_sim.paths import config_dir
+from pentapod_sim.plant.model import PlantModel
+from pentapod_sim.plant.ports import (
+    check_names,
+    input_matrix,
+    INPUT_NAMES,
+    modal_points,
+    output_matrices,
+    OUTPUT_NAMES,
+)
+from pentapod_sim.plant.ports import ports as port_list
+from pentapod_sim.plant.reduction import (
+    modal_dc_gains,
+    modal_resonance_gains,
+    select_modes,
+    static_compliance,
+)
+
+LOG = logging.getLogger(__name__)
+
+
+def load_reduction_config(path: str | Path | None = None) -> dict:
+    """
+    Read config/reduction.yaml (or ``path``) and check its values.
+
+    Raises
+    ------
+    ConfigError
+        For a missing file, a missing key or a bad value (the message names it).
+    """
+    path = Path(path) if path is not None else config_dir() / 'reduction.yaml'
+    try:
+        cfg = yaml.safe_load(path.read_text())
+    except (OSError, yaml.YAMLError) as err:
+        raise ConfigError(f'cannot read reduction config {path}: {err}') from None
+    for key in ('inputs', 'outputs', 'relevance', 'damping_ratio', 'static_correction',
+                'modes_f_max', 'frequency', 'sample_rate'):
+        if key not in cfg:
+            raise ConfigError(f'{path}: missing key {key!r}')
+    zeta = np.asarray(cfg['damping_ratio'], dtype=float)
+    if np.any(~np.isfinite(zeta)) or np.any(zeta < 0):
+        raise ConfigError(f'{path}: damping_ratio must be >= 0, got {cfg["damping_ratio"]!r}')
+    for key in ('modes_f_max', 'sample_rate'):
+        if not isinstance(cfg[key], (int, float)) or cfg[key] <= 0:
+            raise ConfigError(f'{path}: {key} must be > 0, got {cfg[key]!r}')
+    return cfg
+
+
+def _names(spec, known: tuple[str, ...], direction: str) -> list[str]:
+    names = list(known) if spec == 'all' else list(spec)
+    check_names(names, direction)
+    return names
+
+
+def from_modal_data(frequencies_hz: npt.ArrayLike, point_shapes: Mapping[str, npt.ArrayLike],
+                    strut_frames: npt.ArrayLike | None, inputs: Sequence[str],
+                    outputs: Sequence[str], zeta: npt.ArrayLike = 0.001,
+                    d: npt.ArrayLike | None = None, meta: dict | None = None) -> PlantModel:
+    """
+    Plant model from modal data: frequencies and mass-normalised shapes at named points.
+
+    Parameters
+    ----------
+    frequencies_hz : (m,) array_like
+        Natural frequencies [Hz].
+    point_shapes : mapping of point name to (6, m) array_like
+        Mode shapes at the named points (ux, uy, uz [m], rx, ry, rz [rad] per unit modal
+        coordinate, mass-normalised: ``Phi^T M Phi = I``); only the points the ports need.
+    strut_frames : (5, 3, 3) array_like or None
+        Strut frames (rows e1, e2, e3); needed only by strut ports.
+    inputs, outputs : sequence of str
+        Port names.
+    zeta : float or (m,) array_like
+        Modal damping ratio(s) [-].
+    d : (n_out, n_in) array_like, optional
+        Feed-through (static correction); default zero.
+    meta : dict, optional
+        Provenance stored with the model.
+    """
+    check_names(inputs, 'input')
+    check_names(outputs, 'output')
+    omega = 2 * np.pi * np.asarray(frequencies_hz, dtype=float)
+    frames = np.full((5, 3, 3), np.nan) if strut_frames is None else strut_frames
+    in_ports = port_list(point_shapes, frames, inputs)
+    out_ports = port_list(point_shapes, frames, outputs)
+    for p in in_ports + out_ports:
+        if not np.all(np.isfinite(p.vector)):
+            raise ModelFileError(f'port {p.name!r} needs strut frames, none were given')
+    c_disp, c_vel = output_matrices(out_ports)
+    d = np.zeros((len(outputs), len(inputs))) if d is None else d
+    zeta = np.asarray(zeta, float)
+    if zeta.ndim > 0 and zeta.shape != omega.shape:
+        raise ConfigError(f'damping ratios: {zeta.size} given for {omega.size} modes')
+    return PlantModel(omega, np.broadcast_to(zeta, omega.shape),
+                      input_matrix(in_ports), c_disp, c_vel, d, list(inputs), list(outputs),
+                      [p.unit for p in in_ports], [p.unit for p in out_ports],
+                      [p.description for p in in_ports], [p.description for p in out_ports],
+                      dict(meta or {}))
+
+
+def keep_by_relevance(plant_all: PlantModel, relevance: Sequence[dict]) -> np.ndarray:
+    """
+    Indices of the modes kept by any of the relevance criteria (see config/reduction.yaml).
+
+    A rule's optional ``measure`` is 'dc' (default, ``c b / omega^2``) or 'resonance'
+    (``c b / (2 zeta omega^2)``, for modes with individual damping ratios).
+    """
+    keep = np.zeros(plant_all.n_modes, dtype=bool)
+    for rule in relevance:
+        sub = plant_all.select(rule['inputs'], rule['outputs'])
+        criterion = {k: rule[k] for k in ('abs_limit', 'rel_limit', 'count') if k in rule}
+        if rule.get('measure', 'dc') == 'resonance':
+            gains = modal_resonance_gains(sub.omega, sub.zeta, sub.b, sub.c_disp)
+        elif rule.get('measure', 'dc') == 'dc':
+            gains = modal_dc_gains(sub.omega, sub.b, sub.c_disp)
+        else:
+            raise ConfigError(f'relevance measure must be dc or resonance, got '
+                              f'{rule["measure"]!r}')
+        keep[select_modes(gains, **criterion)] = True
+    return np.flatnonzero(keep)
+
+
+def plant_from_fe(fe, reduction_cfg: dict, progress: Callable[[str], None] | None = None
+                  ) -> tuple[PlantModel, np.ndarray]:
+    """
+    Plant with every mode below ``modes_f_max`` of an FE model, and the relevant modes.
+
+    Parameters
+    ----------
+    fe : FEModel
+        The FE model (:func:`pentapod_sim.fe.assembly.build_model`).
+    reduction_cfg : dict
+        As :func:`load_reduction_config` returns.
+    progress : callable, optional
+        Receives one message per stage.
+
+    Returns
+    -------
+    plant_all : PlantModel
+        All computed modes; ``d`` holds the residual flexibility of the modes that were not
+        computed (``C K^-1 B`` minus all computed modes), so its static gain is exact, and
+        ``meta['static_compliance_full']`` the exact static gain ``C K^-1 B``.
+    keep : (r,) ndarray of int
+        Indices of the modes kept by the relevance criteria.
+    """
+    say = progress or (lambda msg: LOG.info('%s', msg))
+    cfg = reduction_cfg
+    say(f'FE model: {fe.n_dof} DOF; solving modes below {cfg["modes_f_max"]} Hz')
+    modes = solve_modes(fe.K, fe.M, f_max=float(cfg['modes_f_max']))
+    say(f'{modes.n_modes} modes, {modes.frequencies[0]:.2f} .. {modes.frequencies[-1]:.2f} Hz')
+    inputs = _names(cfg['inputs'], INPUT_NAMES, 'input')
+    outputs = _names(cfg['outputs'], OUTPUT_NAMES, 'output')
+    plant_all = from_modal_data(modes.frequencies, modal_points(fe.points, modes.shapes),
+                                fe.strut_frames, inputs, outputs, cfg['damping_ratio'])
+    keep = keep_by_relevance(plant_all, cfg['relevance'])
+    c_disp_full, _ = output_matrices(port_list(fe.points, fe.strut_frames, outputs))
+    g_full = static_compliance(fe.K, input_matrix(port_list(fe.points, fe.strut_frames, inputs)),
+                               c_disp_full)
+    plant_all.d = g_full - modal_dc_gains(plant_all.omega, plant_all.b,
+                                          plant_all.c_disp).sum(axis=0)
+    plant_all.meta.update({
+        'pose': [float(v) for v in fe.pose], 'params_sha256': fe.meta.get('params_sha256'),
+        'package_version': __version__, 'n_dof': fe.n_dof, 'n_modes_computed': modes.n_modes,
+        'modes_f_max_hz': float(cfg['modes_f_max']), 'static_compliance_full': g_full.tolist()})
+    return plant_all, keep
+
+
+def reduce_plant(plant_all: PlantModel, keep: npt.ArrayLike,
+                 static_correction: bool = True) -> PlantModel:
+    """
+    Keep the modes ``keep`` of :func:`plant_from_fe`'s plant, with or without static correction.
+
+    With the correction, ``d = C K^-1 B - sum_kept c b^T / omega^2`` (exact static gain);
+    without it, ``d = 0``.
+    """
+    keep = np.asarray(keep, dtype=int)
+    d = np.zeros_like(plant_all.d)
+    if static_correction:
+        if 'static_compliance_full' not in plant_all.meta:
+            raise ConfigError('static correction needs the FE compliance C K^-1 B '
+                              "(meta['static_compliance_full']); this plant has none")
+        g_kept = modal_dc_gains(plant_all.omega[keep], plant_all.b[keep],
+                                plant_all.c_disp[:, keep]).sum(axis=0)
+        d = np.asarray(plant_all.meta['static_compliance_full']) - g_kept
+    meta = dict(plant_all.meta, kept_modes=(keep + 1).tolist(),
+                static_correction=bool(static_correction))
+    return PlantModel(plant_all.omega[keep], plant_all.zeta[keep], plant_all.b[keep],
+                      plant_all.c_disp[:, keep], plant_all.c_vel[:, keep], d,
+                      plant_all.input_names, plant_all.output_names, plant_all.input_units,
+                      plant_all.output_units, plant_all.input_descriptions,
+                      plant_all.output_descriptions, meta)
+
+
+def build_plant(position: str | npt.ArrayLike, machine=None, reduction_cfg: dict | None = None,
+                progress: Callable[[str], None] | None = None) -> PlantModel:
+    """
+    Whole chain for one machine position: FE model -> modes -> ports -> reduction.
+
+    Parameters
+    ----------
+    position : str or (5,) array_like
+        Position name of config/positions.yaml or a pose x, y, z [m], a, b [rad].
+    machine : MachineParams, optional
+        Default :func:`pentapod_sim.fe.params.load_machine`.
+    reduction_cfg : dict, optional
+        Default :func:`load_reduction_config`.
+    progress : callable, optional
+        Receives one message per stage.
+
+    Returns
+    -------
+    PlantModel
+        Kept modes only, static correction in ``d`` if configured; ``meta`` records the
+        position, pose, parameter hash, package version and kept mode numbers (1-based).
+    """
+    cfg = load_reduction_config() if reduction_cfg is None else reduction_cfg
+    machine = load_machine() if machine is None else machine
+    plant_all, keep = plant_from_fe(build_model(machine, position), cfg, progress)
+    plant_all.meta['position'] = position if isinstance(position, str) else None
+    plant = reduce_plant(plant_all, keep, bool(cfg['static_correction']))
+    (progress or (lambda msg: LOG.info('%s', msg)))(
+        f'kept {keep.size} of {plant_all.n_modes} modes; static correction '
+        f'{"on" if cfg["static_correction"] else "off"}')
+    return plant
+
+
+def model_cache_key(position: str) -> str:
+    """
+    SHA-256 (hex, 16 chars) over the configuration a built model depends on.
+
+    Covers machine.yaml, positions.yaml and reduction.yaml of
+    :func:`pentapod_sim.paths.config_dir`, the position name and the package version, so any
+    edit gives a new cache file.
+    """
+    digest = hashlib.sha256(f'{position}|{__version__}'.encode())
+    for name in ('machine.yaml', 'positions.yaml', 'reduction.yaml'):
+        path = config_dir() / name
+        digest.update(path.read_bytes() if path.exists() else b'')
+    return digest.hexdigest()[:16]
+
+
+def load_or_build_model(model_file: str = '', position: str = '',
+                        cache_dir: str | Path = 'out/models'):
+    """
+    Load a saved PlantModel, or build it for a position (cached under ``cache_dir``).
+
+    Parameters
+    ----------
+    model_file : str
+        Path of a model saved by :meth:`PlantModel.save`; wins over ``position``.
+    position : str
+        Position name of config/positions.yaml (used if ``model_file`` is empty).
+    cache_dir : str or Path
+        Folder of cached models ``plant_<position>_<key>.npz``.
+
+    Returns
+    -------
+    (PlantModel, str)
+        The model and a sentence saying where it came from.
+    """
+    if model_file:
+        return PlantModel.load(model_file), f'loaded {model_file}'
+    if not position:
+        raise ConfigError('set model_file or position (neither was given)')
+    cached = Path(cache_dir) / f'plant_{position}_{model_cache_key(position)}.npz'
+    if cached.exists():
+        return PlantModel.load(cached), f'loaded cached {cached}'
+    model = build_plant(position, progress=lambda msg: LOG.info('build_plant: %s', msg))
+    model.save(cached)
+    return model, f'built for {position} and cached in {cached}'

@@ -1,0 +1,260 @@
+"""
+The reduced modal plant: continuous and discrete state space, save/load.
+
+State order: ``x = [q_1..q_m, dq_1..dq_m]`` (modal displacements [sqrt(kg) m] and their
+rates), so that ``A = [[0, I], [-W^2, -2 Z W]]``, ``B = [0; b]``, ``C = [c_disp, c_vel]``.
+External modal data (frequencies plus mass-normalised shapes at the named points) enters
+through :func:`pentapod_sim.plant.build.from_modal_data` (files:
+:mod:`pentapod_sim.plant.modal_data`); the whole chain for a machine position is
+:func:`pentapod_sim.plant.build.build_plant`.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+import hashlib
+import json
+import logging
+from pathlib import Path
+import zipfile
+
+import control
+import numpy as np
+import numpy.typing as npt
+import scipy.linalg as spla
+
+from pentapod_sim.errors import ConfigError, ModelFileError, PortError
+from pentapod_sim.plant.ports import check_names
+
+LOG = logging.getLogger(__name__)
+
+_ARRAYS = ('omega', 'zeta', 'b', 'c_disp', 'c_vel', 'd')
+_LISTS = ('input_names', 'output_names', 'input_units', 'output_units',
+          'input_descriptions', 'output_descriptions')
+FILE_FORMAT = 'pentapod-plant-model-1'
+
+
+@dataclass
+class PlantModel:
+    """
+    Modal state-space plant model with named ports.
+
+    Attributes
+    ----------
+    omega : (m,) ndarray
+        Natural angular frequencies of the kept modes [rad/s].
+    zeta : (m,) ndarray
+        Modal damping ratios [-].
+    b : (m, n_in) ndarray
+        Modal input matrix ``Phi^T B``.
+    c_disp, c_vel : (n_out, m) ndarray
+        Modal output matrices acting on modal displacements and modal velocities.
+    d : (n_out, n_in) ndarray
+        Feed-through (static correction of dropped modes for displacement outputs).
+    input_names, output_names : list of str
+        Port names (docs/architecture.md).
+    input_units, output_units, input_descriptions, output_descriptions : list of str
+        SI units and descriptions of the ports.
+    meta : dict
+        JSON-serialisable provenance: position, pose, machine parameter hash, package version,
+        kept mode indices, reduction settings.
+    """
+
+    omega: npt.NDArray[np.float64]
+    zeta: npt.NDArray[np.float64]
+    b: npt.NDArray[np.float64]
+    c_disp: npt.NDArray[np.float64]
+    c_vel: npt.NDArray[np.float64]
+    d: npt.NDArray[np.float64]
+    input_names: list[str]
+    output_names: list[str]
+    input_units: list[str]
+    output_units: list[str]
+    input_descriptions: list[str]
+    output_descriptions: list[str]
+    meta: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        """Convert to float arrays and check shapes (ModelFileError names the mismatch)."""
+        for name in _ARRAYS:
+            setattr(self, name, np.asarray(getattr(self, name), dtype=float))
+        m = self.omega.size
+        self.zeta = np.broadcast_to(self.zeta, (m,)).copy() if self.zeta.ndim == 0 else self.zeta
+        n_in, n_out = len(self.input_names), len(self.output_names)
+        expected = {'zeta': (m,), 'b': (m, n_in), 'c_disp': (n_out, m), 'c_vel': (n_out, m),
+                    'd': (n_out, n_in)}
+        for name, shape in expected.items():
+            if getattr(self, name).shape != shape:
+                raise ModelFileError(f'{name} has shape {getattr(self, name).shape}, expected '
+                                     f'{shape} for {m} modes, {n_in} inputs, {n_out} outputs')
+        for name in _LISTS:
+            if len(getattr(self, name)) != (n_in if name.startswith('input') else n_out):
+                raise ModelFileError(f'{name} has {len(getattr(self, name))} entries')
+        if np.any(self.omega < 0) or np.any(self.zeta < 0):
+            raise ConfigError('omega and zeta must be >= 0; got min omega '
+                              f'{self.omega.min(initial=0)}, min zeta {self.zeta.min(initial=0)}')
+
+    @property
+    def n_modes(self) -> int:
+        """Number of modes m (state dimension 2 m)."""
+        return self.omega.size
+
+    @property
+    def frequencies_hz(self) -> npt.NDArray[np.float64]:
+        """Natural frequencies [Hz]."""
+        return self.omega / (2 * np.pi)
+
+    def state_names(self) -> list[str]:
+        """Names of the 2 m states: q1..qm, dq1..dqm."""
+        return ([f'q{i + 1}' for i in range(self.n_modes)]
+                + [f'dq{i + 1}' for i in range(self.n_modes)])
+
+    def state_matrices(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Continuous-time matrices A (2m, 2m), B (2m, n_in), C (n_out, 2m), D (n_out, n_in)."""
+        m = self.n_modes
+        a = np.zeros((2 * m, 2 * m))
+        a[:m, m:] = np.eye(m)
+        a[m:, :m] = -np.diag(self.omega ** 2)
+        a[m:, m:] = -np.diag(2 * self.zeta * self.omega)
+        b = np.vstack([np.zeros_like(self.b), self.b])
+        c = np.hstack([self.c_disp, self.c_vel])
+        return a, b, c, self.d.copy()
+
+    def to_statespace(self) -> control.StateSpace:
+        """Continuous modal state space with named inputs, outputs and states."""
+        a, b, c, d = self.state_matrices()
+        return control.ss(a, b, c, d, inputs=list(self.input_names),
+                          outputs=list(self.output_names), states=self.state_names(),
+                          name='pentapod_plant')
+
+    def zoh_blocks(self, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        """
+        Exact zero-order-hold discretisation, mode by mode.
+
+        Parameters
+        ----------
+        dt : float
+            Sample time [s], > 0.
+
+        Returns
+        -------
+        phi : (m, 2, 2) ndarray
+            Per mode ``expm(A_i dt)`` acting on ``[q_i, dq_i]``.
+        gamma : (m, 2) ndarray
+            Per mode ``int_0^dt expm(A_i s) ds [0, 1]^T``; the modal force is ``b_i . u``.
+
+        Notes
+        -----
+        One batched 3x3 matrix exponential per mode (Van Loan's block trick), which is exact
+        for any damping including omega = 0; cost O(m) instead of expm of the full 2m x 2m A.
+        """
+        if not np.isfinite(dt) or dt <= 0:
+            raise ConfigError(f'sample time dt must be > 0 s, got {dt!r}')
+        m = self.n_modes
+        blocks = np.zeros((m, 3, 3))
+        blocks[:, 0, 1] = 1.0
+        blocks[:, 1, 0] = -self.omega ** 2
+        blocks[:, 1, 1] = -2 * self.zeta * self.omega
+        blocks[:, 1, 2] = 1.0
+        expo = spla.expm(blocks * dt)
+        return expo[:, :2, :2].copy(), expo[:, :2, 2].copy()
+
+    def discrete_matrices(self, dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray,
+                                                    np.ndarray]:
+        """Discrete (ZOH) matrices A_d, B_d, C, D in the state order of :meth:`state_names`."""
+        phi, gamma = self.zoh_blocks(dt)
+        m = self.n_modes
+        idx = np.arange(m)
+        a_d = np.zeros((2 * m, 2 * m))
+        a_d[idx, idx] = phi[:, 0, 0]
+        a_d[idx, idx + m] = phi[:, 0, 1]
+        a_d[idx + m, idx] = phi[:, 1, 0]
+        a_d[idx + m, idx + m] = phi[:, 1, 1]
+        b_d = np.vstack([gamma[:, :1] * self.b, gamma[:, 1:] * self.b])
+        return a_d, b_d, np.hstack([self.c_disp, self.c_vel]), self.d.copy()
+
+    def discretize(self, dt: float) -> control.StateSpace:
+        """Discrete state space (exact ZOH, sample time ``dt`` [s]) with the same names."""
+        a_d, b_d, c, d = self.discrete_matrices(dt)
+        return control.ss(a_d, b_d, c, d, dt, inputs=list(self.input_names),
+                          outputs=list(self.output_names), states=self.state_names(),
+                          name='pentapod_plant_d')
+
+    def select(self, inputs: list[str] | None = None,
+               outputs: list[str] | None = None) -> 'PlantModel':
+        """Return a copy restricted to the named inputs/outputs (PortError if unknown)."""
+        inputs = list(self.input_names) if inputs is None else list(inputs)
+        outputs = list(self.output_names) if outputs is None else list(outputs)
+        check_names(inputs, 'input')
+        check_names(outputs, 'output')
+        for name, have in [(n, self.input_names) for n in inputs] + \
+                [(n, self.output_names) for n in outputs]:
+            if name not in have:
+                raise PortError(f'port {name!r} is not in this plant model; it has '
+                                + ', '.join(have))
+        ii = [self.input_names.index(n) for n in inputs]
+        oo = [self.output_names.index(n) for n in outputs]
+        meta = dict(self.meta)
+        if 'static_compliance_full' in meta:     # (n_out, n_in) like d
+            meta['static_compliance_full'] = np.asarray(
+                meta['static_compliance_full'])[np.ix_(oo, ii)].tolist()
+        return PlantModel(self.omega, self.zeta, self.b[:, ii], self.c_disp[oo],
+                          self.c_vel[oo], self.d[np.ix_(oo, ii)], inputs, outputs,
+                          [self.input_units[i] for i in ii], [self.output_units[o] for o in oo],
+                          [self.input_descriptions[i] for i in ii],
+                          [self.output_descriptions[o] for o in oo], meta)
+
+    def content_hash(self) -> str:
+        """SHA-256 over all numbers and names (hex); identical models give identical hashes."""
+        digest = hashlib.sha256()
+        for name in _ARRAYS:
+            arr = np.ascontiguousarray(getattr(self, name), dtype='<f8')
+            digest.update(name.encode() + str(arr.shape).encode() + arr.tobytes())
+        digest.update(json.dumps({n: list(getattr(self, n)) for n in _LISTS},
+                                 sort_keys=True).encode())
+        return digest.hexdigest()
+
+    def save(self, path: str | Path) -> Path:
+        """
+        Write the model to an .npz file (arrays + JSON metadata + content hash).
+
+        Returns
+        -------
+        Path
+            The written file.
+        """
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        header = {n: list(getattr(self, n)) for n in _LISTS}
+        header.update(format=FILE_FORMAT, meta=self.meta, content_hash=self.content_hash())
+        with open(path, 'wb') as stream:
+            np.savez(stream, header=np.array(json.dumps(header)),
+                     **{n: getattr(self, n) for n in _ARRAYS})
+        LOG.info('saved plant model (%d modes) to %s', self.n_modes, path)
+        return path
+
+    @classmethod
+    def load(cls, path: str | Path) -> 'PlantModel':
+        """
+        Read a model written by :meth:`save` and verify its content hash.
+
+        Raises
+        ------
+        ModelFileError
+            If the file is unreadable, lacks arrays, or its numbers do not match the hash.
+        """
+        try:
+            with np.load(path, allow_pickle=False) as data:
+                header = json.loads(str(data['header']))
+                arrays = {n: data[n] for n in _ARRAYS}
+        except (OSError, ValueError, KeyError, zipfile.BadZipFile) as err:
+            raise ModelFileError(f'cannot read plant model {path}: {err}') from None
+        if header.get('format') != FILE_FORMAT:
+            raise ModelFileError(f'{path}: format {header.get("format")!r}, expected '
+                                 f'{FILE_FORMAT!r}')
+        try:
+            model = cls(**arrays, **{n: header[n] for n in _LISTS}, meta=header.get('meta', {}))
+        except KeyError as err:
+            raise ModelFileError(f'{path}: header lacks {err}') from None
+        if model.content_hash() != header.get('content_hash'):
+            raise ModelFileError(f'{path}: content hash mismatch (file corrupted or edited)')
+        return model

@@ -1,0 +1,119 @@
+"""
+Scenario files: the one parser of config/scenarios/*.yaml and the resolution of their names.
+
+A scenario is an ordinary ROS 2 parameter file: one ``<node_name>: ros__parameters:`` section
+per node plus an optional ``/**`` section shared by all (e.g. ``sample_rate``). The executable
+of a node follows from its name's prefix (:data:`pentapod_sim.executables.NODE_KINDS`).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from pentapod_sim.errors import ConfigError
+from pentapod_sim.executables import module_of, NODE_KINDS
+from pentapod_sim.paths import scenario_dir
+
+
+@dataclass(frozen=True)
+class ScenarioNode:
+    """A node of a scenario: its name, python module and ros2 executable."""
+
+    name: str
+    module: str
+    executable: str
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """
+    A parsed scenario file.
+
+    Attributes
+    ----------
+    path : Path
+        The file.
+    nodes : list of ScenarioNode
+        Its nodes, sources first and the plant last.
+    sections : dict
+        Parameters of every node with the ``/**`` section merged in (node entries win).
+    shared : dict
+        The ``/**`` section's parameters.
+    """
+
+    path: Path
+    nodes: list[ScenarioNode]
+    sections: dict[str, dict[str, Any]]
+    shared: dict[str, Any] = field(default_factory=dict)
+
+    def of_kind(self, executable: str) -> list[ScenarioNode]:
+        """Nodes running ``executable``."""
+        return [n for n in self.nodes if n.executable == executable]
+
+
+def scenario_names() -> list[str]:
+    """Names of the shipped scenarios."""
+    folder = scenario_dir()
+    return sorted(p.stem for p in folder.glob('*.yaml')) if folder.is_dir() else []
+
+
+def resolve(scenario: str | Path) -> Path:
+    """Path of a scenario file given a path or a shipped scenario's name (ConfigError)."""
+    path = Path(scenario)
+    if path.is_file():
+        return path
+    cand = scenario_dir() / f'{scenario}.yaml'
+    if cand.is_file():
+        return cand
+    raise ConfigError(f'scenario {str(scenario)!r} is neither a file nor one of: '
+                      f'{", ".join(scenario_names())}')
+
+
+def executable_of(node_name: str) -> str:
+    """Executable of a scenario node by the longest matching name prefix."""
+    for prefix in sorted(NODE_KINDS, key=len, reverse=True):
+        if node_name.startswith(prefix):
+            return prefix
+    raise ConfigError(f'node {node_name!r}: name must start with one of {", ".join(NODE_KINDS)}')
+
+
+def read_scenario(scenario: str | Path) -> Scenario:
+    """
+    Parse a scenario file (a path or a shipped scenario's name).
+
+    Raises
+    ------
+    ConfigError
+        If the file cannot be read, is not a mapping of ``<node>: {ros__parameters: {...}}``,
+        names a node of no known kind or has not exactly one plant; the message names the file.
+    """
+    path = resolve(scenario)
+    try:
+        doc = yaml.safe_load(path.read_text(encoding='utf-8'))
+    except (OSError, yaml.YAMLError) as err:
+        raise ConfigError(f'cannot read scenario file {path}: {err}') from None
+    if not isinstance(doc, dict):
+        raise ConfigError(f'scenario file {path} is empty or not a mapping of node sections')
+    shared_section = doc.get('/**') or {}
+    if not isinstance(shared_section, dict):
+        raise ConfigError(f"{path}: section '/**' is not a mapping")
+    shared = shared_section.get('ros__parameters') or {}
+    sections, nodes = {}, []
+    for name, body in doc.items():
+        if str(name).startswith('/'):
+            continue                            # wildcard sections such as /**
+        if not isinstance(body, dict) or not isinstance(body.get('ros__parameters'), dict):
+            raise ConfigError(f'{path}: section {name!r} has no ros__parameters mapping')
+        try:
+            executable = executable_of(name)
+        except ConfigError as err:
+            raise ConfigError(f'{path}: {err}') from None
+        sections[name] = {**shared, **body['ros__parameters']}
+        nodes.append(ScenarioNode(name, module_of(executable), executable))
+    if sum(n.executable == 'plant' for n in nodes) != 1:
+        raise ConfigError(f'scenario file {path} needs exactly one plant node')
+    nodes.sort(key=lambda n: n.executable == 'plant')
+    return Scenario(path, nodes, sections, dict(shared))

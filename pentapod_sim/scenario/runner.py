@@ -1,0 +1,172 @@
+"""
+Start a whole scenario from a ROS parameter file: every node its own process, like ros2 run.
+
+A scenario file (config/scenarios/*.yaml) is an ordinary ROS 2 parameter file: one
+``<node_name>: ros__parameters:`` section per node plus an optional ``/**`` section shared by
+all (e.g. ``sample_rate``). The executable of a node follows from its name's prefix
+(:data:`pentapod_sim.executables.NODE_KINDS`: ``plant``, ``exciter``, ``damper*``, ``pma*``,
+``example_controller*``, ``recorder*``). The runner starts the sources first, then the plant,
+waits for the plant to end, stops the others with SIGINT (SIGKILL after a grace period) and
+returns the plant's exit code (nonzero also if another node failed).
+launch/testbed.launch.py uses the same parser.
+"""
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+from pathlib import Path
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+
+import yaml
+
+from pentapod_sim.errors import ConfigError
+from pentapod_sim.scenario.files import read_scenario, resolve, Scenario, ScenarioNode
+
+LOG = logging.getLogger(__name__)
+
+#: Wall time [s] the plant gets to end by itself after another node died.
+EARLY_EXIT_GRACE = 10.0
+
+def node_command(node: ScenarioNode, params_files: list[Path]) -> list[str]:
+    """Command line of one node process (``python -m module --ros-args ...``)."""
+    cmd = [sys.executable, '-m', node.module, '--ros-args', '-r', f'__node:={node.name}']
+    for path in params_files:       # a later file wins (a -p rule would lose to the file)
+        cmd += ['--params-file', str(path)]
+    return cmd
+
+
+def stop(procs: dict[str, subprocess.Popen], grace: float = 5.0) -> None:
+    """SIGINT every running process, SIGKILL those still alive after ``grace`` seconds."""
+    for proc in procs.values():
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGINT)
+    end = time.monotonic() + grace
+    for proc in procs.values():
+        try:
+            proc.wait(timeout=max(0.1, end - time.monotonic()))
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
+def drain_recorders(scenario: Scenario, procs: dict[str, subprocess.Popen],
+                    limit: float = 120.0) -> None:
+    """
+    Let recorders with ``stop_when_idle`` finish writing before the run is stopped.
+
+    A recorder may still be working through its queue when the plant ends; it closes its bag
+    and exits by itself once idle. After ``limit`` seconds it is stopped like the others
+    (its bag is still complete then, only messages still queued are not in it).
+    """
+    idle = [n.name for n in scenario.of_kind('recorder')
+            if float(scenario.sections[n.name].get('stop_when_idle', 0)) > 0]
+    end = time.monotonic() + limit
+    for name in idle:
+        try:
+            procs[name].wait(timeout=max(0.1, end - time.monotonic()))
+        except subprocess.TimeoutExpired:
+            LOG.warning('recorder %s still busy %.0f s after the plant ended; stopping it',
+                        name, limit)
+
+
+def run_scenario(path: Path, plant_overrides: dict, timeout: float,
+                 env: dict | None = None, log_dir: Path | None = None) -> int:
+    """
+    Start the nodes of a scenario, wait for the plant, stop the rest; return exit code.
+
+    With ``log_dir`` each node's stdout and stderr go to ``log_dir/<node>.log`` instead of
+    this process's terminal.
+    """
+    scenario = read_scenario(path)
+    nodes = scenario.nodes
+    procs: dict[str, subprocess.Popen] = {}
+    logs: list = []
+    tmp = tempfile.TemporaryDirectory(prefix='pentapod_scenario_')
+    try:
+        for node in nodes:
+            files = [path]
+            if node.executable == 'plant' and plant_overrides:
+                files.append(Path(tmp.name) / 'plant_overrides.yaml')
+                files[-1].write_text(yaml.safe_dump(
+                    {node.name: {'ros__parameters': plant_overrides}}))
+            LOG.info('starting %s (%s)', node.name, node.module)
+            out = None
+            if log_dir is not None:
+                Path(log_dir).mkdir(parents=True, exist_ok=True)
+                out = open(Path(log_dir) / f'{node.name}.log', 'w')  # noqa: SIM115
+                logs.append(out)
+            procs[node.name] = subprocess.Popen(node_command(node, files), env=env,
+                                                stdout=out, stderr=subprocess.STDOUT if out
+                                                else None)
+        plant = procs[nodes[-1].name]
+        end = time.monotonic() + timeout
+        reported: set = set()
+        while plant.poll() is None:
+            dead = {n for n, p in procs.items() if p.poll() not in (None, 0)} - reported
+            if dead:
+                # a dead source stops a lockstep plant with a named error; give it the time
+                LOG.error('node(s) %s exited early with an error', ', '.join(sorted(dead)))
+                reported |= dead
+                end = min(end, time.monotonic() + EARLY_EXIT_GRACE)
+            if time.monotonic() > end:
+                LOG.error('plant did not finish within %.0f s; stopping', timeout)
+                break
+            time.sleep(0.2)
+        code = plant.poll()
+        if code == 0:
+            drain_recorders(scenario, procs)
+        failed = [n for n, p in procs.items() if p.poll() not in (None, 0)]
+    finally:
+        stop(procs)
+        tmp.cleanup()
+        for stream in logs:
+            stream.close()
+    if code is None:
+        return 2
+    if code == 0 and failed:
+        LOG.error('node(s) %s failed', ', '.join(failed))
+        return 1
+    return code
+
+
+def main(argv=None) -> int:
+    """Entry point of ``ros2 run pentapod_testbed scenario <name or file>``."""
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser.add_argument('scenario', help='scenario name (config/scenarios) or YAML file')
+    parser.add_argument('--steps', type=int, help='override plant steps')
+    parser.add_argument('--duration', type=float, help='override plant duration [s]')
+    parser.add_argument('--timing', choices=['lockstep', 'realtime'])
+    parser.add_argument('--model-file', help='override plant model_file')
+    parser.add_argument('--output-file', help='plant trace .npz (y_k, u_k per step)')
+    parser.add_argument('--domain-id', type=int, help='ROS_DOMAIN_ID for all nodes')
+    parser.add_argument('--timeout', type=float, default=3600.0,
+                        help='wall-time limit of the run [s]')
+    parser.add_argument('--list', action='store_true', help='only print the nodes')
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=logging.INFO, format='%(levelname)s %(message)s')
+    try:
+        path = resolve(args.scenario)
+        if args.list:
+            for node in read_scenario(path).nodes:
+                print(f'{node.name}: {node.executable} ({node.module})')
+            return 0
+        overrides = {key: value for key, value in (
+            ('steps', args.steps), ('duration', args.duration), ('timing', args.timing),
+            ('model_file', args.model_file), ('output_file', args.output_file))
+            if value is not None}
+        env = dict(os.environ)
+        if args.domain_id is not None:
+            env['ROS_DOMAIN_ID'] = str(args.domain_id)
+        return run_scenario(path, overrides, args.timeout, env)
+    except ConfigError as err:
+        print(f'error: {err}', file=sys.stderr)
+        return 1
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

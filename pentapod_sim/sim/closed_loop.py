@@ -1,0 +1,166 @@
+"""
+Offline closed loop: the plant core plus damper/PMA laws in-process.
+
+:func:`simulate` steps :class:`pentapod_sim.sim.stepping.DiscretePlant` exactly as the lockstep ROS
+run does (y_k, then every law and the excitation answer u_k, then x_{k+1}); it is the reference
+a ROS run must reproduce. :func:`simulate_linear` gives the same response for memoryless linear
+laws much faster: it forms the closed-loop discrete system once and runs each of its
+(diagonalised) modes through ``scipy.signal.lfilter``.
+
+Units: as the plant ports (N, N m in; m, m/s, rad, rad/s out); time in steps of dt [s].
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+import logging
+from typing import Callable, Protocol, Sequence
+
+import numpy as np
+import numpy.typing as npt
+
+from pentapod_sim.errors import ConfigError, PortError
+from pentapod_sim.sim.stepping import DiscretePlant
+
+LOG = logging.getLogger(__name__)
+
+
+class Law(Protocol):
+    """What a control law offers (see :mod:`pentapod_damper.laws`)."""
+
+    sensor_ports: list[str]
+    actuator_ports: list[str]
+
+    def step(self, sensors: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+        """Efforts for the actuator ports at this step."""
+
+    def reset(self) -> None:
+        """Back to the initial state."""
+
+
+@dataclass
+class Response:
+    """
+    Closed-loop run: y[k] = y_k, u[k] = u_k (total input applied over step k).
+
+    Attributes
+    ----------
+    y : (n_steps, n_out) ndarray
+        Outputs in the units of the output ports.
+    u : (n_steps, n_in) ndarray
+        Inputs [N or N m].
+    dt : float
+        Sample time [s].
+    output_names, input_names : list of str
+        Port names of the columns.
+    """
+
+    y: npt.NDArray[np.float64]
+    u: npt.NDArray[np.float64]
+    dt: float
+    output_names: list[str]
+    input_names: list[str]
+
+    def output(self, name: str) -> npt.NDArray[np.float64]:
+        """Column of an output port."""
+        return self.y[:, self.output_names.index(name)]
+
+    def input(self, name: str) -> npt.NDArray[np.float64]:
+        """Column of an input port."""
+        return self.u[:, self.input_names.index(name)]
+
+
+def _indices(names: Sequence[str], index: dict, what: str) -> npt.NDArray[np.intp]:
+    """Map port names to plant indices (PortError names a missing port)."""
+    try:
+        return np.array([index[n] for n in names], dtype=np.intp)
+    except KeyError as err:
+        raise PortError(f'{what} port {err.args[0]!r} is not in the plant model') from None
+
+
+def excitation_matrix(plant: DiscretePlant, ports: Sequence[str],
+                      forces: npt.ArrayLike, n_steps: int) -> npt.NDArray[np.float64]:
+    """Scatter excitation forces (n_steps, len(ports)) into a full input array (n_steps, n_in)."""
+    forces = np.asarray(forces, dtype=float)
+    if forces.shape != (n_steps, len(ports)):
+        raise ConfigError(f'excitation forces have shape {forces.shape}, expected '
+                          f'({n_steps}, {len(ports)})')
+    e = np.zeros((n_steps, len(plant.input_names)))
+    e[:, _indices(ports, plant.input_index, 'excitation')] = forces
+    return e
+
+
+def simulate(plant: DiscretePlant, laws: Sequence[Law], excitation: npt.NDArray[np.float64],
+             progress: Callable[[int, int], None] | None = None) -> Response:
+    """
+    Step plant + laws from the plant's current state, as the lockstep ROS run does.
+
+    Parameters
+    ----------
+    plant : DiscretePlant
+        The plant (stepped in place).
+    laws : sequence of Law
+        Controllers; each answers every step from its sensor outputs.
+    excitation : (n_steps, n_in) ndarray
+        External forces per step [N, N m] (:func:`excitation_matrix`).
+    progress : callable, optional
+        Called as ``progress(k, n_steps)`` every 10 % of the run.
+
+    Returns
+    -------
+    Response
+    """
+    n_steps = excitation.shape[0]
+    bound = [(_indices(law.sensor_ports, plant.output_index, 'sensor'),
+              _indices(law.actuator_ports, plant.input_index, 'actuator'), law) for law in laws]
+    ys = np.empty((n_steps, len(plant.output_names)))
+    us = np.empty((n_steps, len(plant.input_names)))
+    every = max(1, n_steps // 10)
+    for k in range(n_steps):
+        y = plant.outputs()
+        u = excitation[k].copy()
+        for sensors, actuators, law in bound:
+            u[actuators] += law.step(y[sensors])
+        ys[k], us[k] = y, u
+        plant.advance(u)
+        if progress is not None and (k + 1) % every == 0:
+            progress(k + 1, n_steps)
+    return Response(ys, us, plant.dt, list(plant.output_names), list(plant.input_names))
+
+
+def feedback_gain(plant: DiscretePlant, laws: Sequence[Law]) -> npt.NDArray[np.float64]:
+    """
+    Total static gain K (n_in, n_out) of memoryless linear laws, u = K y.
+
+    Raises
+    ------
+    ConfigError
+        If a law has memory (``linear_gain()`` is None or missing).
+    """
+    gain = np.zeros((len(plant.input_names), len(plant.output_names)))
+    for law in laws:
+        k_law = getattr(law, 'linear_gain', lambda: None)()
+        if k_law is None:
+            raise ConfigError(f'{type(law).__name__} has memory or limits; use simulate()')
+        rows = _indices(law.actuator_ports, plant.input_index, 'actuator')
+        cols = _indices(law.sensor_ports, plant.output_index, 'sensor')
+        gain[np.ix_(rows, cols)] += k_law
+    return gain
+
+
+def closed_loop_matrices(plant: DiscretePlant, gain: npt.NDArray[np.float64]):
+    """
+    Discrete closed loop with one-step controller delay.
+
+    Returns ``(a, b, c_y, c_u, augmented)`` with ``z_{k+1} = a z_k + b e_k``,
+    ``u_k = c_u z_k + e_k`` and ``y_k = c_y z_k`` (e: external input). The state is
+    ``z_k = [x_k; u_{k-1}]`` (``augmented``) only if the laws read an output with feed-through
+    (``K D != 0``); otherwise ``z_k = x_k`` and ``y_k = c_y z_k + D u_{k-1}``.
+    """
+    a, b, c, d = plant.a, plant.b, plant.c, plant.d
+    kc, kd = gain @ c, gain @ d
+    if not np.any(kd):
+        return a + b @ kc, b.copy(), c.copy(), kc, False
+    m = b.shape[1]
+    a_cl = np.block([[a + b @ kc, b @ kd], [kc, kd]])
+    b_cl = np.vstack([b, np.eye(m)])
+    return a_cl, b_cl, np.hstack([c, d]), np.hstack([kc, kd]), True

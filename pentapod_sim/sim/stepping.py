@@ -1,0 +1,265 @@
+"""
+Discrete stepping core of the plant: lockstep semantics, force sources, instability checks.
+
+Convention (docs/architecture.md): at step k, t_k = k dt, the plant reports
+``y_k = C x_k + D u_{k-1}``; every force source answers ``u_k`` for that step; then
+``x_{k+1} = A_d x_k + B_d u_k`` (exact zero-order hold, A_d/B_d from
+:meth:`pentapod_sim.plant.model.PlantModel.discretize`). The ROS plant node, the offline
+closed-loop simulator (:mod:`pentapod_sim.sim.closed_loop`) and the benchmarks all use this class,
+so a lockstep ROS run reproduces the offline run to rounding.
+
+Units: SI, as the model's ports (inputs N or N m, outputs m, m/s, rad, rad/s).
+"""
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import dataclass
+import logging
+from typing import Mapping, Sequence
+
+import control
+import numpy as np
+import numpy.typing as npt
+
+from pentapod_sim.errors import ConfigError, PortError, RunError
+
+LOG = logging.getLogger(__name__)
+
+#: Default bound on the Euclidean state norm; a modal state of 1e3 means metres of motion.
+DEFAULT_MAX_STATE_NORM = 1.0e3
+
+
+class DiscretePlant:
+    """
+    Step a discrete state space with named ports by the lockstep convention.
+
+    Parameters
+    ----------
+    sys : control.StateSpace
+        Discrete system (``sys.dt > 0``) with ``input_labels`` / ``output_labels`` = port names.
+    max_state_norm : float, optional
+        Bound on ``||x||_2``; exceeding it (or a non-finite state) raises :class:`RunError`.
+
+    Attributes
+    ----------
+    dt : float
+        Sample time [s].
+    k : int
+        Index of the current step (outputs of step k are available, u_k not yet applied).
+    x : (n,) ndarray
+        State x_k.
+    u_prev : (n_in,) ndarray
+        Input of the previous step u_{k-1} (feeds through D into y_k).
+    """
+
+    def __init__(self, sys: control.StateSpace, max_state_norm: float = DEFAULT_MAX_STATE_NORM):
+        if not sys.isdtime(strict=True) or not np.isfinite(float(sys.dt)) or sys.dt <= 0:
+            raise ConfigError(f'plant system must be discrete with dt > 0 s, got dt={sys.dt!r}')
+        if not np.isfinite(max_state_norm) or max_state_norm <= 0:
+            raise ConfigError(f'max_state_norm must be > 0, got {max_state_norm!r}')
+        self.dt = float(sys.dt)
+        # contiguous float64 copies: the step is two small dense products (BLAS, 1 thread)
+        self.a = np.ascontiguousarray(sys.A, dtype=float)
+        self.b = np.ascontiguousarray(sys.B, dtype=float)
+        self.c = np.ascontiguousarray(sys.C, dtype=float)
+        self.d = np.ascontiguousarray(sys.D, dtype=float)
+        self.input_names = list(sys.input_labels)
+        self.output_names = list(sys.output_labels)
+        self.input_index = {n: i for i, n in enumerate(self.input_names)}
+        self.output_index = {n: i for i, n in enumerate(self.output_names)}
+        self.has_feedthrough = bool(np.any(self.d))
+        self.max_state_norm = float(max_state_norm)
+        self.reset()
+
+    @property
+    def n_states(self) -> int:
+        """Number of states."""
+        return self.a.shape[0]
+
+    @property
+    def time(self) -> float:
+        """Time of the current step t_k = k dt [s]."""
+        return self.k * self.dt
+
+    def reset(self, x0: npt.ArrayLike | None = None) -> None:
+        """Set step 0 with state ``x0`` (default zero) and u_{-1} = 0."""
+        self.k = 0
+        self.x = np.zeros(self.n_states) if x0 is None else np.array(x0, dtype=float)
+        if self.x.shape != (self.n_states,):
+            raise ConfigError(f'x0 has shape {self.x.shape}, expected ({self.n_states},)')
+        self.u_prev = np.zeros(len(self.input_names))
+
+    def outputs(self) -> npt.NDArray[np.float64]:
+        """Return y_k = C x_k + D u_{k-1} (units of the output ports)."""
+        y = self.c @ self.x
+        if self.has_feedthrough:
+            y += self.d @ self.u_prev
+        return y
+
+    def advance(self, u: npt.NDArray[np.float64]) -> None:
+        """
+        Apply u_k (input port units) and move to step k+1: x_{k+1} = A_d x_k + B_d u_k.
+
+        Raises
+        ------
+        RunError
+            If the new state is non-finite or its norm exceeds ``max_state_norm``.
+        """
+        x = self.a @ self.x
+        x += self.b @ u
+        self.x = x
+        self.u_prev = np.array(u, dtype=float)
+        self.k += 1
+        norm = float(np.sqrt(x @ x))
+        if not norm <= self.max_state_norm:  # also catches NaN
+            raise RunError(f'plant unstable at step {self.k} (t = {self.time:.6g} s): state '
+                           f'norm {norm:.3g} exceeds max_state_norm {self.max_state_norm:.3g}; '
+                           'a feedback gain is probably too high')
+
+
+@dataclass
+class ForceSource:
+    """
+    A named force source and the input ports it may drive.
+
+    Attributes
+    ----------
+    name : str
+        Source name (topic /pentapod/forces/<name>).
+    ports : tuple of str
+        Input ports it may drive (empty = every input port of the plant).
+    """
+
+    name: str
+    ports: tuple[str, ...] = ()
+
+
+class ForceMixer:
+    """
+    Collect per-step force messages from several sources, validate them and sum them.
+
+    A message carries port names, efforts [N or N m] and the step it answers. Bad messages
+    (unknown source, unknown or forbidden port, wrong length, NaN/Inf, stale or future step)
+    are rejected and counted per (source, reason); nothing already accepted is lost.
+
+    Parameters
+    ----------
+    input_names : sequence of str
+        The plant's input ports (order of the summed vector).
+    sources : sequence of ForceSource
+        Sources expected to answer every step in lockstep.
+    """
+
+    def __init__(self, input_names: Sequence[str], sources: Sequence[ForceSource]):
+        self.input_names = list(input_names)
+        self._index = {n: i for i, n in enumerate(self.input_names)}
+        self.sources: dict[str, ForceSource] = {}
+        for src in sources:
+            if src.name in self.sources:
+                raise ConfigError(f'force source {src.name!r} is configured twice')
+            for port in src.ports:
+                if port not in self._index:
+                    raise PortError(f'force source {src.name!r}: port {port!r} is not an input '
+                                    'of the plant; inputs: ' + ', '.join(self.input_names))
+            self.sources[src.name] = src
+        self._allowed = {s.name: (set(s.ports) or set(self.input_names))
+                         for s in self.sources.values()}
+        self._cache: dict[tuple[str, tuple[str, ...]], npt.NDArray[np.intp]] = {}
+        self.rejected: Counter = Counter()
+        self.accepted: Counter = Counter()
+        n = len(self.input_names)
+        self.latest = {name: np.zeros(n) for name in self.sources}
+        self.latest_step = dict.fromkeys(self.sources, -1)
+
+    def _indices(self, source: str, names: tuple[str, ...]) -> npt.NDArray[np.intp] | str:
+        """Map port names to input indices (cached per name tuple) or return a reject reason."""
+        key = (source, names)
+        idx = self._cache.get(key)
+        if idx is not None:
+            return idx
+        allowed = self._allowed[source]
+        for name in names:
+            if name not in self._index:
+                return f'unknown_port: {name!r} is not an input port of the plant'
+            if name not in allowed:
+                return f'forbidden_port: {name!r} is not among the ports of this source'
+        if len(set(names)) != len(names):
+            return f'duplicate_port: names {list(names)} repeat a port'
+        idx = np.array([self._index[n] for n in names], dtype=np.intp)
+        self._cache[key] = idx
+        return idx
+
+    def submit(self, source: str, names: Sequence[str], efforts: npt.ArrayLike, step: int,
+               current_step: int, exact: bool = True) -> str | None:
+        """
+        Offer one force message; return None if accepted, else the reason it was rejected.
+
+        Parameters
+        ----------
+        source : str
+            Source name.
+        names : sequence of str
+            Input port names of the efforts.
+        efforts : array_like
+            Forces [N] / moments [N m], one per name.
+        step : int
+            Step the message answers (from its stamp).
+        current_step : int
+            Step the plant is waiting for.
+        exact : bool
+            Lockstep (True): only ``step == current_step`` is accepted; real time (False):
+            any step <= current_step that is newer than the held one.
+        """
+        reason = self._check(source, names, efforts, step, current_step, exact)
+        if reason is not None:
+            self.rejected[(source, reason.split(':')[0])] += 1
+            return reason
+        values = np.asarray(efforts, dtype=float)
+        vec = self.latest[source]
+        vec[:] = 0.0
+        vec[self._cache[(source, tuple(names))]] = values
+        self.latest_step[source] = step
+        self.accepted[source] += 1
+        return None
+
+    def _check(self, source, names, efforts, step, current_step, exact) -> str | None:
+        """Return the reason a message is unacceptable, or None."""
+        if source not in self.sources:
+            return f'unknown_source: {source!r} is not a configured force source'
+        if len(names) != len(efforts):
+            return f'length: {len(names)} names but {len(efforts)} efforts'
+        idx = self._indices(source, tuple(names))
+        if isinstance(idx, str):
+            return idx
+        values = np.asarray(efforts, dtype=float)
+        if not np.all(np.isfinite(values)):
+            return f'nonfinite: effort {list(values)}'
+        if step > current_step:
+            return f'future: step {step} (plant at step {current_step})'
+        if step < current_step if exact else step <= self.latest_step[source]:
+            return f'stale: step {step} (plant at step {current_step})'
+        if exact and self.latest_step[source] == step:
+            return f'duplicate: second answer for step {step}'
+        return None
+
+    def missing(self, step: int) -> list[str]:
+        """Sources that have not answered ``step`` yet."""
+        return [n for n, s in self.latest_step.items() if s < step]
+
+    def total(self) -> npt.NDArray[np.float64]:
+        """Sum of the held forces of all sources (input vector u)."""
+        u = np.zeros(len(self.input_names))
+        for vec in self.latest.values():
+            u += vec
+        return u
+
+    def reject_summary(self) -> str:
+        """One line listing rejected messages per source and reason."""
+        if not self.rejected:
+            return 'no rejected messages'
+        return ', '.join(f'{s}/{r}: {c}' for (s, r), c in sorted(self.rejected.items()))
+
+
+def parse_sources(names: Sequence[str], ports: Mapping[str, Sequence[str]]) -> list[ForceSource]:
+    """Build :class:`ForceSource` objects from names and a name -> ports mapping."""
+    return [ForceSource(n, tuple(ports.get(n, ()))) for n in names]
