@@ -75,7 +75,7 @@ class _Mesh:
         ids = np.concatenate([[a], np.arange(first, first + n_el - 1), [b]])
         sec = beam.rhs_section(section.width, section.height, section.thickness)
         mat = self.machine.materials.steel
-        length = np.linalg.norm(pb - pa)
+        length = float(np.linalg.norm(pb - pa))
         self.mass_parts[part] = self.mass_parts.get(part, 0.0) + mat.density * sec.area * length
         if added_mass:
             self.mass_parts['ball_screws'] = (self.mass_parts.get('ball_screws', 0.0)
@@ -181,7 +181,7 @@ def _platform(mesh: _Mesh, state: StrutState) -> None:
         mesh.slaves[mesh.named[name]] = master
 
 
-def _dofs(nodes: Array) -> Array:
+def _dofs(nodes: npt.ArrayLike) -> Array:
     """(n,) node ids -> (n, 6) global DOF indices."""
     return (6 * np.asarray(nodes, dtype=np.int64)[:, None] + np.arange(6)).astype(np.int32)
 
@@ -248,9 +248,9 @@ def _rigid_elimination(mesh: _Mesh) -> sp.csr_matrix:
     free_nodes = np.flatnonzero(~is_slave)
     col_of_node = -np.ones(mesh.n_nodes, int)
     col_of_node[free_nodes] = np.arange(len(free_nodes))
-    rows = [_dofs(free_nodes).ravel()]
-    cols = [np.arange(6 * len(free_nodes))]
-    vals = [np.ones(6 * len(free_nodes))]
+    rows: list[np.ndarray] = [_dofs(free_nodes).ravel()]
+    cols: list[np.ndarray] = [np.arange(6 * len(free_nodes))]
+    vals: list[np.ndarray] = [np.ones(6 * len(free_nodes))]
     xyz = mesh.positions()
     for s, m in mesh.slaves.items():
         r = xyz[s] - xyz[m]

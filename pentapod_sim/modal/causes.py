@@ -94,7 +94,7 @@ class CauseTable:
                 row['neuber_cause'] = self.neuber_cause[j]
             for g, name in enumerate(self.group_names):
                 row[f'share_{name}'] = float(self.energy_shares[j, g])
-            if self.neuber_frequency is not None:
+            if self.neuber_frequency is not None and self.neuber_mac is not None:
                 for g, name in enumerate(self.group_names):
                     row[f'neuber_f_{name}_hz'] = float(self.neuber_frequency[j, g])
                     row[f'neuber_mac_{name}'] = float(self.neuber_mac[j, g])
@@ -372,7 +372,8 @@ def plot_mode_distribution(frequencies: npt.ArrayLike, path: str | os.PathLike,
     top = float(f_max if f_max is not None else (f[-1] if f.size else 1.0))
     f = f[f <= top]
     fig, ax = plt.subplots(figsize=(7.0, 3.8))
-    ax.hist(f, bins=np.arange(0.0, top + bin_width, bin_width), color='tab:blue', alpha=0.7)
+    bins = np.arange(0.0, top + bin_width, bin_width).tolist()
+    ax.hist(f, bins=bins, color='tab:blue', alpha=0.7)
     ax.set_xlabel('frequency [Hz]')
     ax.set_ylabel(f'modes per {bin_width:g} Hz band')
     ax.set_xlim(0.0, top)

@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 import logging
 import math
 import time
-from typing import Callable
+from typing import Any, Callable
 import warnings
 
 import numpy as np
@@ -98,11 +98,11 @@ class ModalResult:
         (r, m) ndarray
             ``T @ shapes``: row i is output i of every mode.
         """
-        T = T if sp.issparse(T) else np.asarray(T, dtype=float)
-        if T.shape[1] != self.shapes.shape[0]:
-            raise ValueError(f'observation matrix has {T.shape[1]} columns, '
+        obs: Any = T if sp.issparse(T) else np.asarray(T, dtype=float)
+        if obs.shape[1] != self.shapes.shape[0]:
+            raise ValueError(f'observation matrix has {obs.shape[1]} columns, '
                              f'the modes have {self.shapes.shape[0]} DOFs')
-        return np.asarray(T @ self.shapes)
+        return np.asarray(obs @ self.shapes)
 
     def count_below(self, f: float) -> int:
         """Return how many of the held modes lie below frequency ``f`` [Hz]."""
@@ -211,10 +211,8 @@ def _slice(sl: _Slicer, wanted: int | None, lam_max: float | None) -> None:
     while True:
         sl.windows += 1
         done_by_limit = lam_max is not None and lam[-1] >= lam_max
-        if done_by_limit:
-            b = lam_max
-        else:
-            b = _edge_between(lam, lam.size - 1)
+        b = lam_max if lam_max is not None and done_by_limit else _edge_between(lam,
+                                                                                lam.size - 1)
         c_b = sl.count(b)
         inside = (lam >= a) & (lam < b)
         if b <= a or c_b - c_a != np.count_nonzero(inside):
@@ -327,6 +325,7 @@ def solve_modes(K: sp.spmatrix, M: sp.spmatrix, *, n_modes: int | None = None,
     lam_max = None if f_max is None else (2.0 * np.pi * f_max) ** 2
     t0 = time.perf_counter()
     sturm = None
+    stats: dict[str, Any]
     if n <= DENSE_LIMIT:
         lam, phi, sturm = _solve_dense(K, M, n_modes, f_max)
         blocks, stats = [(0, lam.size)], {'method': 'dense eigh', 'windows': 1}

@@ -15,6 +15,7 @@ import hashlib
 import json
 import logging
 from pathlib import Path
+from typing import Any
 import zipfile
 
 import control
@@ -224,7 +225,7 @@ class PlantModel:
         """
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
-        header = {n: list(getattr(self, n)) for n in _LISTS}
+        header: dict[str, Any] = {n: list(getattr(self, n)) for n in _LISTS}
         header.update(format=FILE_FORMAT, meta=self.meta, content_hash=self.content_hash())
         with open(path, 'wb') as stream:
             np.savez(stream, header=np.array(json.dumps(header)),

@@ -222,12 +222,14 @@ def port(points: Mapping, strut_frames: npt.ArrayLike, name: str) -> Port:
     check_names([name])
     frames = np.asarray(strut_frames, dtype=float)
     definition = _definitions(frames)[name]
-    vector = None
+    vector: np.ndarray | None = None
     for point_name, direction, part, sign in definition.terms:
         rows = _point_rows(points, point_name)
         block = rows[0:3] if part == 'translation' else rows[3:6]
         term = sign * (direction @ block)
         vector = term if vector is None else vector + term
+    if vector is None:
+        raise PortError(f'port {name!r} has no terms')
     return Port(name, definition.unit, definition.description, definition.kind, vector)
 
 

@@ -100,7 +100,8 @@ def select_modes(gains: npt.ArrayLike, abs_limit: float | None = None,
                                ('count', count)) if v is not None}
     if len(given) != 1:
         raise ConfigError(f'give exactly one of abs_limit, rel_limit, count; got {given}')
-    g = np.abs(np.asarray(gains, dtype=float)).reshape(len(gains), -1)
+    g = np.abs(np.asarray(gains, dtype=float))
+    g = g.reshape(g.shape[0], -1)
     m = g.shape[0]
     if abs_limit is not None:
         _check_limit('abs_limit', abs_limit)
