@@ -1,0 +1,374 @@
+"""
+Truncation check of sampled closed loops: stability on the plant and on a check model.
+
+The testbed runs plain sampled feedback: the plant is held over a step (zero-order hold) and
+every law answers ``u_k`` to the outputs ``y_k = C x_k + D u_{k-1}`` of the same step
+(:mod:`pentapod_sim.sim.stepping`). Whether that loop is stable depends on modes the plant
+model dropped, so :func:`check_loop` computes the spectral radius of the loop twice: on the
+plant and on a *check model* with every FE mode up to a high frequency
+(:mod:`pentapod_sim.plant.check_model`). The verdict is
+
+* ``stable``: both loops are asymptotically stable (spectral radius < 1);
+* ``unstable``: the loop on the plant is unstable;
+* ``stable only thanks to truncation``: the plant's loop is stable, the check model's is not;
+  the controller would excite modes the plant model left out.
+
+A policy decides what a non-stable verdict does: ``refuse`` raises :class:`UnstableLoopError`
+(a :class:`pentapod_sim.errors.ConfigError`), ``warn`` logs a loud warning.
+
+Controllers are discrete state spaces on named ports (:class:`DiscreteController`), so laws
+with internal dynamics (filters, actuator models, delays) plug in the same way as static gains:
+a law offers either ``discrete_model()`` returning a :class:`DiscreteController` at its sample
+time, or ``linear_gain()`` (memoryless ``u = K y``); see :func:`controller_of`.
+
+Units: as the plant ports (N, N m in; m, m/s, rad, rad/s out); sample time dt [s].
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+import json
+import logging
+from typing import Sequence
+
+import numpy as np
+import numpy.typing as npt
+import scipy.linalg as sla
+
+from pentapod_sim.errors import ConfigError, PortError
+from pentapod_sim.plant.check_model import (
+    check_f_max,
+    DEFAULT_CHECK_F_MIN,
+    load_or_build_check_model,
+)
+from pentapod_sim.plant.model import PlantModel
+
+LOG = logging.getLogger(__name__)
+
+STABLE = 'stable'
+UNSTABLE = 'unstable'
+TRUNCATION = 'stable only thanks to truncation'
+#: What a verdict other than ``stable`` does.
+POLICIES = ('refuse', 'warn')
+DEFAULT_POLICY = 'refuse'
+
+
+class UnstableLoopError(ConfigError):
+    """A sampled loop is unstable on the plant or on the check model (policy ``refuse``)."""
+
+
+@dataclass(frozen=True)
+class DiscreteController:
+    """
+    Linear discrete controller on named ports, sampled with the plant.
+
+    ``xc_{k+1} = a xc_k + b y_k`` and ``u_k = c xc_k + d y_k``, where ``y_k`` are the values of
+    ``sensor_ports`` at step k and ``u_k`` the efforts on ``actuator_ports``.
+
+    Attributes
+    ----------
+    sensor_ports, actuator_ports : tuple of str
+        Plant output and input port names.
+    a, b, c, d : ndarray
+        (n, n), (n, n_s), (n_a, n), (n_a, n_s); n = 0 for a memoryless law.
+    """
+
+    sensor_ports: tuple
+    actuator_ports: tuple
+    a: np.ndarray
+    b: np.ndarray
+    c: np.ndarray
+    d: np.ndarray
+
+    def __post_init__(self) -> None:
+        """Convert to float arrays and check the shapes (ConfigError names the mismatch)."""
+        n_s, n_a = len(self.sensor_ports), len(self.actuator_ports)
+        n = np.asarray(self.a).shape[0] if np.asarray(self.a).size else 0
+        want = {'a': (n, n), 'b': (n, n_s), 'c': (n_a, n), 'd': (n_a, n_s)}
+        for name, shape in want.items():
+            value = np.asarray(getattr(self, name), dtype=float)
+            if value.size == 0 and 0 in shape:      # [] for an empty block
+                value = value.reshape(shape)
+            if value.shape != shape:
+                raise ConfigError(f'controller matrix {name} has shape {value.shape}, expected '
+                                  f'{shape} for {n} states, {n_s} sensors, {n_a} actuators')
+            if not np.all(np.isfinite(value)):
+                raise ConfigError(f'controller matrix {name} is not finite')
+            object.__setattr__(self, name, value)
+        object.__setattr__(self, 'sensor_ports', tuple(self.sensor_ports))
+        object.__setattr__(self, 'actuator_ports', tuple(self.actuator_ports))
+
+    @classmethod
+    def static(cls, sensor_ports: Sequence[str], actuator_ports: Sequence[str],
+               gain: npt.ArrayLike) -> 'DiscreteController':
+        """Memoryless law ``u = K y`` with ``K = gain`` (n_actuators, n_sensors)."""
+        gain = np.asarray(gain, dtype=float)
+        return cls(tuple(sensor_ports), tuple(actuator_ports), np.zeros((0, 0)),
+                   np.zeros((0, len(sensor_ports))), np.zeros((len(actuator_ports), 0)), gain)
+
+    @property
+    def n_states(self) -> int:
+        """Number of controller states."""
+        return self.a.shape[0]
+
+    def to_json(self) -> str:
+        """JSON text of the controller (e.g. for a ROS string parameter)."""
+        return json.dumps({'sensor_ports': list(self.sensor_ports),
+                           'actuator_ports': list(self.actuator_ports),
+                           **{k: getattr(self, k).tolist() for k in 'abcd'}})
+
+    @classmethod
+    def from_json(cls, text: str) -> 'DiscreteController':
+        """Inverse of :meth:`to_json` (ConfigError names what is missing or malformed)."""
+        try:
+            doc = json.loads(text)
+            return cls(doc['sensor_ports'], doc['actuator_ports'],
+                       *(np.asarray(doc[k], dtype=float) for k in 'abcd'))
+        except (ValueError, KeyError, TypeError) as err:
+            raise ConfigError(f'not a controller description: {err}') from None
+
+
+def controller_of(law) -> DiscreteController:
+    """
+    The discrete linear model of a control law.
+
+    A law with internal dynamics returns it from ``discrete_model()``; a memoryless linear law
+    from ``linear_gain()`` (with ``sensor_ports`` and ``actuator_ports``).
+
+    Raises
+    ------
+    ConfigError
+        If the law offers neither (e.g. limits or a filter without a linear model).
+    """
+    model = getattr(law, 'discrete_model', None)
+    if callable(model):
+        result = model()
+        if isinstance(result, DiscreteController):
+            return result
+    gain = getattr(law, 'linear_gain', lambda: None)()
+    if gain is None:
+        raise ConfigError(f'{type(law).__name__} on {getattr(law, "actuator_ports", "?")} has '
+                          'no linear discrete model (discrete_model() or linear_gain()); the '
+                          'stability check cannot close its loop')
+    return DiscreteController.static(law.sensor_ports, law.actuator_ports, gain)
+
+
+def _index(names: Sequence[str], ports: Sequence[str], what: str) -> np.ndarray:
+    lookup = {n: i for i, n in enumerate(names)}
+    try:
+        return np.array([lookup[p] for p in ports], dtype=np.intp)
+    except KeyError as err:
+        raise PortError(f'{what} port {err.args[0]!r} is not in the plant model') from None
+
+
+def loop_matrix(a: np.ndarray, b: np.ndarray, c: np.ndarray, d: np.ndarray,
+                input_names: Sequence[str], output_names: Sequence[str],
+                controllers: Sequence[DiscreteController]) -> np.ndarray:
+    """
+    State matrix of the sampled loop: discrete plant (lockstep convention) plus controllers.
+
+    The plant is ``x_{k+1} = a x_k + b u_k``, ``y_k = c x_k + d u_{k-1}``; the controllers'
+    efforts add up on the input ports. The state is ``[x; xc; u_{k-1}]``, with ``u_{k-1}``
+    left out when no controller reads an output with feed-through.
+    """
+    n_in, n_out = len(input_names), len(output_names)
+    n_c = sum(k.n_states for k in controllers)
+    gain = np.zeros((n_in, n_out))
+    c_full = np.zeros((n_in, n_c))
+    b_full = np.zeros((n_c, n_out))
+    a_c = np.zeros((n_c, n_c))
+    start = 0
+    for ctrl in controllers:
+        rows = _index(input_names, ctrl.actuator_ports, 'actuator')
+        cols = _index(output_names, ctrl.sensor_ports, 'sensor')
+        span = slice(start, start + ctrl.n_states)
+        gain[np.ix_(rows, cols)] += ctrl.d
+        c_full[rows, span] += ctrl.c
+        b_full[span, cols] += ctrl.b
+        a_c[span, span] = ctrl.a
+        start += ctrl.n_states
+    kc = gain @ c
+    top = [a + b @ kc, b @ c_full]
+    mid = [b_full @ c, a_c]
+    kd, bd = gain @ d, b_full @ d
+    if not (np.any(kd) or np.any(bd)):
+        return np.block([top, mid])
+    return np.block([top + [b @ kd], mid + [bd], [kc, c_full, kd]])
+
+
+def spectral_radius(matrix: np.ndarray, dt: float) -> tuple[float, float]:
+    """
+    Largest |eigenvalue| of a discrete state matrix and the frequency of that eigenvalue.
+
+    Returns
+    -------
+    radius : float
+        max |lambda| (>= 1: not asymptotically stable).
+    freq_hz : float
+        ``|arg lambda| / (2 pi dt)`` of the largest eigenvalue [Hz] (0 to Nyquist).
+    """
+    if matrix.size == 0:
+        return 0.0, 0.0
+    lam = sla.eigvals(matrix, check_finite=False)
+    top = lam[np.argmax(np.abs(lam))]
+    return float(abs(top)), float(abs(np.angle(top)) / (2 * np.pi * dt))
+
+
+def plant_radius(plant: PlantModel, controllers: Sequence[DiscreteController],
+                 dt: float) -> tuple[float, float]:
+    """Spectral radius (and its frequency [Hz]) of the sampled loop of a modal plant."""
+    a, b, c, d = plant.discrete_matrices(dt)
+    return spectral_radius(loop_matrix(a, b, c, d, plant.input_names, plant.output_names,
+                                       controllers), dt)
+
+
+@dataclass(frozen=True)
+class LoopCheck:
+    """
+    Result of :func:`check_loop`.
+
+    Attributes
+    ----------
+    label : str
+        What was checked (e.g. scenario and position).
+    dt : float
+        Sample time [s].
+    plant_radius, check_radius : float
+        Spectral radius of the sampled loop on the plant and on the check model.
+    plant_critical_hz, check_critical_hz : float
+        Frequency of the largest eigenvalue [Hz].
+    plant_modes, check_modes : int
+        Modes of the plant and of the check model.
+    check_f_max : float
+        Cut-off of the check model's modes [Hz].
+    """
+
+    label: str
+    dt: float
+    plant_radius: float
+    check_radius: float
+    plant_critical_hz: float
+    check_critical_hz: float
+    plant_modes: int
+    check_modes: int
+    check_f_max: float
+
+    @property
+    def plant_margin(self) -> float:
+        """1 - spectral radius on the plant (> 0: stable)."""
+        return 1.0 - self.plant_radius
+
+    @property
+    def check_margin(self) -> float:
+        """1 - spectral radius on the check model (> 0: stable)."""
+        return 1.0 - self.check_radius
+
+    @property
+    def verdict(self) -> str:
+        """``stable``, ``unstable`` or ``stable only thanks to truncation``."""
+        if self.plant_radius >= 1.0:
+            return UNSTABLE
+        return STABLE if self.check_radius < 1.0 else TRUNCATION
+
+    def summary(self) -> str:
+        """One sentence with both margins and the verdict."""
+        return (f'{self.label}: sampled loop at {1 / self.dt:g} Hz is {self.verdict}; '
+                f'spectral radius {self.plant_radius:.6g} on the plant ({self.plant_modes} '
+                f'modes, margin {self.plant_margin:.3g}), {self.check_radius:.6g} on the check '
+                f'model ({self.check_modes} modes below {self.check_f_max:g} Hz, margin '
+                f'{self.check_margin:.3g}, largest eigenvalue at {self.check_critical_hz:.0f} Hz)')
+
+    def as_row(self) -> dict:
+        """Plain values for tables."""
+        return {'sample_rate_hz': 1 / self.dt, 'plant_modes': self.plant_modes,
+                'plant_radius': self.plant_radius, 'plant_margin': self.plant_margin,
+                'plant_critical_hz': self.plant_critical_hz, 'check_modes': self.check_modes,
+                'check_f_max_hz': self.check_f_max, 'check_radius': self.check_radius,
+                'check_margin': self.check_margin, 'check_critical_hz': self.check_critical_hz,
+                'verdict': self.verdict}
+
+
+def apply_policy(check: LoopCheck, policy: str = DEFAULT_POLICY) -> LoopCheck:
+    """
+    Refuse (raise) or warn loudly when ``check`` is not ``stable``; return it otherwise.
+
+    Raises
+    ------
+    UnstableLoopError
+        With policy ``refuse`` and a verdict other than ``stable``.
+    """
+    if policy not in POLICIES:
+        raise ConfigError(f'truncation check policy must be one of {", ".join(POLICIES)}, '
+                          f'got {policy!r}')
+    if check.verdict == STABLE:
+        return check
+    advice = ('lower the gains, raise the sample rate or give the law actuator/sensor '
+              'dynamics that roll off')
+    if policy == 'refuse':
+        raise UnstableLoopError(f'{check.summary()}; {advice}')
+    LOG.warning('!!! %s -- results of this loop are not trustworthy; %s', check.summary(),
+                advice)
+    return check
+
+
+def check_loop(plant: PlantModel, check_plant: PlantModel,
+               controllers: Sequence[DiscreteController], dt: float,
+               policy: str = DEFAULT_POLICY, label: str = 'loop') -> LoopCheck:
+    """
+    Spectral radius of the sampled loop on the plant and on the check model; apply a policy.
+
+    Parameters
+    ----------
+    plant : PlantModel
+        The (reduced) plant the loop runs on.
+    check_plant : PlantModel
+        The check model (:mod:`pentapod_sim.plant.check_model`); restricted to the plant's
+        ports here.
+    controllers : sequence of DiscreteController
+        The laws (:func:`controller_of`); empty for the open loop.
+    dt : float
+        Sample time [s].
+    policy : str
+        ``refuse`` or ``warn`` (:func:`apply_policy`).
+    label : str
+        Names the loop in messages.
+    """
+    if not np.isfinite(dt) or dt <= 0:
+        raise ConfigError(f'sample time dt must be > 0 s, got {dt!r}')
+    check_plant = check_plant.select(plant.input_names, plant.output_names)
+    rho_p, f_p = plant_radius(plant, controllers, dt)
+    rho_c, f_c = plant_radius(check_plant, controllers, dt)
+    f_max = float(check_plant.meta.get('check_f_max_hz', check_plant.frequencies_hz.max(
+        initial=0.0)))
+    result = LoopCheck(label, float(dt), rho_p, rho_c, f_p, f_c, plant.n_modes,
+                       check_plant.n_modes, f_max)
+    return apply_policy(result, policy)
+
+
+def startup_check(plant: PlantModel, controllers: Sequence[DiscreteController],
+                  sample_rate: float, position: str = '', policy: str = DEFAULT_POLICY,
+                  check_f_min: float = DEFAULT_CHECK_F_MIN,
+                  cache_dir: str = 'out/models') -> LoopCheck:
+    """
+    The truncation check a plant node runs before step 0.
+
+    Parameters
+    ----------
+    plant : PlantModel
+        The node's model.
+    controllers : sequence of DiscreteController
+        Linear models of the laws its force sources run (e.g. sent as
+        :meth:`DiscreteController.to_json` text).
+    sample_rate : float
+        Plant sample rate [Hz].
+    position : str
+        Position name for the check model; default ``plant.meta['position']``.
+    policy, check_f_min, cache_dir
+        As :func:`check_loop`, :func:`pentapod_sim.plant.check_model.check_f_max` and
+        :func:`pentapod_sim.plant.check_model.load_or_build_check_model`.
+    """
+    position = position or plant.meta.get('position') or ''
+    f_max = check_f_max(sample_rate, check_f_min)
+    check_plant, origin = load_or_build_check_model(position, f_max, cache_dir)
+    LOG.info('check model %s: %d modes', origin, check_plant.n_modes)
+    return check_loop(plant, check_plant, controllers, 1.0 / sample_rate, policy,
+                      label=f'plant at {position}')
