@@ -226,5 +226,5 @@ class TestModesCommand:
     def test_unknown_position_is_an_error_naming_it(self, tmp_path, capsys):
         from pentapod_sim.cli.modes import main
 
-        assert main(['--position', 'P99', '--out', str(tmp_path)]) == 2
+        assert main(['--position', 'P99', '--out', str(tmp_path)]) == 1
         assert 'P99' in capsys.readouterr().err

@@ -228,4 +228,4 @@ def test_analyze_cli_end_to_end(tmp_path, random_record, capsys):
     assert_allclose([float(r['damping_ratio']) for r in rows], [ZETA, ZETA], rtol=0.15)
     assert main(['info', str(tmp_path / 'run')]) == 0
     assert 'scenario = random' in capsys.readouterr().out
-    assert main(['info', str(tmp_path / 'nothing')]) == 2  # BagError -> exit code 2
+    assert main(['info', str(tmp_path / 'nothing')]) == 1  # BagError -> exit code 1

@@ -1,4 +1,5 @@
 """PlantModel: continuous/discrete state space against physics, save/load, building."""
+import dataclasses
 import zipfile
 
 import control
@@ -157,14 +158,14 @@ def test_build_plant_static_gain_equals_fe_compliance():
     from pentapod_sim.fe.params import load_machine
     from pentapod_sim.plant.build import load_reduction_config
     cfg = load_reduction_config()
-    cfg['inputs'] = ['tcp_force_x', 'tcp_force_y', 'tcp_force_z', 'strut1_axial_force']
-    cfg['outputs'] = ['tcp_displacement_x', 'tcp_displacement_y', 'tcp_displacement_z',
-                      'strut1_axial_displacement', 'tcp_velocity_y']
-    cfg['relevance'] = cfg['relevance'][:1]
+    cfg = dataclasses.replace(
+        cfg, inputs=('tcp_force_x', 'tcp_force_y', 'tcp_force_z', 'strut1_axial_force'),
+        outputs=('tcp_displacement_x', 'tcp_displacement_y', 'tcp_displacement_z',
+                 'strut1_axial_displacement', 'tcp_velocity_y'), relevance=cfg.relevance[:1])
     plant = build_plant('P1', reduction_cfg=cfg)
     fe = build_model(load_machine(), 'P1')
-    B = ports.input_matrix(ports.ports(fe.points, fe.strut_frames, cfg['inputs']))
-    C, _ = ports.output_matrices(ports.ports(fe.points, fe.strut_frames, cfg['outputs']))
+    B = ports.input_matrix(ports.ports(fe.points, fe.strut_frames, cfg.inputs))
+    C, _ = ports.output_matrices(ports.ports(fe.points, fe.strut_frames, cfg.outputs))
     exact = static_compliance(fe.K, B, C)
     a, b, c, d = plant.state_matrices()
     dc = d - c @ np.linalg.solve(a, b)        # G(0) = D - C A^-1 B

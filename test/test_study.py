@@ -119,7 +119,7 @@ def test_missing_key_is_named(tmp_path):
     doc = yaml.safe_load(Path(load_study_config.__globals__['default_path']()).read_text())
     del doc['excitation']['seed']
     path.write_text(yaml.safe_dump(doc))
-    with pytest.raises(ConfigError, match="missing key 'excitation.seed'"):
+    with pytest.raises(ConfigError, match=r'study\.yaml: excitation\.seed: missing key'):
         load_study_config(path)
 
 

@@ -1,14 +1,33 @@
-"""Study configuration (config/study.yaml): schema, defaults and validation."""
+"""
+Study configuration (config/study.yaml): schema and validation.
+
+The file's schema (:mod:`pentapod_sim.schema`, the validation style of every configuration
+file) is :class:`StudyFile` with its sections; the study reads the flat :class:`StudyConfig`
+made from it. Unknown keys are refused naming the closest known one; missing keys, wrong
+types, values out of range, unknown positions and scenarios are refused naming the file, the
+key and the value.
+"""
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import yaml
-
 from pentapod_sim.errors import ConfigError
+from pentapod_sim.fe.params import load_positions
 from pentapod_sim.paths import config_dir
+from pentapod_sim.plant.config import FrequencyGrid
+from pentapod_sim.scenario.files import scenario_names
+from pentapod_sim.schema import (
+    build,
+    check_choice,
+    closest,
+    NON_NEGATIVE,
+    POSITIVE,
+    read_mapping,
+    spec,
+)
 
 AXES = ('x', 'y', 'z')
 
@@ -77,28 +96,108 @@ class StudyConfig:
     step_duration: float
 
 
-def _get(doc: dict, key: str, kind: type, where: str = '') -> Any:
-    name = f'{where}{key}'
-    if key not in doc:
-        raise ConfigError(f'study config: missing key {name!r}')
-    value = doc[key]
+@dataclass(frozen=True)
+class Excitation:
+    """Band-limited random force at the TCP of the FRF runs."""
+
+    direction: str = spec(choices=AXES, description='TCP direction excited and measured')
+    amplitude: float = spec('N', POSITIVE, description='RMS of the random force')
+    band: tuple[float, ...] = spec('Hz', NON_NEGATIVE, length=2, description='force band')
+    duration: float = spec('s', POSITIVE, description='excited and recorded time per run')
+    seed: int = spec('-', NON_NEGATIVE, description='random seed of the excitation')
+
+
+@dataclass(frozen=True)
+class Analysis:
+    """FRF estimation from the bags."""
+
+    nperseg: int = spec('samples', POSITIVE, description='Welch segment length')
+    f_max: float = spec('Hz', POSITIVE, description='upper end of plots and tables')
+    coherence_min: float = spec('-', bounds=(0.0, 1.0), closed=(False, False),
+                                description='coherence above which FRFs are compared')
+
+
+@dataclass(frozen=True)
+class StepResponse:
+    """PMA step-response run."""
+
+    position: str = spec(description='position of the step-response runs')
+    amplitude: float = spec('N', POSITIVE, description='step force at the TCP')
+    duration: float = spec('s', POSITIVE, description='length of the step-response runs')
+
+
+@dataclass(frozen=True)
+class StudyFile:
+    """config/study.yaml; see that file for the meaning of each key."""
+
+    positions: tuple[str, ...] = spec(min_length=1, description='positions of config/positions'
+                                      '.yaml')
+    scenarios: tuple[str, ...] = spec(min_length=1, description='scenarios, baseline first')
+    sample_rate: float = spec('Hz', POSITIVE, description='plant sample rate of every run')
+    excitation: Excitation = spec(description='excitation of the FRF runs')
+    analysis: Analysis = spec(description='FRF estimation from the bags')
+    frequency: FrequencyGrid = spec(description='frequencies of the analytic FRFs')
+    pma_force_amplitude: float = spec('N', POSITIVE,
+                                      description='harmonic TCP force of the PMA requirements')
+    step_response: StepResponse = spec(description='PMA step-response run')
+
+    def __post_init__(self) -> None:
+        exc, fs = self.excitation, self.sample_rate
+        if self.scenarios[0] != 'baseline':
+            raise ConfigError(f'scenarios[0] = {self.scenarios[0]!r}: the scenarios must start '
+                              'with baseline')
+        lo, hi = exc.band
+        if not 0 <= lo < hi < fs / 2:
+            raise ConfigError(f'excitation.band = {list(exc.band)} Hz: must satisfy 0 <= low < '
+                              f'high < sample_rate / 2 = {fs / 2:g} Hz')
+        if not 16 <= self.analysis.nperseg <= exc.duration * fs:
+            raise ConfigError(f'analysis.nperseg = {self.analysis.nperseg}: must lie in '
+                              f'[16, excitation.duration * sample_rate = {exc.duration * fs:g}]')
+
+
+#: Key path in the file of each :class:`StudyConfig` attribute.
+FILE_KEYS = {'positions': 'positions', 'scenarios': 'scenarios', 'sample_rate': 'sample_rate',
+             'direction': 'excitation.direction', 'amplitude': 'excitation.amplitude',
+             'band': 'excitation.band', 'duration': 'excitation.duration',
+             'seed': 'excitation.seed', 'nperseg': 'analysis.nperseg',
+             'f_max': 'analysis.f_max', 'coherence_min': 'analysis.coherence_min',
+             'freq_grid': 'frequency', 'pma_force_amplitude': 'pma_force_amplitude',
+             'step_position': 'step_response.position',
+             'step_amplitude': 'step_response.amplitude',
+             'step_duration': 'step_response.duration'}
+
+
+def _get(obj: Any, key_path: str) -> Any:
+    for key in key_path.split('.'):
+        obj = getattr(obj, key)
+    if isinstance(obj, FrequencyGrid):
+        return (obj.f_min, obj.f_max, obj.n_points)
+    return obj
+
+
+def _set(doc: dict, key_path: str, value: Any) -> None:
+    *parents, last = key_path.split('.')
+    for key in parents:                 # the file was checked: its sections are mappings
+        doc = doc[key]
+    if last == 'frequency' and isinstance(value, (list, tuple)) and len(value) == 3:
+        value = dict(zip(('f_min', 'f_max', 'n_points'), value))
+    elif isinstance(value, tuple):
+        value = list(value)
+    doc[last] = value
+
+
+def _check_names(study: StudyFile, source: str) -> None:
+    """Positions and scenarios must exist (positions.yaml, config/scenarios)."""
+    positions, scenarios = sorted(load_positions()), scenario_names()
+    named = [(f'positions[{i}]', p) for i, p in enumerate(study.positions)]
+    named.append(('step_response.position', study.step_response.position))
     try:
-        if kind is tuple:
-            if not isinstance(value, (list, tuple)) or not value:
-                raise TypeError
-            return tuple(value)
-        if kind is str and not isinstance(value, str):
-            raise TypeError
-        return kind(value)
-    except (TypeError, ValueError):
-        raise ConfigError(f'study config: {name} = {value!r} is not a valid '
-                          f'{kind.__name__}') from None
-
-
-def _positive(name: str, value: float) -> float:
-    if not value > 0:
-        raise ConfigError(f'study config: {name} = {value!r} must be > 0')
-    return value
+        for key, name in named:
+            check_choice(name, positions, key, 'position of positions.yaml')
+        for i, name in enumerate(study.scenarios):
+            check_choice(name, scenarios, f'scenarios[{i}]', 'scenario of config/scenarios')
+    except ConfigError as err:
+        raise ConfigError(f'{source}: {err}') from None
 
 
 def load_study_config(path: str | Path | None = None, **overrides: Any) -> StudyConfig:
@@ -110,64 +209,28 @@ def load_study_config(path: str | Path | None = None, **overrides: Any) -> Study
     path : str or Path, optional
         YAML file; default :func:`default_path`.
     **overrides
-        Attribute values of :class:`StudyConfig` that replace the file's (e.g. from the CLI).
+        Attribute values of :class:`StudyConfig` that replace the file's (e.g. from the CLI),
+        checked like the file's values.
 
     Raises
     ------
     ConfigError
-        Naming the missing or invalid key and its value.
+        Naming the file (and the overrides), the key and its value.
     """
     path = Path(path) if path else default_path()
-    try:
-        doc = yaml.safe_load(path.read_text())
-    except (OSError, yaml.YAMLError) as err:
-        raise ConfigError(f'cannot read study config {path}: {err}') from None
-    if not isinstance(doc, dict):
-        raise ConfigError(f'study config {path} is not a mapping')
-    exc = _get(doc, 'excitation', dict)
-    ana = _get(doc, 'analysis', dict)
-    freq = _get(doc, 'frequency', dict)
-    step = _get(doc, 'step_response', dict)
-    values = {
-        'positions': _get(doc, 'positions', tuple), 'scenarios': _get(doc, 'scenarios', tuple),
-        'sample_rate': _get(doc, 'sample_rate', float),
-        'direction': _get(exc, 'direction', str, 'excitation.'),
-        'amplitude': _get(exc, 'amplitude', float, 'excitation.'),
-        'band': _get(exc, 'band', tuple, 'excitation.'),
-        'duration': _get(exc, 'duration', float, 'excitation.'),
-        'seed': _get(exc, 'seed', int, 'excitation.'),
-        'nperseg': _get(ana, 'nperseg', int, 'analysis.'),
-        'f_max': _get(ana, 'f_max', float, 'analysis.'),
-        'coherence_min': _get(ana, 'coherence_min', float, 'analysis.'),
-        'freq_grid': (_get(freq, 'f_min', float, 'frequency.'),
-                   _get(freq, 'f_max', float, 'frequency.'),
-                   _get(freq, 'n_points', int, 'frequency.')),
-        'pma_force_amplitude': _get(doc, 'pma_force_amplitude', float),
-        'step_position': _get(step, 'position', str, 'step_response.'),
-        'step_amplitude': _get(step, 'amplitude', float, 'step_response.'),
-        'step_duration': _get(step, 'duration', float, 'step_response.')}
-    values.update({k: v for k, v in overrides.items() if v is not None})
-    return _validated(StudyConfig(**values))
-
-
-def _validated(cfg: StudyConfig) -> StudyConfig:
-    for name in ('sample_rate', 'amplitude', 'duration', 'f_max', 'pma_force_amplitude',
-                 'step_amplitude', 'step_duration'):
-        _positive(name, getattr(cfg, name))
-    if cfg.direction not in AXES:
-        raise ConfigError(f'study config: excitation.direction = {cfg.direction!r} is not '
-                          'one of x, y, z')
-    if cfg.scenarios[0] != 'baseline':
-        raise ConfigError(f'study config: scenarios must start with baseline, got '
-                          f'{cfg.scenarios[0]!r}')
-    lo, hi = (float(v) for v in cfg.band)
-    if not 0 <= lo < hi < cfg.sample_rate / 2:
-        raise ConfigError(f'study config: excitation.band = {list(cfg.band)} must satisfy '
-                          f'0 <= low < high < sample_rate / 2 = {cfg.sample_rate / 2} Hz')
-    if not 16 <= cfg.nperseg <= cfg.duration * cfg.sample_rate:
-        raise ConfigError(f'study config: analysis.nperseg = {cfg.nperseg} must lie in '
-                          f'[16, duration * sample_rate]')
-    if not 0 < cfg.coherence_min < 1:
-        raise ConfigError(f'study config: analysis.coherence_min = {cfg.coherence_min} '
-                          'must lie in (0, 1)')
-    return cfg
+    doc = read_mapping(path)
+    source = str(path)
+    build(StudyFile, doc, source)                         # the file alone is valid
+    overrides = {k: v for k, v in overrides.items() if v is not None}
+    if overrides:
+        doc = copy.deepcopy(doc)
+        for name, value in overrides.items():
+            if name not in FILE_KEYS:
+                near = closest(name, FILE_KEYS)
+                raise ConfigError(f'unknown study setting {name!r}'
+                                  f'{f"; did you mean {near!r}?" if near else ""}')
+            _set(doc, FILE_KEYS[name], value)
+        source = f'{path} with {", ".join(f"{k}={v!r}" for k, v in overrides.items())}'
+    study = build(StudyFile, doc, source)
+    _check_names(study, source)
+    return StudyConfig(**{name: _get(study, key) for name, key in FILE_KEYS.items()})

@@ -2,12 +2,53 @@
 Command-line entry points of the testbed (ROS-free).
 
 The helpers below give every command the same model options (machine file, positions file,
-position name, mesh size) and the same logging setup.
+position name, mesh size), the same logging setup and the same handling of a user's mistake
+(:func:`run_command`: one line ``<prog>: error: <message>`` on stderr, exit code 1, no
+traceback; argparse's usage errors keep exit code 2).
 """
 from __future__ import annotations
 
 import argparse
 import logging
+import sys
+from typing import Callable
+
+from pentapod_sim.errors import (
+    BagError,
+    ConfigError,
+    ModelFileError,
+    PortError,
+    UnreachablePoseError,
+)
+
+#: Errors that come from the user's input (files, options); shown without a traceback.
+USER_ERRORS = (ConfigError, UnreachablePoseError, PortError, ModelFileError, BagError, OSError)
+#: Exit code of a command stopped by a user error (argparse uses 2 for a bad command line).
+EXIT_USER_ERROR = 1
+
+
+def run_command(prog: str, func: Callable[[argparse.Namespace], int],
+                args: argparse.Namespace, errors: tuple[type[BaseException], ...] = ()) -> int:
+    """
+    Run ``func(args)``; a user error is printed once, on one line, and gives exit code 1.
+
+    Parameters
+    ----------
+    prog : str
+        Command name that starts the error line.
+    func : callable
+        The command; returns its exit code.
+    args : argparse.Namespace
+        Parsed options.
+    errors : tuple of exception types
+        Further errors to treat as the user's (besides :data:`USER_ERRORS`).
+    """
+    try:
+        return func(args)
+    except USER_ERRORS + tuple(errors) as err:
+        text = ' '.join(str(err).split('\n')) or type(err).__name__
+        print(f'{prog}: error: {text}', file=sys.stderr, flush=True)
+        return EXIT_USER_ERROR
 
 
 def add_model_arguments(parser: argparse.ArgumentParser, position: str = 'P1') -> None:
@@ -43,25 +84,34 @@ def model_from_args(args: argparse.Namespace):
     Raises
     ------
     ConfigError
-        If a file or value is invalid, or the position name is unknown.
+        If a file or value is invalid, the position name is unknown or the position cannot
+        be reached (the message names the positions file).
     """
-    from pentapod_sim.errors import ConfigError
     from pentapod_sim.fe import (
         assembly,
         params,  # heavy imports only when a model is built
     )
+    from pentapod_sim.schema import closest
 
     machine = params.load_machine(args.machine)
-    positions = params.load_positions(args.positions)
+    path = params.positions_path(args.positions)
+    positions = params.load_positions(path)
     if args.position not in positions:
-        raise ConfigError(f'unknown position {args.position!r}; known: '
-                          f'{", ".join(sorted(positions))}')
+        near = closest(args.position, positions)
+        raise ConfigError(f'{path}: no position {args.position!r}'
+                          f'{f"; did you mean {near!r}?" if near else ""} (known: '
+                          f'{", ".join(positions)})')
     element_size = args.element_size
     if args.refine is not None:
         if not args.refine > 0:
             raise ConfigError(f'--refine must be > 0, got {args.refine}')
         element_size = machine.mesh.element_size / args.refine
-    return assembly.build_model(machine, positions[args.position], element_size=element_size)
+    try:
+        return assembly.build_model(machine, positions[args.position],
+                                    element_size=element_size)
+    except UnreachablePoseError as err:
+        raise ConfigError(f'{path}: position {args.position!r} cannot be reached with '
+                          f'{machine.source}: {err}') from None
 
 
 def configure_logging(verbose: bool = False) -> None:

@@ -24,6 +24,7 @@ from pentapod_sim.analysis.bag_reader import open_bag
 from pentapod_sim.analysis.estimation import amplitude_spectrum, EXCITATIONS, frf_from_series
 from pentapod_sim.analysis.export import write_csv, write_uff58
 from pentapod_sim.analysis.peaks import find_resonances, peak_reductions
+from pentapod_sim.cli import run_command
 from pentapod_sim.errors import BagError
 from pentapod_sim.interface import PMA_STATE
 
@@ -212,11 +213,7 @@ def main(argv=None) -> int:
     commands = {'info': cmd_info, 'frf': cmd_frf, 'time': cmd_time,
                 'amplitudes': cmd_amplitudes,
                 'peaks': lambda a: cmd_frf(a, plot=False)}
-    try:
-        return commands[args.command](args)
-    except (BagError, ValueError) as err:
-        print(f'analyze: error: {err}', file=sys.stderr)
-        return 2
+    return run_command('analyze', commands[args.command], args, errors=(ValueError,))
 
 
 if __name__ == '__main__':

@@ -22,8 +22,8 @@ from pathlib import Path
 import sys
 import time
 
-from pentapod_sim.cli import add_model_arguments, configure_logging, model_from_args
-from pentapod_sim.errors import ConfigError, ModalError, UnreachablePoseError
+from pentapod_sim.cli import add_model_arguments, configure_logging, model_from_args, run_command
+from pentapod_sim.errors import ModalError
 from pentapod_sim.modal.causes import (
     analyse_causes,
     DEFAULT_ALPHA,
@@ -114,14 +114,10 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point of the `modes` executable; returns the exit code."""
     args = _parser().parse_args(argv)
     if args.n_modes is not None and args.n_modes < 1:
-        print(f'modes: --n-modes must be >= 1, got {args.n_modes}', file=sys.stderr)
+        print(f'modes: error: --n-modes must be >= 1, got {args.n_modes}', file=sys.stderr)
         return 2
     configure_logging(args.verbose)
-    try:
-        return run(args)
-    except (ConfigError, UnreachablePoseError, ModalError, OSError) as err:
-        print(f'modes: {err}', file=sys.stderr)
-        return 2
+    return run_command('modes', run, args, errors=(ModalError,))
 
 
 if __name__ == '__main__':

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import copy
+from dataclasses import replace
 import json
 import logging
 from pathlib import Path
@@ -22,8 +23,8 @@ import sys
 
 import numpy as np
 
-from pentapod_sim.cli import add_model_arguments, configure_logging, model_from_args
-from pentapod_sim.errors import ConfigError, ModelFileError, PortError
+from pentapod_sim.cli import add_model_arguments, configure_logging, model_from_args, run_command
+from pentapod_sim.errors import ConfigError
 from pentapod_sim.plant import frf, frf_plot, reduction
 from pentapod_sim.plant.build import (
     from_modal_data,
@@ -32,6 +33,7 @@ from pentapod_sim.plant.build import (
     plant_from_fe,
     reduce_plant,
 )
+from pentapod_sim.plant.config import RelevanceRule
 
 LOGGER = logging.getLogger('statespace')
 DEFAULT_OUT = Path('out') / 'statespace'
@@ -41,7 +43,7 @@ DEFAULT_DAMPERS = [f'strut{i}_bending_moment_{k}=2e4' for i in range(1, 6) for k
 
 
 def _positions(args) -> list[str]:
-    return [p for p in (args.position or ','.join(args.cfg['positions'])).split(',') if p]
+    return [p for p in (args.position or ','.join(args.cfg.positions)).split(',') if p]
 
 
 def _plants(args):
@@ -49,8 +51,8 @@ def _plants(args):
     for position in _positions(args):
         model_args = copy.copy(args)
         model_args.position = position
-        LOGGER.info('%s: building FE model', position)
         fe = model_from_args(model_args)
+        LOGGER.info('%s: FE model built', position)
         plant_all, keep = plant_from_fe(fe, args.cfg, lambda msg: LOGGER.info('%s', msg))
         plant_all.meta['position'] = position
         args.fe_model = fe
@@ -65,25 +67,21 @@ def _pair(args) -> tuple[str, str]:
         if not sep:
             raise ConfigError(f'--pair must be OUTPUT/INPUT, got {args.pair!r}')
     else:
-        out, inp = args.cfg['report_pair']
+        out, inp = args.cfg.report_pair
     check_names([out], 'output')
     check_names([inp], 'input')
     return out, inp
 
 
-def _freq(cfg: dict) -> np.ndarray:
-    f = cfg['frequency']
-    return np.linspace(float(f['f_min']), float(f['f_max']), int(f['n_points']))
-
-
-def _pair_rule(args) -> list[dict]:
+def _pair_rule(args) -> list[RelevanceRule]:
     """Relevance for the report: the report pair alone at the first rule's limit (or --limit)."""
     out, inp = _pair(args)
-    rule = {k: v for k, v in args.cfg['relevance'][0].items() if k in ('abs_limit', 'rel_limit',
-                                                                       'count')}
+    rule = replace(args.cfg.relevance[0], inputs=(inp,), outputs=(out,))
     if args.limit is not None:
-        rule = {'abs_limit': args.limit}
-    return [dict(rule, inputs=[inp], outputs=[out])]
+        if not args.limit > 0:
+            raise ConfigError(f'--limit = {args.limit!r} (unit of the pair): must be > 0')
+        rule = replace(rule, abs_limit=args.limit, rel_limit=None, count=None)
+    return [rule]
 
 
 def _direct_check(fe, pair_all, f_max: float) -> dict:
@@ -105,7 +103,7 @@ def _direct_check(fe, pair_all, f_max: float) -> dict:
 def cmd_report(args) -> int:
     """Modes kept, static error with/without correction and FRF error for the report pair."""
     out, inp = _pair(args)
-    freq = _freq(args.cfg)
+    freq = args.cfg.frequency.grid()
     rows = []
     for position, plant_all, _ in _plants(args):
         pair_all = plant_all.select([inp], [out])
@@ -113,8 +111,8 @@ def cmd_report(args) -> int:
         reference = frf.modal_frf(pair_all, freq).H
         row = {'position': position, 'pair': f'{out}/{inp}', 'n_dof': plant_all.meta['n_dof'],
                'modes_computed': plant_all.n_modes, 'modes_kept': int(keep.size),
-               'relevance': {k: v for k, v in _pair_rule(args)[0].items()
-                             if k not in ('inputs', 'outputs')},
+               'relevance': dict(_pair_rule(args)[0].criterion,
+                                 measure=_pair_rule(args)[0].measure),
                'static_compliance_m_per_n': float(pair_all.meta['static_compliance_full'][0][0])}
         for corrected in (False, True):
             red = reduce_plant(pair_all, keep, corrected)
@@ -150,9 +148,9 @@ def cmd_report(args) -> int:
 def cmd_frf(args) -> int:
     """FRF of the report pair (kept modes, configured correction) per position: PNG + CSV."""
     out, inp = _pair(args)
-    freq, results, marks = _freq(args.cfg), [], []
+    freq, results, marks = args.cfg.frequency.grid(), [], []
     for position, plant_all, keep in _plants(args):
-        plant = reduce_plant(plant_all, keep, bool(args.cfg['static_correction']))
+        plant = reduce_plant(plant_all, keep, args.cfg.static_correction)
         results.append(frf.modal_frf(plant.select([inp], [out]), freq, label=position))
         marks.append(plant_all.frequencies_hz)
     stem = f'frf_{out}_{inp}_{"_".join(r.label for r in results)}'
@@ -173,7 +171,7 @@ def cmd_dcgain(args) -> int:
         gains = reduction.modal_dc_gains(pair_all.omega, pair_all.b, pair_all.c_disp)[:, 0, 0]
         png = frf_plot.dc_gain_plot(gains, pair_all.frequencies_hz,
                                args.out / f'dcgain_{out}_{inp}_{position}.png',
-                               limit=rule.get('abs_limit'), keep=keep,
+                               limit=rule.abs_limit, keep=keep,
                                title=f'{position}: dc gain per mode, {out} / {inp}; '
                                      f'{keep.size} of {gains.size} kept')
         table = args.out / f'dcgain_{out}_{inp}_{position}.csv'
@@ -203,9 +201,9 @@ def cmd_closed_loop(args) -> int:
     """Open vs closed-loop FRF of the report pair with added viscous dampers."""
     out, inp = _pair(args)
     dampers = _dampers(args.damper or DEFAULT_DAMPERS)
-    freq = _freq(args.cfg)
+    freq = args.cfg.frequency.grid()
     for position, plant_all, keep in _plants(args):
-        plant = reduce_plant(plant_all, keep, bool(args.cfg['static_correction']))
+        plant = reduce_plant(plant_all, keep, args.cfg.static_correction)
         open_ = frf.modal_frf(plant, freq, label=f'{position} open loop')
         closed = frf.closed_loop_frf(plant, dampers, freq, label=f'{position} damped')
         stem = f'closed_loop_{out}_{inp}_{position}'
@@ -223,18 +221,16 @@ def cmd_build(args) -> int:
     """Build and save plant model files (from the FE model or from external modal data)."""
     if args.modal_data:
         from pentapod_sim.plant.modal_data import load_modal_data
-        from pentapod_sim.plant.ports import INPUT_NAMES, OUTPUT_NAMES
         data = load_modal_data(args.modal_data, args.strut_frames)
-        inputs = list(INPUT_NAMES) if args.cfg['inputs'] == 'all' else args.cfg['inputs']
-        outputs = list(OUTPUT_NAMES) if args.cfg['outputs'] == 'all' else args.cfg['outputs']
-        zeta = data.zeta if data.zeta is not None else args.cfg['damping_ratio']
+        zeta = data.zeta if data.zeta is not None else args.cfg.damping_ratio
         plant = from_modal_data(data.frequencies_hz, data.point_shapes, data.strut_frames,
-                                inputs, outputs, zeta, meta={'source': data.source})
+                                list(args.cfg.inputs), list(args.cfg.outputs), zeta,
+                                meta={'source': data.source})
         path = plant.save(args.out / f'plant_{Path(args.modal_data).stem}.npz')
         print(f'wrote {path} ({plant.n_modes} modes, no reduction, no static correction)')
         return 0
     for position, plant_all, keep in _plants(args):
-        plant = reduce_plant(plant_all, keep, bool(args.cfg['static_correction']))
+        plant = reduce_plant(plant_all, keep, args.cfg.static_correction)
         path = plant.save(args.out / f'plant_{position}.npz')
         print(f'wrote {path} ({plant.n_modes} of {plant_all.n_modes} modes, '
               f'{len(plant.input_names)} inputs, {len(plant.output_names)} outputs)')
@@ -275,12 +271,11 @@ def main(argv: list[str] | None = None) -> int:
     """Run the `statespace` command line; returns the exit code."""
     args = _parser().parse_args(argv)
     configure_logging(args.verbose)
-    try:
+
+    def command(args) -> int:
         args.cfg = load_reduction_config(args.config)
         return args.func(args)
-    except (ConfigError, ModelFileError, PortError) as err:
-        LOGGER.error('%s', err)
-        return 2
+    return run_command('statespace', command, args)
 
 
 if __name__ == '__main__':

@@ -1,29 +1,28 @@
 """
-Machine parameter file (``config/machine.yaml``): schema, units and validation.
+Machine parameter file (``config/machine.yaml``) and named positions (``config/positions.yaml``).
 
 Every parameter is a field of a frozen dataclass whose metadata holds its unit and its
-admissible range; :func:`load_machine` checks the YAML against that schema (missing keys,
-unknown keys, wrong types, values out of range) and raises
-:class:`pentapod_sim.errors.ConfigError` naming the key path and the bad value.
+admissible range (:mod:`pentapod_sim.schema`, the one validation style of all configuration
+files); :func:`load_machine` checks the YAML against that schema (missing keys, unknown keys
+with the closest known one, wrong types, values out of range) and raises
+:class:`pentapod_sim.errors.ConfigError` naming the file, the key path and the bad value.
 Quantities in radians may be written in degrees in YAML by appending ``_deg`` to the key.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field, fields, is_dataclass, replace
-import math
+from dataclasses import dataclass, replace
 import os
 from pathlib import Path
 import typing
 
 import numpy as np
-import yaml
 
 from pentapod_sim.errors import ConfigError
 from pentapod_sim.paths import config_dir
+from pentapod_sim.schema import ANY, build, internal, NON_NEGATIVE, POSITIVE, read_mapping, spec
 
-POSITIVE = 'positive'
-NON_NEGATIVE = 'non-negative'
-ANY = 'any'
+__all__ = ['config_dir', 'load_machine', 'load_positions', 'machine_from_dict', 'MachineParams',
+           'machine_path', 'Pose', 'positions_path']
 
 
 def _f(unit: str, rule: str = POSITIVE, length: int | None = None,
@@ -33,10 +32,7 @@ def _f(unit: str, rule: str = POSITIVE, length: int | None = None,
 
     ``per_strut=True``: a tuple of 5 values (struts 1..5); the YAML may give one number for all.
     """
-    if per_strut:
-        length = 5
-    return field(metadata={'unit': unit, 'rule': rule, 'length': length,
-                           'per_strut': per_strut})
+    return spec(unit, rule, length=5 if per_strut else length, broadcast=per_strut)
 
 
 @dataclass(frozen=True)
@@ -44,7 +40,7 @@ class MeshParams:
     """Beam meshing: target element length [m] and least elements per member [-]."""
 
     element_size: float = _f('m')
-    min_elements_per_member: int = field(metadata={'unit': '-', 'rule': POSITIVE})
+    min_elements_per_member: int = _f('-')
 
 
 @dataclass(frozen=True)
@@ -85,7 +81,7 @@ class FrameParams:
     bp_bracket: RhsSection
     bed_mass: float = _f('kg')
     bed_z: float = _f('m')
-    bed_inertia: tuple = _f('kg m^2', length=3)
+    bed_inertia: tuple[float, ...] = _f('kg m^2', length=3)
 
 
 @dataclass(frozen=True)
@@ -102,15 +98,15 @@ class BpJointParams:
     """BP cardan joints: layout, needle-bearing stiffness, gimbal mass and angle limit."""
 
     radius: float = _f('m')
-    angles: tuple = _f('rad', ANY, length=5)
-    z: tuple = _f('m', ANY, length=5)
+    angles: tuple[float, ...] = _f('rad', ANY, length=5)
+    z: tuple[float, ...] = _f('m', ANY, length=5)
     needle_axial_stiffness: float = _f('N/m')
     needle_cardan1_stiffness: float = _f('N/m')
     needle_cardan2_stiffness: float = _f('N/m')
     torsion_stiffness: float = _f('N m/rad')
     angle_max: float = _f('rad')
     gimbal_mass: float = _f('kg')
-    gimbal_inertia: tuple = _f('kg m^2', length=3)
+    gimbal_inertia: tuple[float, ...] = _f('kg m^2', length=3)
 
 
 @dataclass(frozen=True)
@@ -132,9 +128,9 @@ class StrutParams:
     give one number for all struts).
     """
 
-    tube_length: tuple = _f('m', per_strut=True)
-    stroke_min: tuple = _f('m', per_strut=True)
-    stroke_max: tuple = _f('m', per_strut=True)
+    tube_length: tuple[float, ...] = _f('m', per_strut=True)
+    stroke_min: tuple[float, ...] = _f('m', per_strut=True)
+    stroke_max: tuple[float, ...] = _f('m', per_strut=True)
     section: RhsSection
     screw_mass_per_length: float = _f('kg/m', NON_NEGATIVE)
     shear_factor: float = _f('-')
@@ -145,7 +141,7 @@ class WpJointParams:
     """WP cardan joints: ring radius [m], heights above the nose [m], stiffness, limit."""
 
     radius: float = _f('m')
-    height: tuple = _f('m', ANY, length=5)
+    height: tuple[float, ...] = _f('m', ANY, length=5)
     axial_stiffness: float = _f('N/m')
     lateral_stiffness: float = _f('N/m')
     torsion_stiffness: float = _f('N m/rad')
@@ -158,7 +154,7 @@ class PlatformParams:
 
     mass: float = _f('kg')
     cog_above_nose: float = _f('m', ANY)
-    inertia: tuple = _f('kg m^2', length=3)
+    inertia: tuple[float, ...] = _f('kg m^2', length=3)
     tcp_below_nose: float = _f('m', NON_NEGATIVE)
     pma_mount_above_tcp: float = _f('m', ANY)
 
@@ -179,6 +175,20 @@ class Pose:
 
 
 @dataclass(frozen=True)
+class NamedPose(Pose):
+    """A pose of config/positions.yaml with an optional description."""
+
+    description: str = spec(default='', description='what the position is for')
+
+
+@dataclass(frozen=True)
+class PositionsFile:
+    """config/positions.yaml: the named machine positions."""
+
+    positions: dict[str, NamedPose] = spec(min_length=1, description='named machine positions')
+
+
+@dataclass(frozen=True)
 class MachineParams:
     """All parameters of the pentapod machine model (see config/machine.yaml)."""
 
@@ -192,72 +202,10 @@ class MachineParams:
     wp_joints: WpJointParams
     platform: PlatformParams
     home_pose: Pose
-    source: str = field(default='', metadata={'internal': True})
+    source: str = internal()
 
-
-def _check_number(value: typing.Any, rule: str, path: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ConfigError(f'{path}: expected a number, got {value!r}')
-    value = float(value)
-    if not math.isfinite(value):
-        raise ConfigError(f'{path}: value {value!r} is not finite')
-    if rule == POSITIVE and value <= 0.0:
-        raise ConfigError(f'{path}: value {value!r} must be > 0')
-    if rule == NON_NEGATIVE and value < 0.0:
-        raise ConfigError(f'{path}: value {value!r} must be >= 0')
-    return value
-
-
-def _parse_value(value: typing.Any, meta: dict, path: str, is_int: bool) -> typing.Any:
-    """Check one leaf value against its metadata; return float, int or tuple of floats."""
-    length = meta.get('length')
-    if meta.get('per_strut') and isinstance(value, (int, float)) and not isinstance(value, bool):
-        value = [value] * length          # one number for all struts
-    if length is not None:
-        if not isinstance(value, (list, tuple)) or len(value) != length:
-            raise ConfigError(f'{path}: expected a list of {length} numbers, got {value!r}')
-        return tuple(_check_number(v, meta['rule'], f'{path}[{k}]')
-                     for k, v in enumerate(value))
-    if is_int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise ConfigError(f'{path}: expected an integer, got {value!r}')
-        _check_number(value, meta['rule'], path)
-        return value
-    return _check_number(value, meta['rule'], path)
-
-
-def _build(cls: type, data: typing.Any, path: str) -> typing.Any:
-    """Build dataclass ``cls`` from a YAML mapping, validating every key recursively."""
-    if not isinstance(data, dict):
-        raise ConfigError(f'{path or "<root>"}: expected a mapping, got {data!r}')
-    hints = typing.get_type_hints(cls)
-    remaining = dict(data)
-    kwargs = {}
-    for fld in fields(cls):
-        if fld.metadata.get('internal'):
-            continue
-        key_path = f'{path}.{fld.name}' if path else fld.name
-        hint = hints[fld.name]
-        deg_key = fld.name + '_deg'
-        if fld.metadata.get('unit') == 'rad' and deg_key in remaining:
-            if fld.name in remaining:
-                raise ConfigError(f'{key_path}: give either {fld.name} or {deg_key}, not both')
-            value = _parse_value(remaining.pop(deg_key), fld.metadata,
-                                 f'{path}.{deg_key}' if path else deg_key, False)
-            kwargs[fld.name] = (tuple(math.radians(v) for v in value) if isinstance(value, tuple)
-                                else math.radians(value))
-            continue
-        if fld.name not in remaining:
-            raise ConfigError(f'{key_path}: missing key')
-        value = remaining.pop(fld.name)
-        if is_dataclass(hint):
-            kwargs[fld.name] = _build(hint, value, key_path)
-        else:
-            kwargs[fld.name] = _parse_value(value, fld.metadata, key_path, hint is int)
-    if remaining:
-        bad = ', '.join(f'{path}.{k}' if path else str(k) for k in remaining)
-        raise ConfigError(f'unknown key(s): {bad}')
-    return cls(**kwargs)
+    def __post_init__(self) -> None:
+        _check_consistency(self)
 
 
 def _check_consistency(m: MachineParams) -> None:
@@ -291,14 +239,14 @@ def _check_section(sec: RhsSection, path: str) -> None:
                           f'{sec.width!r} x {sec.height!r} section')
 
 
-def _read_yaml(path: str | os.PathLike) -> typing.Any:
-    try:
-        with open(path, encoding='utf-8') as stream:
-            return yaml.safe_load(stream)
-    except OSError as err:
-        raise ConfigError(f'cannot read parameter file {path}: {err}') from None
-    except yaml.YAMLError as err:
-        raise ConfigError(f'parameter file {path} is not valid YAML: {err}') from None
+def machine_path(path: str | os.PathLike | None = None) -> Path:
+    """``path``, or machine.yaml of :func:`config_dir` if None."""
+    return Path(path) if path is not None else config_dir() / 'machine.yaml'
+
+
+def positions_path(path: str | os.PathLike | None = None) -> Path:
+    """``path``, or positions.yaml of :func:`config_dir` if None."""
+    return Path(path) if path is not None else config_dir() / 'positions.yaml'
 
 
 def machine_from_dict(data: dict, source: str = '<dict>') -> MachineParams:
@@ -308,11 +256,9 @@ def machine_from_dict(data: dict, source: str = '<dict>') -> MachineParams:
     Raises
     ------
     ConfigError
-        Naming the key path and value of the first problem found.
+        Naming ``source``, the key path and value of the first problem found.
     """
-    params = _build(MachineParams, data, '')
-    _check_consistency(params)
-    return replace(params, source=source)
+    return replace(build(MachineParams, data, source), source=source)
 
 
 def load_machine(path: str | os.PathLike | None = None) -> MachineParams:
@@ -329,8 +275,8 @@ def load_machine(path: str | os.PathLike | None = None) -> MachineParams:
     MachineParams
         Frozen, validated parameters in SI units (angles in rad).
     """
-    path = Path(path) if path is not None else config_dir() / 'machine.yaml'
-    return machine_from_dict(_read_yaml(path), source=str(path))
+    path = machine_path(path)
+    return machine_from_dict(read_mapping(path), source=str(path))
 
 
 def load_positions(path: str | os.PathLike | None = None) -> dict[str, np.ndarray]:
@@ -340,24 +286,14 @@ def load_positions(path: str | os.PathLike | None = None) -> dict[str, np.ndarra
     Parameters
     ----------
     path : str or path-like, optional
-        YAML file with a mapping ``positions: {name: {x, y, z, a|a_deg, b|b_deg}}``; an
-        optional ``description`` per entry is ignored. Default ``positions.yaml`` in
-        :func:`config_dir`.
+        YAML file with a mapping ``positions: {name: {x, y, z, a|a_deg, b|b_deg}}`` and an
+        optional ``description`` per entry. Default ``positions.yaml`` in :func:`config_dir`.
 
     Returns
     -------
     dict of str to (5,) ndarray
         Pose x, y, z [m], a, b [rad] of the TCP for each name.
     """
-    path = Path(path) if path is not None else config_dir() / 'positions.yaml'
-    data = _read_yaml(path)
-    if not isinstance(data, dict) or set(data) != {'positions'}:
-        raise ConfigError(f'{path}: expected a single top-level key "positions"')
-    if not isinstance(data['positions'], dict) or not data['positions']:
-        raise ConfigError(f'{path}: positions must be a non-empty mapping')
-    out = {}
-    for name, entry in data['positions'].items():
-        if isinstance(entry, dict):
-            entry = {k: v for k, v in entry.items() if k != 'description'}
-        out[str(name)] = _build(Pose, entry, f'positions.{name}').as_array()
-    return out
+    path = positions_path(path)
+    doc = build(PositionsFile, read_mapping(path), str(path))
+    return {name: entry.as_array() for name, entry in doc.positions.items()}

@@ -15,7 +15,6 @@ from typing import Callable, Mapping, Sequence
 
 import numpy as np
 import numpy.typing as npt
-import yaml
 
 from pentapod_sim import __version__
 from pentapod_sim.errors import ConfigError, ModelFileError
@@ -23,14 +22,18 @@ from pentapod_sim.fe.assembly import build_model
 from pentapod_sim.fe.params import load_machine
 from pentapod_sim.modal.solver import solve_modes
 from pentapod_sim.paths import config_dir
+from pentapod_sim.plant.config import (
+    load_reduction_config,
+    ReductionConfig,
+    relevance_rule,
+    RelevanceRule,
+)
 from pentapod_sim.plant.model import PlantModel
 from pentapod_sim.plant.ports import (
     check_names,
     input_matrix,
-    INPUT_NAMES,
     modal_points,
     output_matrices,
-    OUTPUT_NAMES,
 )
 from pentapod_sim.plant.ports import ports as port_list
 from pentapod_sim.plant.reduction import (
@@ -41,39 +44,6 @@ from pentapod_sim.plant.reduction import (
 )
 
 LOG = logging.getLogger(__name__)
-
-
-def load_reduction_config(path: str | Path | None = None) -> dict:
-    """
-    Read config/reduction.yaml (or ``path``) and check its values.
-
-    Raises
-    ------
-    ConfigError
-        For a missing file, a missing key or a bad value (the message names it).
-    """
-    path = Path(path) if path is not None else config_dir() / 'reduction.yaml'
-    try:
-        cfg = yaml.safe_load(path.read_text())
-    except (OSError, yaml.YAMLError) as err:
-        raise ConfigError(f'cannot read reduction config {path}: {err}') from None
-    for key in ('inputs', 'outputs', 'relevance', 'damping_ratio', 'static_correction',
-                'modes_f_max', 'frequency', 'sample_rate'):
-        if key not in cfg:
-            raise ConfigError(f'{path}: missing key {key!r}')
-    zeta = np.asarray(cfg['damping_ratio'], dtype=float)
-    if np.any(~np.isfinite(zeta)) or np.any(zeta < 0):
-        raise ConfigError(f'{path}: damping_ratio must be >= 0, got {cfg["damping_ratio"]!r}')
-    for key in ('modes_f_max', 'sample_rate'):
-        if not isinstance(cfg[key], (int, float)) or cfg[key] <= 0:
-            raise ConfigError(f'{path}: {key} must be > 0, got {cfg[key]!r}')
-    return cfg
-
-
-def _names(spec, known: tuple[str, ...], direction: str) -> list[str]:
-    names = list(known) if spec == 'all' else list(spec)
-    check_names(names, direction)
-    return names
 
 
 def from_modal_data(frequencies_hz: npt.ArrayLike, point_shapes: Mapping[str, npt.ArrayLike],
@@ -122,29 +92,27 @@ def from_modal_data(frequencies_hz: npt.ArrayLike, point_shapes: Mapping[str, np
                       dict(meta or {}))
 
 
-def keep_by_relevance(plant_all: PlantModel, relevance: Sequence[dict]) -> np.ndarray:
+def keep_by_relevance(plant_all: PlantModel,
+                      relevance: Sequence[RelevanceRule | Mapping]) -> np.ndarray:
     """
     Indices of the modes kept by any of the relevance criteria (see config/reduction.yaml).
 
-    A rule's optional ``measure`` is 'dc' (default, ``c b / omega^2``) or 'resonance'
+    A rule is a :class:`RelevanceRule` or a mapping with the keys of the file's rules (checked
+    the same way). Its ``measure`` is 'dc' (default, ``c b / omega^2``) or 'resonance'
     (``c b / (2 zeta omega^2)``, for modes with individual damping ratios).
     """
     keep = np.zeros(plant_all.n_modes, dtype=bool)
-    for rule in relevance:
-        sub = plant_all.select(rule['inputs'], rule['outputs'])
-        criterion = {k: rule[k] for k in ('abs_limit', 'rel_limit', 'count') if k in rule}
-        if rule.get('measure', 'dc') == 'resonance':
+    for rule in map(relevance_rule, relevance):
+        sub = plant_all.select(list(rule.inputs), list(rule.outputs))
+        if rule.measure == 'resonance':
             gains = modal_resonance_gains(sub.omega, sub.zeta, sub.b, sub.c_disp)
-        elif rule.get('measure', 'dc') == 'dc':
-            gains = modal_dc_gains(sub.omega, sub.b, sub.c_disp)
         else:
-            raise ConfigError(f'relevance measure must be dc or resonance, got '
-                              f'{rule["measure"]!r}')
-        keep[select_modes(gains, **criterion)] = True
+            gains = modal_dc_gains(sub.omega, sub.b, sub.c_disp)
+        keep[select_modes(gains, **rule.criterion)] = True
     return np.flatnonzero(keep)
 
 
-def plant_from_fe(fe, reduction_cfg: dict, progress: Callable[[str], None] | None = None
+def plant_from_fe(fe, reduction_cfg: ReductionConfig, progress: Callable[[str], None] | None = None
                   ) -> tuple[PlantModel, np.ndarray]:
     """
     Plant with every mode below ``modes_f_max`` of an FE model, and the relevant modes.
@@ -153,7 +121,7 @@ def plant_from_fe(fe, reduction_cfg: dict, progress: Callable[[str], None] | Non
     ----------
     fe : FEModel
         The FE model (:func:`pentapod_sim.fe.assembly.build_model`).
-    reduction_cfg : dict
+    reduction_cfg : ReductionConfig
         As :func:`load_reduction_config` returns.
     progress : callable, optional
         Receives one message per stage.
@@ -169,14 +137,13 @@ def plant_from_fe(fe, reduction_cfg: dict, progress: Callable[[str], None] | Non
     """
     say = progress or (lambda msg: LOG.info('%s', msg))
     cfg = reduction_cfg
-    say(f'FE model: {fe.n_dof} DOF; solving modes below {cfg["modes_f_max"]} Hz')
-    modes = solve_modes(fe.K, fe.M, f_max=float(cfg['modes_f_max']))
+    say(f'FE model: {fe.n_dof} DOF; solving modes below {cfg.modes_f_max} Hz')
+    modes = solve_modes(fe.K, fe.M, f_max=cfg.modes_f_max)
     say(f'{modes.n_modes} modes, {modes.frequencies[0]:.2f} .. {modes.frequencies[-1]:.2f} Hz')
-    inputs = _names(cfg['inputs'], INPUT_NAMES, 'input')
-    outputs = _names(cfg['outputs'], OUTPUT_NAMES, 'output')
+    inputs, outputs = list(cfg.inputs), list(cfg.outputs)
     plant_all = from_modal_data(modes.frequencies, modal_points(fe.points, modes.shapes),
-                                fe.strut_frames, inputs, outputs, cfg['damping_ratio'])
-    keep = keep_by_relevance(plant_all, cfg['relevance'])
+                                fe.strut_frames, inputs, outputs, cfg.damping_ratio)
+    keep = keep_by_relevance(plant_all, cfg.relevance)
     c_disp_full, _ = output_matrices(port_list(fe.points, fe.strut_frames, outputs))
     g_full = static_compliance(fe.K, input_matrix(port_list(fe.points, fe.strut_frames, inputs)),
                                c_disp_full)
@@ -185,7 +152,7 @@ def plant_from_fe(fe, reduction_cfg: dict, progress: Callable[[str], None] | Non
     plant_all.meta.update({
         'pose': [float(v) for v in fe.pose], 'params_sha256': fe.meta.get('params_sha256'),
         'package_version': __version__, 'n_dof': fe.n_dof, 'n_modes_computed': modes.n_modes,
-        'modes_f_max_hz': float(cfg['modes_f_max']), 'static_compliance_full': g_full.tolist()})
+        'modes_f_max_hz': float(cfg.modes_f_max), 'static_compliance_full': g_full.tolist()})
     return plant_all, keep
 
 
@@ -215,7 +182,8 @@ def reduce_plant(plant_all: PlantModel, keep: npt.ArrayLike,
                       plant_all.output_descriptions, meta)
 
 
-def build_plant(position: str | npt.ArrayLike, machine=None, reduction_cfg: dict | None = None,
+def build_plant(position: str | npt.ArrayLike, machine=None,
+                reduction_cfg: ReductionConfig | None = None,
                 progress: Callable[[str], None] | None = None) -> PlantModel:
     """
     Whole chain for one machine position: FE model -> modes -> ports -> reduction.
@@ -226,7 +194,7 @@ def build_plant(position: str | npt.ArrayLike, machine=None, reduction_cfg: dict
         Position name of config/positions.yaml or a pose x, y, z [m], a, b [rad].
     machine : MachineParams, optional
         Default :func:`pentapod_sim.fe.params.load_machine`.
-    reduction_cfg : dict, optional
+    reduction_cfg : ReductionConfig, optional
         Default :func:`load_reduction_config`.
     progress : callable, optional
         Receives one message per stage.
@@ -241,10 +209,10 @@ def build_plant(position: str | npt.ArrayLike, machine=None, reduction_cfg: dict
     machine = load_machine() if machine is None else machine
     plant_all, keep = plant_from_fe(build_model(machine, position), cfg, progress)
     plant_all.meta['position'] = position if isinstance(position, str) else None
-    plant = reduce_plant(plant_all, keep, bool(cfg['static_correction']))
+    plant = reduce_plant(plant_all, keep, cfg.static_correction)
     (progress or (lambda msg: LOG.info('%s', msg)))(
         f'kept {keep.size} of {plant_all.n_modes} modes; static correction '
-        f'{"on" if cfg["static_correction"] else "off"}')
+        f'{"on" if cfg.static_correction else "off"}')
     return plant
 
 
