@@ -1,1 +1,33 @@
-"""Pytest root configuration: tests import the package from this checkout."""
+"""
+Pytest root configuration: tests import the package from this checkout.
+
+The session runs isolated (pentapod_sim/scenario/domain.py): unless the caller set them,
+``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` and a free ``ROS_DOMAIN_ID``, reserved by this
+pytest process until it exits, are put into the environment before any test starts a node, so
+concurrent test runs, studies and users on this host never share a domain.
+"""
+import os
+
+_LEASES = []
+
+
+def pytest_configure(config):
+    """Reserve the session's ROS domain and export the isolation variables."""
+    from pentapod_sim.scenario.domain import isolation
+    changes, lease = isolation(os.environ)
+    os.environ.update(changes)
+    if lease is not None:
+        _LEASES.append(lease)
+
+
+def pytest_unconfigure(config):
+    """Free the session's domain."""
+    while _LEASES:
+        _LEASES.pop().release()
+
+
+def pytest_report_header(config):
+    """Show the session's ROS domain."""
+    held = ' (reserved for this session)' if _LEASES and _LEASES[0].held else ''
+    return (f"ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID')}{held}, "
+            f"ROS_AUTOMATIC_DISCOVERY_RANGE={os.environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE')}")

@@ -6,15 +6,44 @@ it becomes one Node of package pentapod_testbed; the executable follows from the
 prefix exactly as in :mod:`pentapod_sim.scenario.runner` (same parser and table), and every
 node gets the whole file as its parameter file (so ``/**`` entries reach all nodes). The
 launch ends when the plant ends.
+
+Like the runner, the launch isolates its nodes (:mod:`pentapod_sim.scenario.domain`): unless
+set in the environment (or by ``domain_id:=``), ``ROS_AUTOMATIC_DISCOVERY_RANGE`` is
+LOCALHOST and ``ROS_DOMAIN_ID`` a free domain, reserved while ``ros2 launch`` runs.
 """
-from launch.actions import DeclareLaunchArgument, EmitEvent, OpaqueFunction, RegisterEventHandler
+import os
+
+from launch.actions import (
+    DeclareLaunchArgument,
+    EmitEvent,
+    LogInfo,
+    OpaqueFunction,
+    RegisterEventHandler,
+    SetEnvironmentVariable,
+)
 from launch.event_handlers import OnProcessExit
 from launch.events import Shutdown
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
 from launch import LaunchDescription
+from pentapod_sim.scenario.domain import DOMAIN_VAR, isolation, RANGE_VAR
 from pentapod_sim.scenario.files import read_scenario, resolve
+
+#: Domain leases of this launch process: the lock files stay locked until it exits.
+_LEASES = []
+
+
+def _isolation(context):
+    """SetEnvironmentVariable actions for discovery range and domain (user values kept)."""
+    chosen = LaunchConfiguration('domain_id').perform(context) or None
+    changes, lease = isolation(os.environ, chosen)
+    if lease is not None:
+        _LEASES.append(lease)
+    merged = {**os.environ, **changes}
+    return [SetEnvironmentVariable(name, value) for name, value in changes.items()] + [
+        LogInfo(msg=f'{DOMAIN_VAR}={merged[DOMAIN_VAR]}, '
+                    f'{RANGE_VAR}={merged.get(RANGE_VAR, "(unset)")}')]
 
 
 def _nodes(context):
@@ -40,12 +69,16 @@ def _nodes(context):
 
 
 def generate_launch_description():
-    """Arguments: scenario (name or file), steps and duration (plant overrides)."""
+    """Arguments: scenario (name or file), steps and duration (plant overrides), domain_id."""
     return LaunchDescription([
         DeclareLaunchArgument('scenario', default_value='baseline',
                               description='scenario name (config/scenarios) or YAML path'),
         DeclareLaunchArgument('steps', default_value='', description='plant steps override'),
         DeclareLaunchArgument('duration', default_value='',
                               description='plant duration override [s]'),
+        DeclareLaunchArgument('domain_id', default_value='',
+                              description='ROS_DOMAIN_ID of the nodes (default: the '
+                              "environment's, else a free domain reserved for the launch)"),
+        OpaqueFunction(function=_isolation),
         OpaqueFunction(function=_nodes),
     ])

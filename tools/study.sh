@@ -7,5 +7,6 @@ bash "$ROOT/tools/bootstrap.sh"
 # shellcheck source=tools/env.sh
 source "$ROOT/tools/env.sh"
 cd "$ROOT"
-export ROS_DOMAIN_ID="${ROS_DOMAIN_ID:-$(( ($$ % 100) + 101 ))}"
+# each run of the study reserves a free ROS domain with localhost discovery for its nodes
+# (pentapod_sim/scenario/domain.py) unless ROS_DOMAIN_ID is set
 exec python -m pentapod_damper.study "$@"

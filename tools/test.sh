@@ -7,6 +7,6 @@ bash "$ROOT/tools/bootstrap.sh"
 # shellcheck source=tools/env.sh
 source "$ROOT/tools/env.sh"
 cd "$ROOT"
-# a per-run DDS domain keeps concurrent runs on this host apart
-export ROS_DOMAIN_ID="${ROS_DOMAIN_ID:-$(( ($$ % 100) + 1 ))}"
+# conftest.py reserves a free ROS domain for the pytest session (unless ROS_DOMAIN_ID is set)
+# and keeps discovery on this host: concurrent runs on this host never share a domain
 exec python -m pytest -q -p no:cacheprovider "$@"

@@ -24,7 +24,8 @@ import time
 
 import yaml
 
-from pentapod_sim.errors import ConfigError
+from pentapod_sim.errors import ConfigError, RunError
+from pentapod_sim.scenario.domain import DOMAIN_VAR, isolated_env, RANGE_VAR
 from pentapod_sim.scenario.files import read_scenario, resolve, Scenario, ScenarioNode
 
 LOG = logging.getLogger(__name__)
@@ -79,9 +80,21 @@ def run_scenario(path: Path, plant_overrides: dict, timeout: float,
     """
     Start the nodes of a scenario, wait for the plant, stop the rest; return exit code.
 
+    The nodes run isolated (:mod:`pentapod_sim.scenario.domain`): with localhost-only
+    discovery and on a free ROS domain reserved until they have been stopped, unless ``env``
+    (default ``os.environ``) sets ``ROS_AUTOMATIC_DISCOVERY_RANGE`` or ``ROS_DOMAIN_ID``.
     With ``log_dir`` each node's stdout and stderr go to ``log_dir/<node>.log`` instead of
     this process's terminal.
     """
+    with isolated_env(env) as run_env:
+        LOG.info('%s=%s, %s=%s', DOMAIN_VAR, run_env.get(DOMAIN_VAR),
+                 RANGE_VAR, run_env.get(RANGE_VAR, '(unset)'))
+        return _run_nodes(path, plant_overrides, timeout, run_env, log_dir)
+
+
+def _run_nodes(path: Path, plant_overrides: dict, timeout: float,
+               env: dict, log_dir: Path | None) -> int:
+    """Body of :func:`run_scenario`, in the environment ``env``."""
     scenario = read_scenario(path)
     nodes = scenario.nodes
     procs: dict[str, subprocess.Popen] = {}
@@ -143,7 +156,9 @@ def main(argv=None) -> int:
     parser.add_argument('--timing', choices=['lockstep', 'realtime'])
     parser.add_argument('--model-file', help='override plant model_file')
     parser.add_argument('--output-file', help='plant trace .npz (y_k, u_k per step)')
-    parser.add_argument('--domain-id', type=int, help='ROS_DOMAIN_ID for all nodes')
+    parser.add_argument('--domain-id', type=int,
+                        help='ROS_DOMAIN_ID for all nodes (default: $ROS_DOMAIN_ID, else a '
+                        'free domain reserved for the run)')
     parser.add_argument('--timeout', type=float, default=3600.0,
                         help='wall-time limit of the run [s]')
     parser.add_argument('--list', action='store_true', help='only print the nodes')
@@ -161,9 +176,9 @@ def main(argv=None) -> int:
             if value is not None}
         env = dict(os.environ)
         if args.domain_id is not None:
-            env['ROS_DOMAIN_ID'] = str(args.domain_id)
+            env[DOMAIN_VAR] = str(args.domain_id)
         return run_scenario(path, overrides, args.timeout, env)
-    except ConfigError as err:
+    except (ConfigError, RunError) as err:
         print(f'error: {err}', file=sys.stderr)
         return 1
 
