@@ -1,9 +1,15 @@
 """
 Read rosbag2 MCAP bags (ours or any ros2 profile MCAP) ROS-free into numpy arrays.
 
-The MCAP is read sequentially (``mcap.stream_reader.StreamReader``), not through its summary,
-so a bag cut short by a crash still yields every complete chunk; the loss is reported with a
-warning. Files that are not MCAP raise :class:`pentapod_sim.errors.BagError`.
+Each file is read by the fast, verifying reader (:mod:`pentapod_sim.analysis.mcap_scan`):
+chunk CRCs and record lengths are checked, a damaged chunk is skipped, a file cut by a crash
+yields every intact chunk, and each loss is a :class:`~.bag_file.Damage` in ``Bag.damage``
+(file, byte, reason, topics, log-time span, messages lost) plus one
+:class:`~.bag_file.BagDamageWarning` per bag. If the mcap internals that reader uses are
+missing or changed, files are read with the public ``mcap.reader`` API instead
+(:mod:`pentapod_sim.analysis.mcap_public`, one :class:`~.bag_file.McapInternalsWarning`).
+Files that are not MCAP, or hold nothing readable, raise :class:`~.bag_file.UnreadableBagError`
+(a :class:`pentapod_sim.errors.BagError`).
 
 Field specifications (``TOPIC.FIELD``; topic names contain no dots):
 
@@ -18,18 +24,21 @@ Times are header stamps (simulation time) [s] when the type has one, else MCAP l
 import dataclasses
 import logging
 from pathlib import Path
-import struct
 from typing import Optional
 import warnings
 
-from mcap.exceptions import McapError
-from mcap.records import Channel, Chunk, Message, Metadata, Schema
-from mcap.stream_reader import StreamReader
 import numpy as np
 import yaml
 
-from pentapod_sim.analysis import cdr_arrays
-from pentapod_sim.analysis.mcap_chunks import split_chunk
+from pentapod_sim.analysis import cdr_arrays, mcap_public, mcap_scan
+from pentapod_sim.analysis.bag_file import (
+    BagDamageWarning,
+    FileContent,
+    McapInternalsWarning,
+    reconcile,
+    UnreadableBagError,
+)
+from pentapod_sim.analysis.mcap_chunks import InternalsChanged
 from pentapod_sim.analysis.message_store import MessageStore
 from pentapod_sim.errors import BagError
 
@@ -37,6 +46,10 @@ LOGGER = logging.getLogger(__name__)
 STAMPED_TYPES = ('sensor_msgs/msg/JointState', 'geometry_msgs/msg/WrenchStamped',
                  'rosgraph_msgs/msg/Clock')
 WRENCH_FIELDS = ('force.x', 'force.y', 'force.z', 'torque.x', 'torque.y', 'torque.z')
+READERS = ('fast', 'mcap.reader')
+YAML_LOADER = getattr(yaml, 'CSafeLoader', yaml.SafeLoader)  # libyaml: 20x faster
+#: Why the fast reader cannot be used in this process (set once, with the one warning).
+FALLBACK = {'reason': None}
 
 
 @dataclasses.dataclass
@@ -48,6 +61,7 @@ class TopicData:
     schema_text: str
     payloads: MessageStore = dataclasses.field(default_factory=MessageStore)
     _times: list = dataclasses.field(default_factory=list)
+    schema: object = None  # the file's mcap Schema record (for mcap_ros2)
 
     @property
     def count(self) -> int:
@@ -108,6 +122,9 @@ class Bag:
         Bag folder (with metadata.yaml and/or ``*.mcap``) or a single ``.mcap`` file.
     topics : list of str, optional
         Load only these topics (saves memory: their bytes are copied out of each chunk).
+    reader : str
+        ``'fast'`` (default; falls back to ``'mcap.reader'`` if mcap's internals changed) or
+        ``'mcap.reader'`` (the public API, slower, stops a file at its first damage).
 
     Attributes
     ----------
@@ -115,23 +132,38 @@ class Bag:
         ``{topic: TopicData}``.
     custom_data : dict
         Run information (metadata.yaml custom_data merged with MCAP ``pentapod_run`` record).
+    damage : list of Damage
+        Damaged or missing parts; their messages were skipped, everything else was read.
     truncated : bool
         True when a file ended early (crash); only its complete part was loaded.
+    reader : str
+        The reader that read the files.
     """
 
-    def __init__(self, path, topics: Optional[list] = None) -> None:
+    def __init__(self, path, topics: Optional[list] = None, reader: str = 'fast') -> None:
+        if reader not in READERS:
+            raise BagError(f'unknown bag reader {reader!r}; use one of {READERS}')
         self.path = Path(path)
         self.wanted = set(topics) if topics is not None else None
         self.topics: dict = {}
         self.custom_data: dict = {}
         self.mcap_metadata: dict = {}
         self.metadata_yaml: Optional[dict] = None
+        self.damage: list = []
         self.truncated = False
+        self.reader = reader
         for file in self._mcap_files():
-            self._read_file(file)
+            self._merge(self._read_file(file))
         if self.metadata_yaml:
             self.custom_data.update(self.metadata_yaml.get('custom_data') or {})
+            if any(d.lost is None for d in self.damage):
+                self._reconcile_with_metadata_yaml()
         self.custom_data.update(self.mcap_metadata.get('pentapod_run', {}))
+        if not self.topics:
+            raise UnreadableBagError(f'nothing readable in {self.path}: '
+                                     + '; '.join(d.describe() for d in self.damage))
+        if self.damage:
+            warnings.warn(BagDamageWarning(self.damage_summary()), stacklevel=3)
 
     def _mcap_files(self) -> list:
         if self.path.is_file():
@@ -141,73 +173,75 @@ class Bag:
         meta = self.path / 'metadata.yaml'
         if meta.is_file():
             try:
-                doc = yaml.safe_load(meta.read_text(encoding='utf-8'))
+                doc = yaml.load(meta.read_text(encoding='utf-8'), Loader=YAML_LOADER)
                 self.metadata_yaml = doc['rosbag2_bagfile_information']
                 files = [self.path / f for f in self.metadata_yaml['relative_file_paths']]
                 if all(f.is_file() for f in files):
                     return files
             except (yaml.YAMLError, KeyError, TypeError) as err:
+                self.metadata_yaml = None
                 warnings.warn(f'{meta}: unreadable ({err}); using the .mcap files of the folder')
         files = sorted(self.path.glob('*.mcap'))
         if not files:
             raise BagError(f'bag folder {self.path} holds no .mcap file')
         return files
 
-    def _read_file(self, file: Path) -> None:
-        schemas, channels, n_before = {}, {}, self.message_count
-        with open(file, 'rb') as stream:
-            try:
-                reader = StreamReader(stream, emit_chunks=True, record_size_limit=2**31)
-                for n_records, record in enumerate(reader.records):
-                    self._take(record, schemas, channels)
-                    if n_records % 5000 == 4999:  # progress on large bags
-                        LOGGER.info('%s: %d MB read', file.name, stream.tell() >> 20)
-            except McapError as err:
-                if self.message_count == n_before and not channels:
-                    raise BagError(f'{file} is not a readable MCAP file: {err!r}') from None
-                self._warn_truncated(file, err)
-            except (ValueError, EOFError, OSError, struct.error) as err:
-                if not channels:
-                    raise BagError(f'{file} is not a readable MCAP file: {err!r}') from None
-                self._warn_truncated(file, err)
-        LOGGER.info('read %s: %d messages', file, self.message_count - n_before)
+    def _read_file(self, file: Path) -> FileContent:
+        """Read one file with the fast reader, or with mcap.reader if its internals changed."""
+        content = FileContent(file, self.wanted)
+        try:
+            if self.reader == 'fast' and FALLBACK['reason'] is None:
+                try:
+                    mcap_scan.read_file(file, content)
+                    return content
+                except InternalsChanged as err:
+                    _fall_back(err)
+                    content = FileContent(file, self.wanted)
+            mcap_public.read_file(file, content)
+        except UnreadableBagError as err:
+            content = FileContent(file, self.wanted)
+            content.report(0, str(err))
+        except OSError as err:
+            raise BagError(f'cannot read {file}: {err}') from None
+        return content
 
-    def _warn_truncated(self, file: Path, err: Exception) -> None:
-        self.truncated = True
-        warnings.warn(f'{file} ends early ({type(err).__name__}); loaded the readable part: '
-                      f'{self.message_count} messages')
+    def _merge(self, content: FileContent) -> None:
+        for info in content.channels.values():
+            if info.topic not in self.topics:
+                self.topics[info.topic] = TopicData(info.topic, info.msg_type, info.schema_text,
+                                                    schema=info.schema)
+        for topic, segments in content.segments.items():
+            for data, starts, lengths, times in segments:
+                self.topics[topic].payloads.add_segment(data, starts, lengths)
+                self.topics[topic]._times.append(times)
+        for topic, (payloads, times) in content.loose.items():
+            for payload in payloads:
+                self.topics[topic].payloads.append(payload)
+            self.topics[topic]._times.append(np.asarray(times, dtype=np.int64))
+        self.mcap_metadata.update(content.metadata)
+        self.damage.extend(content.damage)
+        self.truncated |= content.truncated
+        if content.reader != 'fast':
+            self.reader = content.reader
+        LOGGER.info('read %s (%s): %d messages, %d damaged parts', content.path,
+                    content.reader, content.message_count, len(content.damage))
 
-    def _take(self, record, schemas: dict, channels: dict) -> None:
-        if isinstance(record, Chunk):
-            data, channel_ids, times, starts, lengths, others = split_chunk(record)
-            for other in others:
-                self._take(other, schemas, channels)
-            for channel_id in np.unique(channel_ids):
-                topic = channels.get(int(channel_id))
-                if topic is not None:
-                    mine = channel_ids == channel_id
-                    segment = (data, starts[mine], lengths[mine])
-                    if self.wanted is not None:
-                        segment = _compact(*segment)  # do not keep the whole chunk alive
-                    topic.payloads.add_segment(*segment)
-                    topic._times.append(times[mine])
-        elif isinstance(record, Message):
-            topic = channels.get(record.channel_id)
-            if topic is not None:
-                topic.payloads.append(record.data)
-                topic._times.append(np.array([record.log_time], dtype=np.int64))
-        elif isinstance(record, Schema):
-            schemas[record.id] = record
-        elif isinstance(record, Channel):
-            schema = schemas.get(record.schema_id)
-            name = schema.name if schema else ''
-            if record.topic not in self.topics:
-                text = schema.data.decode('utf-8', 'replace') if schema else ''
-                self.topics[record.topic] = TopicData(record.topic, name, text)
-            if self.wanted is None or record.topic in self.wanted:
-                channels[record.id] = self.topics[record.topic]
-        elif isinstance(record, Metadata):
-            self.mcap_metadata[record.name] = dict(record.metadata)
+    def _reconcile_with_metadata_yaml(self) -> None:
+        """Count what a cut file lost from metadata.yaml's per-topic message counts."""
+        try:
+            expected = {entry['topic_metadata']['name']: int(entry['message_count'])
+                        for entry in self.metadata_yaml['topics_with_message_count']}
+        except (KeyError, TypeError, ValueError):
+            return
+        read = {name: data.count for name, data in self.topics.items()}
+        reconcile(self.damage, expected, read, self.wanted, 'metadata.yaml', 'metadata.yaml')
+
+    def damage_summary(self) -> str:
+        """The damage in one paragraph (the text of the BagDamageWarning)."""
+        state = 'ends early (cut short)' if self.truncated else 'is damaged'
+        parts = ' | '.join(d.describe() for d in self.damage)
+        return (f'bag {self.path} {state}: loaded the intact part, {self.message_count} '
+                f'messages; {len(self.damage)} damaged or missing part(s): {parts}')
 
     @property
     def message_count(self) -> int:
@@ -290,11 +324,11 @@ class Bag:
 
 def _generic_field(data: TopicData, field: str) -> np.ndarray:
     """Decode a dotted numeric field of any type with mcap_ros2 (one object per message)."""
-    from mcap.records import Schema as McapSchema
     from mcap_ros2.decoder import DecoderFactory
-    schema = McapSchema(id=1, name=data.msg_type, encoding='ros2msg',
-                        data=data.schema_text.encode('utf-8'))
-    decode = DecoderFactory().decoder_for('cdr', schema)
+    try:
+        decode = DecoderFactory().decoder_for('cdr', data.schema)
+    except Exception as err:  # noqa: BLE001 - mcap_ros2's schema parser raises several types
+        raise BagError(f'cannot decode type {data.msg_type!r} of {data.name}: {err}') from None
     if decode is None:
         raise BagError(f'cannot decode type {data.msg_type!r} of {data.name}')
     out = np.empty(data.count)
@@ -316,16 +350,7 @@ def _unknown_joint_field(data: TopicData, field: str, names: list) -> None:
     raise BagError(f'field {field!r} not in {data.name}; use one of {choices}')
 
 
-def _compact(data: np.ndarray, starts: np.ndarray, lengths: np.ndarray) -> tuple:
-    """Copy the given messages of a chunk into a new contiguous array; return a segment."""
-    ends = np.cumsum(lengths)
-    new_starts = ends - lengths
-    positions = np.arange(int(ends[-1]) if len(ends) else 0) + np.repeat(starts - new_starts,
-                                                                          lengths)
-    return data[positions], new_starts, lengths
-
-
-def open_bag(path, topics: Optional[list] = None) -> Bag:
+def open_bag(path, topics: Optional[list] = None, reader: str = 'fast') -> Bag:
     """
     Load a bag folder or .mcap file.
 
@@ -335,9 +360,25 @@ def open_bag(path, topics: Optional[list] = None) -> Bag:
         Bag folder or ``.mcap`` file.
     topics : list of str, optional
         Load only these topics (others are listed in ``topics`` without messages).
+    reader : str
+        ``'fast'`` or ``'mcap.reader'`` (see :class:`Bag`).
 
     Returns
     -------
     Bag
+
+    Raises
+    ------
+    BagError
+        If there is no bag at ``path``, or nothing in it is readable.
     """
-    return Bag(path, topics)
+    return Bag(path, topics, reader)
+
+
+def _fall_back(err: Exception) -> None:
+    """Use mcap.reader from now on; say so once per process."""
+    FALLBACK['reason'] = str(err)
+    warnings.warn(McapInternalsWarning(
+        f'the mcap internals of the fast bag reader are missing or changed ({err}); reading '
+        'bags with the public mcap.reader API instead (slower, stops a file at its first '
+        'damaged chunk). Install the mcap version that requirements.txt pins.'), stacklevel=5)

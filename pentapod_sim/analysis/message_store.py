@@ -9,6 +9,8 @@ from typing import Optional, Sequence
 
 import numpy as np
 
+from pentapod_sim.errors import BagError
+
 
 class MessageStore:
     """
@@ -100,9 +102,19 @@ class MessageStore:
         Returns
         -------
         (len(indices), width) uint8 ndarray
+
+        Raises
+        ------
+        BagError
+            If a message is shorter than ``offset + width`` bytes (it would read its neighbour).
         """
         self._ready()
         indices = np.asarray(indices, dtype=np.int64)
+        short = np.flatnonzero(self._lengths[indices] < offset + width)
+        if len(short):
+            k = int(indices[short[0]])
+            raise BagError(f'message {k} has {int(self._lengths[k])} bytes, too short for bytes '
+                           f'{offset}..{offset + width} of its type ({len(short)} such messages)')
         out = np.empty((len(indices), width), dtype=np.uint8)
         cuts = np.searchsorted(indices, self._bounds)
         columns = np.arange(offset, offset + width, dtype=np.int64)

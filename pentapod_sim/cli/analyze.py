@@ -16,10 +16,12 @@ import logging
 from pathlib import Path
 import re
 import sys
+import warnings
 
 import numpy as np
 
 from pentapod_sim.analysis import plots
+from pentapod_sim.analysis.bag_file import BagDamageWarning, UnreadableBagError
 from pentapod_sim.analysis.bag_reader import open_bag
 from pentapod_sim.analysis.estimation import amplitude_spectrum, EXCITATIONS, frf_from_series
 from pentapod_sim.analysis.export import write_csv, write_uff58
@@ -37,8 +39,14 @@ def _slug(text: str) -> str:
 
 
 def cmd_info(args) -> int:
-    """Print topics, types, counts, duration and run information of a bag."""
-    bag = open_bag(args.bag)
+    """Print topics, types, counts, duration, run information and damage of a bag."""
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter('ignore', BagDamageWarning)  # printed below instead
+            bag = open_bag(args.bag)
+    except UnreadableBagError as err:
+        print(f'analyze: error: {err}', file=sys.stderr)
+        return 1
     print(f'bag: {bag.path}{"  (TRUNCATED: readable part only)" if bag.truncated else ""}')
     for name, data in sorted(bag.topics.items()):
         times = bag.times_ns(name) if data.count else np.zeros(1, dtype=np.int64)
@@ -48,7 +56,25 @@ def cmd_info(args) -> int:
             print(f'      {name}.{field}')
     for key, value in sorted(bag.custom_data.items()):
         print(f'  run: {key} = {value}')
+    print_damage(bag)
+    if bag.damage and bag.message_count == 0:
+        print(f'analyze: error: no intact message in {bag.path}', file=sys.stderr)
+        return 1
     return 0
+
+
+def print_damage(bag) -> None:
+    """Print the damage report of a bag (nothing if it is intact)."""
+    if not bag.damage:
+        return
+    known = [d.messages_lost for d in bag.damage if d.messages_lost is not None]
+    unknown = any(d.messages_lost is None for d in bag.damage)
+    total = f'{sum(known)}' if not unknown else (
+        f'{sum(known)} + an unknown number of' if sum(known) else 'an unknown number of')
+    print(f'DAMAGE: {len(bag.damage)} damaged or missing part(s), {total} messages lost; '
+          'everything listed above was read intact (chunk CRCs checked)')
+    for damage in bag.damage:
+        print(f'  {damage.describe()}')
 
 
 def _frfs(bag_path, args) -> list:
