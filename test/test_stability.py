@@ -26,6 +26,7 @@ from pentapod_sim.sim.stability import (
     plant_radius,
     STABLE,
     TRUNCATION,
+    UNCHECKED,
     UNSTABLE,
     UnstableLoopError,
 )
@@ -98,6 +99,8 @@ def test_radius_of_one_damped_mode_is_the_closed_form():
     w = 2 * np.pi * 50.0
     assert rho == pytest.approx(np.exp(-0.02 * w * DT), rel=1e-12)
     assert freq == pytest.approx(50.0 * np.sqrt(1 - 0.02 ** 2), rel=1e-9)
+    dense = np.abs(np.linalg.eigvals(model.discrete_matrices(DT)[0])).max()
+    assert rho == pytest.approx(dense, rel=1e-12)
 
 
 @pytest.fixture(scope='module')
@@ -145,6 +148,10 @@ def test_verdicts_and_policies(truncated, caplog):
     assert 'too much' in caplog.text and 'unstable' in caplog.text
     with pytest.raises(ConfigError, match="got 'ignore'"):
         check_loop(plant, check, low, 1e-3, policy='ignore')
+    alone = check_loop(plant, None, low, 1e-3, policy='refuse')    # no FE model behind it
+    assert alone.verdict == UNCHECKED and alone.check_modes == 0
+    with pytest.raises(UnstableLoopError, match='unstable'):
+        check_loop(plant, None, high, 1e-3, policy='refuse')
 
 
 def test_check_model_keeps_the_plant_ports_and_static_gain(truncated):

@@ -10,9 +10,12 @@ from pentapod_damper.laws import ProofMassActuator, tcp_damper
 from pentapod_damper.scenario_laws import continuous_dampers, scenario_laws
 from pentapod_damper.study.analytic import discrete_frf, improvement_share, pma_requirements
 from pentapod_damper.study.config import load_study_config
+from pentapod_damper.study.pipeline import PositionModel, scenario_analytic
+from pentapod_damper.study.report import peak_rows, struts12_share, StudyResults, summary_rows
 from pentapod_damper.study.runs import run_sections
 from pentapod_sim.errors import ConfigError
 from pentapod_sim.plant.frf import closed_loop_frf
+from pentapod_sim.plant.ports import collocated_output
 from pentapod_sim.scenario.files import read_scenario
 from pentapod_sim.sim.closed_loop import simulate
 from pentapod_sim.sim.stepping import DiscretePlant
@@ -125,3 +128,52 @@ def test_missing_key_is_named(tmp_path):
 
 def _scenario(name: str) -> Path:
     return Path(__file__).resolve().parents[1] / 'config' / 'scenarios' / f'{name}.yaml'
+
+
+@pytest.mark.parametrize('override, message', [
+    ({'check_policy': 'ignore'}, 'truncation_check.policy'),
+    ({'pma_band': (400.0, 10.0)}, 'pma_requirements.band'),
+    ({'check_f_min': 0.0}, 'truncation_check.f_min'),
+])
+def test_bad_check_and_pma_settings_name_the_key(override, message):
+    with pytest.raises(ConfigError, match=message):
+        load_study_config(**override)
+
+
+def _dense_peak(plant, dampers, freq, cfg) -> float:
+    """Largest |H| TCP xx: coarse grid, then 40001 points within 1 Hz of its maximum."""
+    inputs = ['tcp_force_x', *dampers]
+    outputs = ['tcp_displacement_x', *(collocated_output(i, 'velocity') for i in dampers)]
+    small = plant.select(inputs, outputs)
+
+    def mag(f):
+        return np.abs(closed_loop_frf(small, dampers, f).pair('tcp_displacement_x',
+                                                               'tcp_force_x'))
+    coarse = freq[(freq >= cfg.band[0]) & (freq <= cfg.f_max)]
+    top = coarse[np.argmax(mag(coarse))]
+    return float(mag(np.linspace(top - 1.0, top + 1.0, 40_001)).max())
+
+
+def test_report_rows_use_exact_peaks_and_the_truncation_check(tmp_path):
+    """Peaks, reductions and the struts-1+2 share against a dense grid of the closed loop."""
+    scenarios = ('baseline', 'strut_damping_all', 'strut_damping_12', 'tcp_damping')
+    cfg = load_study_config(positions=('P1',), scenarios=scenarios)
+    model_plant = demo_model(n_modes=6, f_min=20.0, f_max=300.0, zeta=0.01, seed=4)
+    model = PositionModel('P1', model_plant, tmp_path / 'm.npz', 'hash')
+    res = StudyResults(cfg, np.linspace(*cfg.freq_grid[:2], int(cfg.freq_grid[2])))
+    for scn in scenarios:
+        res.analytic[('P1', scn)] = scenario_analytic(model, scn, cfg, res.freq)
+    peak = {scn: _dense_peak(model_plant, res.analytic[('P1', scn)].dampers, res.freq, cfg)
+            for scn in scenarios}
+    rows = {r['scenario']: r for r in summary_rows(res)}
+    for scn in scenarios:
+        assert rows[scn]['peak_um_per_N'] == pytest.approx(peak[scn] * 1e6, rel=1e-6)
+        assert rows[scn]['peak_reduction'] == pytest.approx(peak['baseline'] / peak[scn],
+                                                            rel=1e-6)
+        assert rows[scn]['sampled_loop'] == 'stable on the plant (no check model)'
+        assert rows[scn]['plant_margin'] > 0
+    share = struts12_share(res)[0]['peak_share']
+    base, part, full = (peak[s] for s in ('baseline', 'strut_damping_12', 'strut_damping_all'))
+    assert share == pytest.approx((base - part) / (base - full), rel=1e-5)
+    grid = {r['scenario']: r['grid_peak_um_per_N'] for r in peak_rows(res)}
+    assert all(grid[s] <= rows[s]['peak_um_per_N'] * (1 + 1e-12) for s in scenarios)

@@ -21,6 +21,7 @@ from pentapod_damper.study.config import load_study_config, StudyConfig
 from pentapod_damper.study.report import struts12_share, StudyResults, summary_rows, write_report
 from pentapod_damper.study.runs import run_on_testbed
 from pentapod_sim.errors import BagError, ConfigError, RunError
+from pentapod_sim.plant.frf_peaks import exact_peak, plant_pair_frf
 
 LOG = logging.getLogger('pentapod_damper.study')
 SWEEP_GAINS = np.logspace(1, 4.3, 12)
@@ -33,16 +34,24 @@ def _say(msg: str) -> None:
 def _analytic(res: StudyResults, cfg: StudyConfig) -> None:
     for pos in cfg.positions:
         t0 = time.perf_counter()
-        model = pipeline.prepare_model(pos, res.out_dir, lambda m: _say(f'{pos}: {m}'))
+        model = pipeline.prepare_model(pos, res.out_dir, lambda m: _say(f'{pos}: {m}'), cfg)
         res.models[pos] = model
         for scn in cfg.scenarios:
-            res.analytic[(pos, scn)] = pipeline.scenario_analytic(model, scn, cfg, res.freq)
-        _say(f'{pos}: plant with {model.plant.n_modes} modes and analytic FRFs of '
+            ana = pipeline.scenario_analytic(model, scn, cfg, res.freq)
+            res.analytic[(pos, scn)] = ana
+            flag = '' if ana.loop.verdict == 'stable' else '  <-- !!!'
+            _say(f'{pos} {scn}: sampled loop {ana.loop.verdict}; margin '
+                 f'{ana.loop.plant_margin:.3g} on the plant, {ana.loop.check_margin:.3g} on the '
+                 f'check model{flag}')
+        _say(f'{pos}: plant with {model.plant.n_modes} modes, check model with '
+             f'{model.check_plant.n_modes} modes, analytic FRFs and checks of '
              f'{len(cfg.scenarios)} scenarios in {time.perf_counter() - t0:.1f} s')
     for scn in cfg.scenarios:
         ana = res.analytic[(cfg.step_position, scn)]
         if ana.pma:
-            res.pma[scn] = pipeline.pma_curves(res.models[cfg.step_position], ana, cfg, res.freq)
+            model = res.models[cfg.step_position]
+            res.pma[scn] = pipeline.pma_curves(model, ana, cfg, res.freq)
+            res.pma_designs[scn] = pipeline.pma_designs(model, ana, cfg)
     bending = res.analytic[(cfg.positions[0], 'strut_damping_all')].dampers
     res.bending_gain = float(next(iter(bending.values()), float('nan')))
 
@@ -103,27 +112,30 @@ def _figures(res: StudyResults, cfg: StudyConfig, steps: dict) -> None:
                 keep = (mes.freq >= cfg.band[0]) & (mes.freq <= cfg.f_max)
                 measured[scn] = (mes.freq[keep], np.abs(mes.pma_stroke[keep]) * amp,
                                  np.abs(mes.pma_force[keep]) * amp)
+        variants = {f'{scn} high-pass {cfg.pma_highpass_hz:g} Hz':
+                    designs['highpass'].stroke_force(freq, cfg.pma_force_amplitude)
+                    for scn, designs in res.pma_designs.items()}
         res.figures[f'PMA stroke and force, {pos}'] = plots.pma_requirements_plot(
-            freq, res.pma, measured, cfg.pma_force_amplitude, fig_dir / 'pma_requirements.png')
+            freq, res.pma, measured, cfg.pma_force_amplitude, fig_dir / 'pma_requirements.png',
+            variants, cfg.pma_band, cfg.pma_frequencies)
     if steps:
         res.figures[f'PMA step response, {cfg.step_position}'] = plots.step_response_plot(
             steps, cfg.step_amplitude, fig_dir / 'pma_step_response.png')
 
 
 def _sweep_figure(res: StudyResults, cfg: StudyConfig) -> None:
-    """Peak reduction over the bending damper gain, all struts and struts 1-2, per position."""
-    d, lo = cfg.direction, float(cfg.band[0])
-    band = (res.freq >= lo) & (res.freq <= cfg.f_max)
+    """Exact peak reduction over the bending damper gain, all struts and struts 1-2."""
+    d, lo, hi = cfg.direction, float(cfg.band[0]), float(cfg.f_max)
     ratios = {}
     for pos, model in res.models.items():
-        base = np.abs(res.analytic[(pos, 'baseline')].continuous[band]).max()
+        base = res.analytic[(pos, 'baseline')].peak.value
         for label, struts in (('all struts', range(1, 6)), ('struts 1, 2', (1, 2))):
             r = []
             for g in SWEEP_GAINS:
                 dampers = {f'strut{i}_bending_moment_{k}': g for i in struts for k in (2, 3)}
-                h = continuous_frf(model.plant, dampers, res.freq[band], f'tcp_displacement_{d}',
-                                   f'tcp_force_{d}')
-                r.append(base / np.abs(h).max())
+                frf = plant_pair_frf(model.plant, f'tcp_displacement_{d}', f'tcp_force_{d}',
+                                     dampers)
+                r.append(base / exact_peak(frf, lo, hi, res.freq).value)
             ratios[f'{pos}, {label}'] = np.array(r)
     res.figures['Bending damper gain sweep'] = plots.gain_sweep_plot(
         SWEEP_GAINS, ratios, res.bending_gain, f'Strut bending damping: TCP {d}{d} peak '

@@ -2,9 +2,10 @@
 Analytic FRFs of a scenario: the continuous closed loop and the sampled lockstep loop.
 
 The continuous FRF (:func:`pentapod_sim.plant.frf.closed_loop_frf`) is the paper's view: ideal
-viscous dampers. The discrete FRF is what the testbed runs: the zero-order-hold plant with the
-laws acting one sample late (docs/architecture.md), evaluated at ``z = exp(j w dt)``; a
-recorded lockstep run must match it up to estimation error.
+viscous dampers. The discrete FRF is what the testbed runs: plain sampled feedback, the
+zero-order-hold plant with every law answering ``u_k`` to the outputs ``y_k`` of the same step
+(docs/architecture.md; no computational delay), evaluated at ``z = exp(j w dt)``; a recorded
+lockstep run must match it up to estimation error.
 """
 from __future__ import annotations
 
@@ -81,7 +82,7 @@ def _resolvent_columns(a: np.ndarray, b: np.ndarray, z: np.ndarray,
 def discrete_frf(plant: PlantModel, laws: Sequence, dt: float, freq_hz: npt.ArrayLike,
                  input_: str) -> DiscreteFrf:
     """
-    FRFs of the lockstep closed loop (laws one sample late) from an external input.
+    FRFs of the lockstep sampled loop (u_k answers y_k, zero-order hold) from an external input.
 
     Parameters
     ----------
@@ -117,13 +118,15 @@ def discrete_frf(plant: PlantModel, laws: Sequence, dt: float, freq_hz: npt.Arra
 
 
 def pma_requirements(mount_velocity: npt.ArrayLike, freq_hz: npt.ArrayLike, mass: float,
-                     gain: float, force_amplitude: float) -> tuple[np.ndarray, np.ndarray]:
+                     gain: float, force_amplitude: float,
+                     filter_response: npt.ArrayLike | None = None
+                     ) -> tuple[np.ndarray, np.ndarray]:
     """
-    Stroke and force amplitudes of an ideal PMA for a harmonic TCP force.
+    Stroke and force amplitudes of a PMA for a harmonic TCP force.
 
-    The proof mass is accelerated by ``g v`` (v: mount velocity), so its force on the
-    structure is ``m_a g v`` and its stroke relative to the mount is
-    ``|v| sqrt(1 + (g / w)^2) / w``.
+    The proof mass is accelerated by ``g H v`` (v: mount velocity, H: the law's filter, 1 for
+    the ideal law), so its force on the structure is ``m_a g H v`` and its stroke relative to
+    the mount is ``|v| |1 - g H / (j w)| / w`` (``|v| sqrt(1 + (g / w)^2) / w`` for H = 1).
 
     Parameters
     ----------
@@ -135,6 +138,8 @@ def pma_requirements(mount_velocity: npt.ArrayLike, freq_hz: npt.ArrayLike, mass
         Proof mass m_a [kg] and gain g [1/s].
     force_amplitude : float
         Amplitude of the harmonic TCP force [N].
+    filter_response : (F,) array_like, optional
+        H(j w) of the law's velocity filter; default 1 (ideal law).
 
     Returns
     -------
@@ -143,7 +148,10 @@ def pma_requirements(mount_velocity: npt.ArrayLike, freq_hz: npt.ArrayLike, mass
     """
     w = 2 * np.pi * np.asarray(freq_hz, dtype=float)
     v = np.abs(np.asarray(mount_velocity)) * force_amplitude
-    return v * np.sqrt(1.0 + (gain / w) ** 2) / w, mass * gain * v
+    if filter_response is None:
+        return v * np.sqrt(1.0 + (gain / w) ** 2) / w, mass * gain * v
+    h = np.asarray(filter_response)
+    return v * np.abs(1.0 - gain * h / (1j * w)) / w, mass * gain * np.abs(h) * v
 
 
 def peak_and_rms(h: npt.ArrayLike, freq_hz: npt.ArrayLike, f_lo: float,

@@ -28,6 +28,7 @@ from pentapod_sim.schema import (
     read_mapping,
     spec,
 )
+from pentapod_sim.sim.stability import POLICIES
 
 AXES = ('x', 'y', 'z')
 
@@ -76,6 +77,16 @@ class StudyConfig:
         Step force [N].
     step_duration : float
         Length of the step-response runs [s].
+    check_f_min : float
+        Lowest cut-off of the truncation check's model [Hz] (at least 2x the sample rate).
+    check_policy : str
+        ``refuse`` or ``warn`` for a loop that is stable only thanks to truncation.
+    pma_band : tuple of float
+        Band of the worst-case PMA stroke and force [Hz].
+    pma_frequencies : tuple of float
+        Frequencies of the reported PMA stroke and force [Hz].
+    pma_highpass_hz : float
+        Corner of the high-pass PMA variant [Hz].
     """
 
     positions: tuple
@@ -94,6 +105,37 @@ class StudyConfig:
     step_position: str
     step_amplitude: float
     step_duration: float
+    check_f_min: float
+    check_policy: str
+    pma_band: tuple
+    pma_frequencies: tuple
+    pma_highpass_hz: float
+
+
+@dataclass(frozen=True)
+class TruncationCheck:
+    """Truncation check of every sampled loop (:mod:`pentapod_sim.sim.stability`)."""
+
+    f_min: float = spec('Hz', POSITIVE, description="lowest cut-off of the check model's "
+                        'modes (at least 2x the sample rate is used)')
+    policy: str = spec(choices=POLICIES, description='what a loop stable only thanks to '
+                       'truncation does')
+
+
+@dataclass(frozen=True)
+class PmaRequirements:
+    """PMA requirements at stated frequencies and in a stated band."""
+
+    band: tuple[float, ...] = spec('Hz', POSITIVE, length=2,
+                                   description='band of the worst-case stroke and force')
+    frequencies: tuple[float, ...] = spec('Hz', POSITIVE, min_length=1,
+                                          description='frequencies of the reported values')
+    highpass_hz: float = spec('Hz', POSITIVE, description='corner of the high-pass variant')
+
+    def __post_init__(self) -> None:
+        if not self.band[0] < self.band[1]:
+            raise ConfigError(f'pma_requirements.band = {list(self.band)} Hz: must satisfy '
+                              'low < high')
 
 
 @dataclass(frozen=True)
@@ -140,6 +182,8 @@ class StudyFile:
     pma_force_amplitude: float = spec('N', POSITIVE,
                                       description='harmonic TCP force of the PMA requirements')
     step_response: StepResponse = spec(description='PMA step-response run')
+    truncation_check: TruncationCheck = spec(description='truncation check of the loops')
+    pma_requirements: PmaRequirements = spec(description='PMA requirements')
 
     def __post_init__(self) -> None:
         exc, fs = self.excitation, self.sample_rate
@@ -164,7 +208,12 @@ FILE_KEYS = {'positions': 'positions', 'scenarios': 'scenarios', 'sample_rate': 
              'freq_grid': 'frequency', 'pma_force_amplitude': 'pma_force_amplitude',
              'step_position': 'step_response.position',
              'step_amplitude': 'step_response.amplitude',
-             'step_duration': 'step_response.duration'}
+             'step_duration': 'step_response.duration',
+             'check_f_min': 'truncation_check.f_min',
+             'check_policy': 'truncation_check.policy',
+             'pma_band': 'pma_requirements.band',
+             'pma_frequencies': 'pma_requirements.frequencies',
+             'pma_highpass_hz': 'pma_requirements.highpass_hz'}
 
 
 def _get(obj: Any, key_path: str) -> Any:

@@ -13,6 +13,7 @@ from typing import Callable
 
 import numpy as np
 
+from pentapod_damper.node_parameters import PMA
 from pentapod_damper.scenario_laws import continuous_dampers, scenario_laws
 from pentapod_damper.study.analytic import (
     continuous_frf,
@@ -21,26 +22,40 @@ from pentapod_damper.study.analytic import (
     pma_requirements,
 )
 from pentapod_damper.study.config import StudyConfig
+from pentapod_damper.study.pma import pma_design, PmaDesign
 from pentapod_damper.study.runs import RunResult
 from pentapod_sim.analysis.bag_reader import open_bag
 from pentapod_sim.analysis.estimation import frf_from_series
 from pentapod_sim.errors import ConfigError
 from pentapod_sim.interface import EXCITATION, PMA_STATE, TCP_STATE
 from pentapod_sim.plant.build import build_plant
+from pentapod_sim.plant.check_model import check_f_max, load_or_build_check_model
+from pentapod_sim.plant.frf_peaks import exact_peak, Peak, plant_pair_frf, PoleResidueFrf
 from pentapod_sim.plant.model import PlantModel
 from pentapod_sim.scenario.files import read_scenario
+from pentapod_sim.sim.stability import check_loop, controller_of, LoopCheck
 
 LOG = logging.getLogger(__name__)
 
 
+#: Cache of check models (shared with the plant node's default model cache).
+CHECK_CACHE = Path('out') / 'models'
+
+
 @dataclass
 class PositionModel:
-    """The reduced plant of one position, saved for the plant node to load."""
+    """
+    The reduced plant of one position, saved for the plant node to load.
+
+    ``check_plant`` is the position's check model (every FE mode below the check cut-off, for
+    the truncation check); None for a plant without an FE model behind it.
+    """
 
     position: str
     plant: PlantModel
     model_file: Path
     model_hash: str
+    check_plant: PlantModel | None = None
 
 
 @dataclass
@@ -50,9 +65,12 @@ class ScenarioAnalytic:
     name: str
     laws: list
     dampers: dict
-    continuous: np.ndarray            # TCP displacement d / TCP force d [m/N]
+    continuous: np.ndarray            # TCP displacement d / TCP force d [m/N] on the grid
     discrete: DiscreteFrf             # sampled lockstep loop, every output and effort
     pma: dict = field(default_factory=dict)   # mass, gain of an ideal PMA, if any
+    frf: PoleResidueFrf | None = None  # the continuous TCP FRF, exact at any frequency
+    peak: Peak | None = None          # its exact peak over the band
+    loop: LoopCheck | None = None     # truncation check of the sampled loop
 
 
 @dataclass
@@ -68,12 +86,22 @@ class Measured:
     n_messages: dict = field(default_factory=dict)
 
 
-def prepare_model(position: str, out_dir: Path,
-                  say: Callable[[str], None]) -> PositionModel:
-    """Build the reduced plant of a position and save it (the plant node loads the file)."""
+def prepare_model(position: str, out_dir: Path, say: Callable[[str], None],
+                  cfg: StudyConfig | None = None) -> PositionModel:
+    """
+    Build the reduced plant of a position and save it (the plant node loads the file).
+
+    With ``cfg``, also load or build the position's check model (modes below
+    ``max(check_f_min, 2 sample_rate)``, cached in :data:`CHECK_CACHE`).
+    """
     plant = build_plant(position, progress=say)
     path = plant.save(out_dir / 'models' / f'plant_{position}.npz')
-    return PositionModel(position, plant, Path(path), plant.content_hash())
+    check = None
+    if cfg is not None:
+        check, origin = load_or_build_check_model(
+            position, check_f_max(cfg.sample_rate, cfg.check_f_min), CHECK_CACHE)
+        say(f'check model {origin}: {check.n_modes} modes')
+    return PositionModel(position, plant, Path(path), plant.content_hash(), check)
 
 
 def welch_freq(cfg: StudyConfig) -> np.ndarray:
@@ -85,32 +113,36 @@ def welch_freq(cfg: StudyConfig) -> np.ndarray:
 def scenario_analytic(model: PositionModel, scenario: str, cfg: StudyConfig,
                       freq: np.ndarray) -> ScenarioAnalytic:
     """
-    Closed-loop FRFs of a scenario from the TCP force.
+    Closed-loop FRFs of a scenario from the TCP force, its exact peak and truncation check.
 
-    The continuous FRF is evaluated on ``freq``; the sampled-loop FRF on the bins of the
-    measured FRFs (:func:`welch_freq`), so both can be compared bin by bin.
+    The continuous FRF is evaluated on ``freq``, and its peak over [band[0], f_max] searched
+    at the resonances (:func:`pentapod_sim.plant.frf_peaks.exact_peak`); the sampled-loop FRF
+    on the bins of the measured FRFs (:func:`welch_freq`), so both can be compared bin by bin.
+    The sampled loop is checked on the plant and the check model
+    (:func:`pentapod_sim.sim.stability.check_loop`, policy ``cfg.check_policy``); a loop
+    unstable on the plant itself is refused whatever the policy.
     """
     d = cfg.direction
+    dt = 1.0 / cfg.sample_rate
     sections = read_scenario(scenario).sections
-    laws = scenario_laws(sections, 1.0 / cfg.sample_rate)
+    laws = scenario_laws(sections, dt)
     dampers = continuous_dampers(laws)
-    disc = discrete_frf(model.plant, laws, 1.0 / cfg.sample_rate, welch_freq(cfg),
-                        f'tcp_force_{d}')
-    rho = disc.spectral_radius
-    if rho >= 1.0:
-        raise ConfigError(f'scenario {scenario!r} at {model.position} is unstable at '
-                          f'sample_rate = {cfg.sample_rate:g} Hz with its one-sample '
-                          f'controller delay (spectral radius {rho:.4g}); lower its gains or '
-                          'raise the sample rate')
+    loop = check_loop(model.plant, model.check_plant, [controller_of(law) for law in laws], dt,
+                      cfg.check_policy, label=f'scenario {scenario} at {model.position}')
+    if loop.plant_radius >= 1.0:       # whatever the policy: the run itself would diverge
+        raise ConfigError(f'{loop.summary()}; lower its gains or raise the sample rate')
+    disc = discrete_frf(model.plant, laws, dt, welch_freq(cfg), f'tcp_force_{d}')
     cont = continuous_frf(model.plant, dampers, freq, f'tcp_displacement_{d}',
                           f'tcp_force_{d}')
+    frf = plant_pair_frf(model.plant, f'tcp_displacement_{d}', f'tcp_force_{d}', dampers)
+    peak = exact_peak(frf, float(cfg.band[0]), float(cfg.f_max), freq)
     pma = {}
     for name, params in sections.items():
         if name.startswith('pma'):
-            pma = {'mass': float(params.get('proof_mass', 5.0)),
-                   'gain': float(params.get('gain', 4000.0)),
-                   'directions': list(params.get('directions', ['x']))}
-    return ScenarioAnalytic(scenario, laws, dampers, cont, disc, pma)
+            values = PMA.values(params, f'node {name!r}')     # the PMA node's defaults
+            pma = {'mass': values.proof_mass, 'gain': values.gain,
+                   'directions': values.directions}
+    return ScenarioAnalytic(scenario, laws, dampers, cont, disc, pma, frf, peak, loop)
 
 
 def pma_curves(model: PositionModel, ana: ScenarioAnalytic, cfg: StudyConfig,
@@ -121,6 +153,19 @@ def pma_curves(model: PositionModel, ana: ScenarioAnalytic, cfg: StudyConfig,
                        f'tcp_force_{d}')
     return pma_requirements(v, freq, ana.pma['mass'], ana.pma['gain'],
                             cfg.pma_force_amplitude)
+
+
+def pma_designs(model: PositionModel, ana: ScenarioAnalytic,
+                cfg: StudyConfig) -> dict[str, PmaDesign]:
+    """
+    The scenario's PMA as run (``ideal``) and with the study's high-pass (``highpass``).
+
+    Both in the continuous closed loop with the scenario's other viscous dampers.
+    """
+    d, mass, gain = cfg.direction, ana.pma['mass'], ana.pma['gain']
+    return {'ideal': pma_design(model.plant, d, mass, gain, 0.0, ana.dampers),
+            'highpass': pma_design(model.plant, d, mass, gain, cfg.pma_highpass_hz,
+                                   ana.dampers)}
 
 
 def measure(run: RunResult, cfg: StudyConfig) -> Measured:

@@ -81,24 +81,40 @@ def damping_plot(freq: np.ndarray, analytic: Mapping[str, np.ndarray],
 
 def pma_requirements_plot(freq: np.ndarray, curves: Mapping[str, tuple],
                           measured: Mapping[str, tuple], force_amplitude: float,
-                          path: Path) -> Path:
-    """Stroke [mm] and force [N] amplitudes over frequency per PMA (analytic + measured)."""
+                          path: Path, variants: Mapping[str, tuple] | None = None,
+                          band: Sequence[float] | None = None,
+                          marks: Sequence[float] = ()) -> Path:
+    """
+    Stroke [mm] and force [N] amplitudes over frequency per PMA (analytic + measured).
+
+    ``variants`` (name -> (stroke, force) on ``freq``) are drawn dashed, e.g. the high-pass
+    variant of each PMA; ``band`` is shaded and ``marks`` (stated frequencies [Hz]) are
+    drawn as vertical lines.
+    """
     fig, (ax_s, ax_f) = plt.subplots(2, 1, figsize=(9, 6.5), sharex=True)
     ax_s.set_title(f'Proof-mass actuator requirements for a +-{force_amplitude:g} N '
                    'harmonic TCP force')
     for name, (stroke, force) in curves.items():
         ax_s.semilogy(freq, stroke * 1e3, color=COLORS.get(name), label=f'{name} (analytic)')
         ax_f.semilogy(freq, force, color=COLORS.get(name))
+    for name, (stroke, force) in (variants or {}).items():
+        color = COLORS.get(name.split()[0])
+        ax_s.semilogy(freq, stroke * 1e3, '--', color=color, lw=1, label=name)
+        ax_f.semilogy(freq, force, '--', color=color, lw=1)
     for name, (f_m, stroke, force) in measured.items():
         ax_s.semilogy(f_m, stroke * 1e3, '.', ms=2, color=COLORS.get(name),
                       label=f'{name} (testbed run)')
         ax_f.semilogy(f_m, force, '.', ms=2, color=COLORS.get(name))
+    for ax in (ax_s, ax_f):
+        if band is not None:
+            ax.axvspan(band[0], band[1], color='grey', alpha=0.08)
+        for f in marks:
+            ax.axvline(f, color='grey', lw=0.8, ls=':')
+        ax.grid(True, which='both', alpha=0.3)
     ax_s.set_ylabel('stroke amplitude [mm]')
     ax_f.set_ylabel('force amplitude [N]')
     ax_f.set_xlabel('frequency [Hz]')
-    for ax in (ax_s, ax_f):
-        ax.grid(True, which='both', alpha=0.3)
-    ax_s.legend(fontsize=8)
+    ax_s.legend(fontsize=7)
     return _save(fig, path)
 
 

@@ -11,7 +11,9 @@ plant and on a *check model* with every FE mode up to a high frequency
 * ``stable``: both loops are asymptotically stable (spectral radius < 1);
 * ``unstable``: the loop on the plant is unstable;
 * ``stable only thanks to truncation``: the plant's loop is stable, the check model's is not;
-  the controller would excite modes the plant model left out.
+  the controller would excite modes the plant model left out;
+* ``stable on the plant (no check model)``: a plant without an FE model behind it (modal data,
+  synthetic models) can only be checked on itself.
 
 A policy decides what a non-stable verdict does: ``refuse`` raises :class:`UnstableLoopError`
 (a :class:`pentapod_sim.errors.ConfigError`), ``warn`` logs a loud warning.
@@ -47,6 +49,7 @@ LOG = logging.getLogger(__name__)
 STABLE = 'stable'
 UNSTABLE = 'unstable'
 TRUNCATION = 'stable only thanks to truncation'
+UNCHECKED = 'stable on the plant (no check model)'
 #: What a verdict other than ``stable`` does.
 POLICIES = ('refuse', 'warn')
 DEFAULT_POLICY = 'refuse'
@@ -216,6 +219,12 @@ def spectral_radius(matrix: np.ndarray, dt: float) -> tuple[float, float]:
 def plant_radius(plant: PlantModel, controllers: Sequence[DiscreteController],
                  dt: float) -> tuple[float, float]:
     """Spectral radius (and its frequency [Hz]) of the sampled loop of a modal plant."""
+    if not controllers:      # open loop: the eigenvalues of the 2x2 ZOH blocks of the modes
+        if plant.n_modes == 0:
+            return 0.0, 0.0
+        lam = np.linalg.eigvals(plant.zoh_blocks(dt)[0]).ravel()
+        top = lam[np.argmax(np.abs(lam))]
+        return float(abs(top)), float(abs(np.angle(top)) / (2 * np.pi * dt))
     a, b, c, d = plant.discrete_matrices(dt)
     return spectral_radius(loop_matrix(a, b, c, d, plant.input_names, plant.output_names,
                                        controllers), dt)
@@ -264,13 +273,19 @@ class LoopCheck:
 
     @property
     def verdict(self) -> str:
-        """``stable``, ``unstable`` or ``stable only thanks to truncation``."""
-        if self.plant_radius >= 1.0:
+        """``stable``, ``unstable``, ``stable only thanks to truncation`` or unchecked."""
+        if not self.plant_radius < 1.0:
             return UNSTABLE
+        if self.check_modes == 0:
+            return UNCHECKED
         return STABLE if self.check_radius < 1.0 else TRUNCATION
 
     def summary(self) -> str:
         """One sentence with both margins and the verdict."""
+        if self.check_modes == 0:
+            return (f'{self.label}: sampled loop at {1 / self.dt:g} Hz is {self.verdict}; '
+                    f'spectral radius {self.plant_radius:.6g} ({self.plant_modes} modes, '
+                    f'margin {self.plant_margin:.3g})')
         return (f'{self.label}: sampled loop at {1 / self.dt:g} Hz is {self.verdict}; '
                 f'spectral radius {self.plant_radius:.6g} on the plant ({self.plant_modes} '
                 f'modes, margin {self.plant_margin:.3g}), {self.check_radius:.6g} on the check '
@@ -299,7 +314,7 @@ def apply_policy(check: LoopCheck, policy: str = DEFAULT_POLICY) -> LoopCheck:
     if policy not in POLICIES:
         raise ConfigError(f'truncation check policy must be one of {", ".join(POLICIES)}, '
                           f'got {policy!r}')
-    if check.verdict == STABLE:
+    if check.verdict in (STABLE, UNCHECKED):
         return check
     advice = ('lower the gains, raise the sample rate or give the law actuator/sensor '
               'dynamics that roll off')
@@ -310,7 +325,7 @@ def apply_policy(check: LoopCheck, policy: str = DEFAULT_POLICY) -> LoopCheck:
     return check
 
 
-def check_loop(plant: PlantModel, check_plant: PlantModel,
+def check_loop(plant: PlantModel, check_plant: PlantModel | None,
                controllers: Sequence[DiscreteController], dt: float,
                policy: str = DEFAULT_POLICY, label: str = 'loop') -> LoopCheck:
     """
@@ -320,9 +335,9 @@ def check_loop(plant: PlantModel, check_plant: PlantModel,
     ----------
     plant : PlantModel
         The (reduced) plant the loop runs on.
-    check_plant : PlantModel
+    check_plant : PlantModel or None
         The check model (:mod:`pentapod_sim.plant.check_model`); restricted to the plant's
-        ports here.
+        ports here. None for a plant without an FE model: checked on itself only.
     controllers : sequence of DiscreteController
         The laws (:func:`controller_of`); empty for the open loop.
     dt : float
@@ -334,8 +349,12 @@ def check_loop(plant: PlantModel, check_plant: PlantModel,
     """
     if not np.isfinite(dt) or dt <= 0:
         raise ConfigError(f'sample time dt must be > 0 s, got {dt!r}')
-    check_plant = check_plant.select(plant.input_names, plant.output_names)
     rho_p, f_p = plant_radius(plant, controllers, dt)
+    if check_plant is None:
+        result = LoopCheck(label, float(dt), rho_p, float('nan'), f_p, float('nan'),
+                           plant.n_modes, 0, float('nan'))
+        return apply_policy(result, policy)
+    check_plant = check_plant.select(plant.input_names, plant.output_names)
     rho_c, f_c = plant_radius(check_plant, controllers, dt)
     f_max = float(check_plant.meta.get('check_f_max_hz', check_plant.frequencies_hz.max(
         initial=0.0)))
