@@ -3,52 +3,17 @@ Control laws of a scenario file, without ROS: what its damper and PMA nodes will
 
 A scenario (config/scenarios/*.yaml) is a ROS 2 parameter file with one section per node.
 This module reads the sections of the damper (``damper*``) and proof-mass actuator (``pma*``)
-nodes and builds the same laws the nodes build, so offline models (analytic closed-loop FRFs,
-the offline closed loop) and ROS runs of one scenario cannot drift apart.
+nodes and builds their laws with the nodes' own functions and defaults
+(:mod:`pentapod_damper.node_parameters`), so offline models (analytic closed-loop FRFs, the
+offline closed loop) and ROS runs of one scenario cannot drift apart.
 """
 from __future__ import annotations
 
 from typing import Any, Mapping
 
-from pentapod_damper.laws import (
-    ProofMassActuator,
-    strut_axial_damper,
-    strut_bending_damper,
-    tcp_damper,
-    ViscousDamper,
-)
+from pentapod_damper.node_parameters import damper_laws, pma_law
 from pentapod_sim.errors import ConfigError
-
-#: Defaults of the damper node's gains [N m s/rad, N s/m, N s/m] (same as the node's).
-DAMPER_DEFAULTS = {'bending_gain': 1000.0, 'axial_gain': 50000.0, 'tcp_gain': 20000.0}
-#: Defaults of the PMA node (same as the node's).
-PMA_DEFAULTS = {'directions': ['x'], 'proof_mass': 5.0, 'gain': 4000.0, 'highpass_hz': 0.0,
-                'stroke_limit': 0.0, 'force_limit': 0.0}
-
-
-def damper_laws(params: Mapping[str, Any]) -> list[ViscousDamper]:
-    """Viscous dampers of one damper node's parameters (see damper_node)."""
-    gains = {key: float(params.get(key, default)) for key, default in DAMPER_DEFAULTS.items()}
-    laws = []
-    bending = [int(s) for s in params.get('bending_struts', []) if int(s)]
-    axial = [int(s) for s in params.get('axial_struts', []) if int(s)]
-    directions = [str(a) for a in params.get('tcp_directions', []) if a]
-    if bending:
-        laws.append(strut_bending_damper(bending, gains['bending_gain']))
-    if axial:
-        laws.append(strut_axial_damper(axial, gains['axial_gain']))
-    if directions:
-        laws.append(tcp_damper(directions, gains['tcp_gain']))
-    return laws
-
-
-def pma_law(params: Mapping[str, Any], dt: float) -> ProofMassActuator:
-    """Proof-mass actuator of one PMA node's parameters at sample time ``dt`` [s]."""
-    p = {**PMA_DEFAULTS, **params}
-    return ProofMassActuator(list(p['directions']), float(p['proof_mass']), float(p['gain']),
-                             dt, highpass_hz=float(p['highpass_hz']),
-                             stroke_limit=float(p['stroke_limit']),
-                             force_limit=float(p['force_limit']))
+from pentapod_sim.scenario.files import executable_of
 
 
 def scenario_laws(sections: Mapping[str, Mapping[str, Any]], dt: float) -> list:
@@ -64,10 +29,11 @@ def scenario_laws(sections: Mapping[str, Mapping[str, Any]], dt: float) -> list:
     """
     laws: list = []
     for name, params in sections.items():
-        if name.startswith('damper'):
-            laws += damper_laws(params)
-        elif name.startswith('pma'):
-            laws.append(pma_law(params, dt))
+        kind = executable_of(name)
+        if kind == 'damper':
+            laws += damper_laws(params, f'node {name!r}').values()
+        elif kind == 'pma':
+            laws.append(pma_law(params, dt, f'node {name!r}'))
     return laws
 
 

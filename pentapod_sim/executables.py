@@ -3,7 +3,8 @@ The package's executables, listed once: ``ros2 run pentapod_testbed <name>``.
 
 setup.py reads this file (without importing the package) to make the console scripts and the
 ``lib/pentapod_testbed`` launchers; the scenario runner and the launch file map scenario node
-names to executables with :data:`NODE_KINDS`. This file imports nothing.
+names to executables with :data:`NODE_KINDS`; :func:`pentapod_sim.parameters.table_of` finds a
+node executable's parameter table through :data:`PARAMETER_TABLES`. This file imports nothing.
 """
 
 #: executable name -> ``module:function`` of its entry point
@@ -24,6 +25,17 @@ EXECUTABLES = {
 #: Node executables a scenario file may use; a node section named ``<kind>...`` runs the
 #: executable ``<kind>`` (the longest matching prefix wins).
 NODE_KINDS = ('plant', 'exciter', 'recorder', 'damper', 'pma', 'example_controller')
+
+#: node executable -> ``module:attribute`` of its parameter table
+#: (a :class:`pentapod_sim.parameters.ParameterTable` in a ROS-free module)
+PARAMETER_TABLES = {
+    'plant': 'pentapod_sim.nodes.parameter_tables:PLANT',
+    'exciter': 'pentapod_sim.nodes.parameter_tables:EXCITER',
+    'recorder': 'pentapod_sim.nodes.parameter_tables:RECORDER',
+    'damper': 'pentapod_damper.node_parameters:DAMPER',
+    'pma': 'pentapod_damper.node_parameters:PMA',
+    'example_controller': 'pentapod_damper.node_parameters:EXAMPLE_CONTROLLER',
+}
 
 
 def module_of(executable: str) -> str:

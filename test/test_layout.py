@@ -9,7 +9,7 @@ PACKAGES = ('pentapod_sim', 'pentapod_damper')
 #: Pipeline order: a module may import only from its own stage or earlier ones.
 STAGES = [
     ('pentapod_sim.errors', 'pentapod_sim.executables', 'pentapod_sim.figures',
-     'pentapod_sim.__init__', 'pentapod_sim.schema'),
+     'pentapod_sim.__init__', 'pentapod_sim.schema', 'pentapod_sim.parameters'),
     ('pentapod_sim.paths',),
     ('pentapod_sim.fe',),
     ('pentapod_sim.modal',),
@@ -17,7 +17,8 @@ STAGES = [
     ('pentapod_sim.sim', 'pentapod_sim.interface'),
     ('pentapod_sim.recording', 'pentapod_sim.analysis', 'pentapod_sim.scenario'),
     ('pentapod_sim.nodes', 'pentapod_sim.cli'),
-    ('pentapod_damper.laws', 'pentapod_damper.scenario_laws', 'pentapod_damper.__init__'),
+    ('pentapod_damper.laws', 'pentapod_damper.node_parameters', 'pentapod_damper.scenario_laws',
+     'pentapod_damper.__init__'),
     ('pentapod_damper.nodes', 'pentapod_damper.study'),
 ]
 #: Packages that need a ROS installation; only node modules may import them.

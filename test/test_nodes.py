@@ -1,4 +1,4 @@
-"""Nodes in real processes (rclpy, DDS on localhost): lockstep, energy, PMA, failures."""
+"""Nodes in real processes (rclpy, DDS on localhost): lockstep, energy, PMA, failures, help."""
 import os
 from pathlib import Path
 import random
@@ -13,6 +13,8 @@ import pytest
 
 from fixtures.demo_model import demo_model
 from pentapod_damper.laws import ProofMassActuator, strut_bending_damper, tcp_damper
+from pentapod_sim.executables import module_of, NODE_KINDS
+from pentapod_sim.parameters import table_of
 from pentapod_sim.sim.closed_loop import excitation_matrix, simulate
 from pentapod_sim.sim.excitation import Excitation, ExcitationSpec
 from pentapod_sim.sim.stepping import DiscretePlant
@@ -345,10 +347,39 @@ damper_tcp:
     ('pentapod_sim.nodes.exciter_node', ['kind:=hammer'], "'hammer'"),
 ])
 def test_bad_parameters_stop_node_with_named_error(ros_env, tmp_path, module, params, named):
-    model_file = demo_model(2).save(tmp_path / 'model.npz')
-    cmd = [sys.executable, '-m', module, '--ros-args', '-p', f'model_file:={model_file}']
+    cmd = [sys.executable, '-m', module, '--ros-args']
+    if module.endswith('plant_node'):
+        cmd += ['-p', f"model_file:={demo_model(2).save(tmp_path / 'model.npz')}"]
     for p in params:
         cmd += ['-p', p]
     proc = subprocess.run(cmd, env=ros_env, capture_output=True, text=True, timeout=60)
     assert proc.returncode == 1
     assert named in proc.stderr, proc.stderr
+
+
+def test_misspelt_override_stops_the_plant_naming_the_parameter(ros_env):
+    """`-p postion:=P2` used to build P1 silently; now one error line, before any model."""
+    proc = subprocess.run([sys.executable, '-m', 'pentapod_sim.nodes.plant_node', '--ros-args',
+                           '-p', 'postion:=P2'], env=ros_env, capture_output=True, text=True,
+                          timeout=60)
+    assert proc.returncode == 1
+    assert proc.stderr.strip().splitlines() == [
+        "error: node 'plant': unknown parameter 'postion'; did you mean 'position'?"], \
+        proc.stderr
+    assert 'plant model' not in proc.stdout + proc.stderr
+
+
+@pytest.mark.parametrize('kind', NODE_KINDS)
+def test_help_prints_the_table_and_starts_nothing(ros_env, tmp_path, kind):
+    """`--help` exits 0 with the table; a started node would fail on these parameters."""
+    table = table_of(kind)
+    bogus = {'plant': 'model_file:=/nonexistent/model.npz',
+             'recorder': f'output_dir:={tmp_path / "bags"}'}.get(kind, 'no_such_parameter:=1')
+    proc = subprocess.run([sys.executable, '-m', module_of(kind), '--help', '--ros-args', '-p',
+                           bogus], env=ros_env, capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.startswith(f'usage: ros2 run pentapod_testbed {kind} ')
+    for param in table:
+        assert f'  {param.name} ({param.type}; default' in proc.stdout
+    assert proc.stderr == '' and '[INFO]' not in proc.stdout
+    assert not (tmp_path / 'bags').exists()

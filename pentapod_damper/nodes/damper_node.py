@@ -12,42 +12,18 @@ from __future__ import annotations
 import numpy as np
 from rcl_interfaces.msg import SetParametersResult
 
-from pentapod_damper.laws import strut_axial_damper, strut_bending_damper, tcp_damper
+from pentapod_damper.node_parameters import DAMPER, damper_laws
 from pentapod_sim.errors import ConfigError
-from pentapod_sim.nodes.common import declare, run_node
+from pentapod_sim.nodes.common import run_node
 from pentapod_sim.nodes.lockstep_source import LockstepSource
-
-MAX_GAIN = 1.0e9
 
 
 class DamperNode(LockstepSource):
     """Viscous dampers on selected struts and TCP directions."""
 
     def __init__(self, **kwargs):
-        super().__init__('damper', **kwargs)
-        d = self
-        struts_b = declare(d, 'bending_struts', [0], 'struts (1..5) with bending dampers on '
-                           'both cardan axes; [] or [0] = none', read_only=True,
-                           array='integer[]')
-        struts_a = declare(d, 'axial_struts', [0], 'struts (1..5) with axial dampers',
-                           read_only=True, array='integer[]')
-        dirs = declare(d, 'tcp_directions', [''], 'TCP damper directions (x, y, z)',
-                       read_only=True, array='string[]')
-        gains = {'bending_gain': declare(d, 'bending_gain', 1000.0, 'bending damping '
-                                         '[N m s/rad]', low=0.0, high=MAX_GAIN),
-                 'axial_gain': declare(d, 'axial_gain', 50000.0, 'axial damping [N s/m]',
-                                       low=0.0, high=MAX_GAIN),
-                 'tcp_gain': declare(d, 'tcp_gain', 20000.0, 'TCP damping [N s/m]',
-                                     low=0.0, high=MAX_GAIN)}
-        self.laws = {}
-        if [s for s in struts_b if s]:
-            self.laws['bending_gain'] = strut_bending_damper([s for s in struts_b if s],
-                                                             gains['bending_gain'])
-        if [s for s in struts_a if s]:
-            self.laws['axial_gain'] = strut_axial_damper([s for s in struts_a if s],
-                                                         gains['axial_gain'])
-        if [a for a in dirs if a]:
-            self.laws['tcp_gain'] = tcp_damper([a for a in dirs if a], gains['tcp_gain'])
+        super().__init__('damper', DAMPER, **kwargs)
+        self.laws = damper_laws(self.params)
         if not self.laws:
             raise ConfigError('damper node has no damper: set bending_struts, axial_struts '
                               'or tcp_directions')
@@ -77,7 +53,7 @@ class DamperNode(LockstepSource):
 
 def main(argv=None) -> int:
     """Entry point of ``ros2 run pentapod_testbed damper``."""
-    return run_node(DamperNode, argv)
+    return run_node(DamperNode, argv, table=DAMPER)
 
 
 if __name__ == '__main__':

@@ -14,32 +14,31 @@ The contract (docs/nodes.md):
    your controller state.
 4. Add your source name to the plant's ``sources`` parameter (and optionally
    ``source_ports.<name>``).
+5. Declare your parameters with descriptors (type, range, a description with the unit). This
+   node declares them from its table in pentapod_damper/node_parameters.py (registered in
+   pentapod_sim/executables.py), which also refuses misspelt names and prints ``--help``.
 
 This example is a TCP damper in x with gain ``gain`` [N s/m]: u = -gain * v_x.
 """
-import sys
-
-from rcl_interfaces.msg import ParameterDescriptor
-import rclpy
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
+from pentapod_damper.node_parameters import EXAMPLE_CONTROLLER
 from pentapod_sim.interface import force_topic, TCP_STATE
-from pentapod_sim.nodes.common import FORCE_QOS, STATE_QOS
+from pentapod_sim.nodes.common import declare_table, FORCE_QOS, node_args, run_node, STATE_QOS
 
 
 class ExampleController(Node):
     """Velocity feedback on the TCP x direction."""
 
-    def __init__(self):
-        super().__init__('example_controller')
-        # every parameter with a descriptor that states its unit
-        self.gain = self.declare_parameter('gain', 1000.0, ParameterDescriptor(
-            description='damping of the TCP in x [N s/m]')).value
-        name = self.declare_parameter('source_name', 'example', ParameterDescriptor(
-            description='answers on /pentapod/forces/<source_name>', read_only=True)).value
-        self.pub = self.create_publisher(JointState, force_topic(name), FORCE_QOS)
+    def __init__(self, **kwargs):
+        super().__init__('example_controller', **kwargs)
+        # every parameter from the node's table (pentapod_damper/node_parameters.py): type,
+        # default, range and a description with the unit; unknown names are refused
+        params = declare_table(self, EXAMPLE_CONTROLLER, node_args(kwargs.get('cli_args')))
+        self.gain = params.gain
+        self.pub = self.create_publisher(JointState, force_topic(params.source_name),
+                                         FORCE_QOS)
         self.sub = self.create_subscription(JointState, TCP_STATE, self.on_state, STATE_QOS)
         self.last_stamp = None
         self.last_answer = None
@@ -59,23 +58,7 @@ class ExampleController(Node):
 
 def main(argv=None) -> int:
     """Spin with spin_once on the EventsExecutor (much faster per step than rclpy.spin)."""
-    rclpy.init(args=sys.argv if argv is None else argv)
-    node = ExampleController()
-    try:
-        from rclpy.experimental import EventsExecutor
-        executor = EventsExecutor()
-    except ImportError:
-        executor = rclpy.executors.SingleThreadedExecutor()
-    executor.add_node(node)
-    try:
-        while rclpy.ok():
-            executor.spin_once(timeout_sec=0.1)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return run_node(ExampleController, argv, table=EXAMPLE_CONTROLLER)
 
 
 if __name__ == '__main__':

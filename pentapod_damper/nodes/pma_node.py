@@ -15,9 +15,9 @@ from __future__ import annotations
 
 from sensor_msgs.msg import JointState
 
-from pentapod_damper.laws import ProofMassActuator
+from pentapod_damper.node_parameters import PMA, pma_law
 from pentapod_sim.interface import PMA_STATE
-from pentapod_sim.nodes.common import declare, INFO_QOS, run_node
+from pentapod_sim.nodes.common import INFO_QOS, run_node
 from pentapod_sim.nodes.lockstep_source import LockstepSource
 
 
@@ -25,25 +25,8 @@ class PmaNode(LockstepSource):
     """Proof-mass actuator as a lockstep force source."""
 
     def __init__(self, **kwargs):
-        super().__init__('pma', **kwargs)
-        d = self
-        rate = declare(d, 'sample_rate', 5000.0, 'plant sample rate [Hz] (same as the plant)',
-                       read_only=True, low=1.0, high=1e6)
-        self.law = ProofMassActuator(
-            declare(d, 'directions', ['x'], 'actuated axes (x, y, z)', read_only=True,
-                    array='string[]'),
-            mass=declare(d, 'proof_mass', 5.0, 'proof mass m_a [kg]', read_only=True,
-                         low=1e-6, high=1e6),
-            gain=declare(d, 'gain', 4000.0, 'g [1/s]; damping b = m_a g [N s/m]',
-                         read_only=True, low=0.0, high=1e9),
-            dt=1.0 / rate,
-            highpass_hz=declare(d, 'highpass_hz', 0.0, '2nd-order Butterworth high-pass on '
-                                'the velocity [Hz]; 0 = none', read_only=True, low=0.0,
-                                high=1e5),
-            stroke_limit=declare(d, 'stroke_limit', 0.0, 'max |stroke| [m]; 0 = unlimited',
-                                 read_only=True, low=0.0, high=10.0),
-            force_limit=declare(d, 'force_limit', 0.0, 'max |force| [N]; 0 = unlimited',
-                                read_only=True, low=0.0, high=1e9))
+        super().__init__('pma', PMA, **kwargs)
+        self.law = pma_law(self.params, 1.0 / self.params.sample_rate)
         self.setup(self.law.sensor_ports, self.law.actuator_ports)
         self.joints = [p.replace('pma_force_', 'pma_') for p in self.law.actuator_ports]
         self.state_pub = self.create_publisher(JointState, PMA_STATE, INFO_QOS)
@@ -70,7 +53,7 @@ class PmaNode(LockstepSource):
 
 def main(argv=None) -> int:
     """Entry point of ``ros2 run pentapod_testbed pma``."""
-    return run_node(PmaNode, argv)
+    return run_node(PmaNode, argv, table=PMA)
 
 
 if __name__ == '__main__':

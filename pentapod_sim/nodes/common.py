@@ -1,13 +1,17 @@
 """
 Shared pieces of the testbed nodes: QoS constants, parameters, stamps, spinning, main().
 
+Every node declares its parameters from its table (:mod:`pentapod_sim.parameters`) with
+:func:`declare_table`, which refuses unknown override names; :func:`run_node` prints the
+table for ``--help`` and each error once.
+
 Every node spins with ``spin_once`` loops on rclpy's EventsExecutor (about 5x faster per
 round trip than the default executor here; its ``spin()`` hung in tests, ``spin_once`` does
 not), falling back to the SingleThreadedExecutor if it is missing.
 """
 from __future__ import annotations
 
-import logging
+import math
 import os
 import sys
 import time
@@ -18,9 +22,12 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.utilities import remove_ros_args
 
 from pentapod_sim import interface
 from pentapod_sim.errors import ConfigError, RunError
+from pentapod_sim.nodes.overrides import override_origins
+from pentapod_sim.parameters import all_tables, Param, ParameterTable, Values
 
 
 def qos(kind: str) -> QoSProfile:
@@ -38,46 +45,115 @@ FORCE_QOS = qos('force')
 #: Diagnostics streams (PMA state, excitation): reliable, deep.
 INFO_QOS = qos('info')
 
-_TYPES = {bool: ParameterType.PARAMETER_BOOL, int: ParameterType.PARAMETER_INTEGER,
-          float: ParameterType.PARAMETER_DOUBLE, str: ParameterType.PARAMETER_STRING}
-_ARRAY_TYPES = {'double[]': ParameterType.PARAMETER_DOUBLE_ARRAY,
-                'string[]': ParameterType.PARAMETER_STRING_ARRAY,
-                'integer[]': ParameterType.PARAMETER_INTEGER_ARRAY}
+_TYPES = {'bool': ParameterType.PARAMETER_BOOL, 'int': ParameterType.PARAMETER_INTEGER,
+          'float': ParameterType.PARAMETER_DOUBLE, 'str': ParameterType.PARAMETER_STRING,
+          'double[]': ParameterType.PARAMETER_DOUBLE_ARRAY,
+          'integer[]': ParameterType.PARAMETER_INTEGER_ARRAY,
+          'string[]': ParameterType.PARAMETER_STRING_ARRAY}
+_INT64 = 2 ** 63 - 1
+#: The arguments run_node gave rclpy.init (None: a node started otherwise; sys.argv is used).
+_process_args: list[str] | None = None
 
 
-def declare(node, name: str, default, description: str, *, read_only: bool = False,
-            low: float | None = None, high: float | None = None, array: str | None = None):
+def descriptor(param: Param) -> ParameterDescriptor:
+    """ROS parameter descriptor of a table entry: type, description with unit, range."""
+    desc = ParameterDescriptor(type=_TYPES[param.type], read_only=param.read_only,
+                               description=param.full_description(),
+                               additional_constraints=param.range_text())
+    if param.type == 'float' and (param.low is not None or param.high is not None):
+        desc.floating_point_range = [FloatingPointRange(
+            from_value=-math.inf if param.low is None else float(param.low),
+            to_value=math.inf if param.high is None else float(param.high), step=0.0)]
+    elif param.type == 'int' and (param.low is not None or param.high is not None):
+        desc.integer_range = [IntegerRange(
+            from_value=-_INT64 if param.low is None else int(param.low),
+            to_value=_INT64 if param.high is None else int(param.high), step=1)]
+    return desc
+
+
+def node_args(cli_args=None) -> list[str]:
+    """Command-line arguments that reached a node: the process's and its own ``cli_args``."""
+    process = sys.argv if _process_args is None else _process_args
+    return list(process) + list(cli_args or [])
+
+
+def declare_param(node, table: ParameterTable, name: str, default=None):
     """
-    Declare a parameter with a descriptor and return its value.
+    Declare one parameter of ``table`` and return its value as the node uses it.
+
+    ``name`` may be an instance of a placeholder name (``source_ports.damper``). A value the
+    table refuses raises ConfigError naming the node, the parameter and the value.
+    """
+    param = table[name]
+    value = param.default if default is None else default
+    override = node._parameter_overrides.get(name)
+    where = f'node {node.get_name()!r}'
+    # rclpy types a parameter by its default and takes [] for a byte array: an empty list is
+    # declared as its "none" mark ([''] or [0]), an override as itself (once checked)
+    empty = [param.none_mark] if param.none_mark is not None else value
+    try:
+        if override is not None and override.value is None and param.is_array:
+            # an empty list in a parameter file arrives untyped: it is the empty list
+            declared = node.declare_parameter(name, empty, descriptor(param),
+                                              ignore_override=True)
+        else:
+            if override is not None:
+                table.check({name: override.value}, where)
+                value = override.value
+            declared = node.declare_parameter(name, empty if value == [] else value,
+                                              descriptor(param))
+    except ConfigError:
+        raise
+    except Exception as err:  # rclpy raises several types for bad overrides
+        raise ConfigError(f'{where}: parameter {name!r}: {err}') from None
+    return param.clean(declared.value)
+
+
+def declare_table(node, table: ParameterTable, args=None, defaults=None) -> Values:
+    """
+    Declare every plain parameter of ``table`` on ``node`` and return the typed values.
+
+    First every override given to the node (``-p``, ``--params-file``, constructor) is
+    checked: a name the table does not know is refused with a ConfigError naming the closest
+    known one, unless it reaches the node only through a wildcard section (``/**``) and some
+    node executable declares it (see :mod:`pentapod_sim.nodes.overrides`).
 
     Parameters
     ----------
     node : rclpy.node.Node
-        The node.
-    name : str
-        Parameter name.
-    default : bool, int, float, str or list
-        Default value (fixes the type).
-    description : str
-        Meaning and unit.
-    read_only : bool
-        True for parameters that define the model or wiring.
-    low, high : float, optional
-        Allowed range (rclpy enforces it; a violation raises naming the parameter).
-    array : {'double[]', 'string[]', 'integer[]'}, optional
-        Array type when the default is a list.
+        The node, created with ``allow_undeclared_parameters=False`` (rclpy's default).
+    table : ParameterTable
+        Its parameters.
+    args : sequence of str, optional
+        The command line the overrides came from (default :func:`node_args`).
+    defaults : dict, optional
+        Defaults known only at run time (``source_name``: the node's name).
     """
-    ptype = _ARRAY_TYPES[array] if array else _TYPES[type(default)]
-    desc = ParameterDescriptor(description=description, read_only=read_only, type=ptype)
-    if low is not None and isinstance(default, float):
-        desc.floating_point_range = [FloatingPointRange(from_value=float(low),
-                                                        to_value=float(high), step=0.0)]
-    elif low is not None and isinstance(default, int):
-        desc.integer_range = [IntegerRange(from_value=int(low), to_value=int(high), step=1)]
-    try:
-        return node.declare_parameter(name, default, desc).value
-    except Exception as err:  # rclpy raises several types for bad overrides
-        raise ConfigError(f'parameter {name!r} of node {node.get_name()!r}: {err}') from None
+    refuse_unknown_overrides(node, table, node_args() if args is None else args)
+    defaults = defaults or {}
+    return Values(table, {p.name: declare_param(node, table, p.name, defaults.get(p.name))
+                          for p in table if p.pattern is None})
+
+
+def refuse_unknown_overrides(node, table: ParameterTable, args) -> None:
+    """
+    ConfigError for an override the node does not know (see :func:`declare_table`).
+
+    rclpy keeps the overrides of a node in ``Node._parameter_overrides`` (filled from rcl
+    in the constructor; there is no public getter). With ``allow_undeclared_parameters=False``
+    rclpy silently drops overrides that are never declared, so they are compared here with
+    the table and the parameters rclpy declared itself (``use_sim_time``, ...).
+    """
+    unknown = [name for name in node._parameter_overrides
+               if name not in table and not node.has_parameter(name)]
+    if not unknown:
+        return
+    origins = override_origins(args, node.get_name(), node.get_fully_qualified_name())
+    for name in unknown:
+        if name in origins.shared and name not in origins.own and any(
+                name in other for other in all_tables().values()):
+            continue                    # a shared /** entry meant for other nodes
+        raise table.unknown(name, f'node {node.get_name()!r}')
 
 
 def stamp_msg(ns: int) -> Time:
@@ -128,28 +204,47 @@ def spin_until(executor, done: Callable[[], bool], timeout: float,
     return True
 
 
-def run_node(factory: Callable[..., object], argv=None, run: Callable | None = None) -> int:
+def wants_help(args) -> bool:
+    """True if the non-ROS arguments ask for help (``-h``, ``--help``)."""
+    return any(a in ('-h', '--help') for a in remove_ros_args(list(args))[1:])
+
+
+def usage(table: ParameterTable) -> str:
+    """``--help`` text of a node executable: usage line, summary and parameter table."""
+    return (f'usage: ros2 run pentapod_testbed {table.node} [--ros-args [-p NAME:=VALUE] ... '
+            f'[--params-file FILE] ...]\n\n{table.node}: {table.summary}\n\n'
+            f'parameters (docs/parameters.md):\n{table.text()}')
+
+
+def run_node(factory: Callable[..., object], argv=None, run: Callable | None = None, *,
+             table: ParameterTable | None = None, executor: Callable = make_executor) -> int:
     """
     Jazzy-style main: init, build the node, spin or ``run(node, executor)``, clean shutdown.
 
-    Returns 0 on a clean end (also SIGINT), 1 with a logged message on ConfigError/RunError.
+    ``--help`` prints the usage and ``table`` and starts nothing. Returns 0 on a clean end
+    (also SIGINT), 1 after printing one ``error: ...`` line on a ConfigError/RunError.
     """
-    rclpy.init(args=sys.argv if argv is None else argv)
+    global _process_args
+    args = list(sys.argv if argv is None else argv)
+    if table is not None and wants_help(args):
+        print(usage(table))
+        return 0
+    _process_args = args
+    rclpy.init(args=args)
     node = None
     code = 0
     try:
         node = factory()
-        executor = make_executor()
-        executor.add_node(node)
+        spinner = executor()
+        spinner.add_node(node)
         if run is not None:
-            run(node, executor)
+            run(node, spinner)
         else:
             while rclpy.ok():
-                executor.spin_once(timeout_sec=0.1)
+                spinner.spin_once(timeout_sec=0.1)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except (ConfigError, RunError, ValueError, KeyError) as err:
-        logging.getLogger('pentapod').error('%s', err)
         print(f'error: {err}', file=sys.stderr)
         code = 1
     finally:

@@ -20,32 +20,32 @@ from sensor_msgs.msg import JointState
 
 from pentapod_sim.interface import CLOCK, force_topic, port_location
 from pentapod_sim.nodes.common import (
-    declare,
+    declare_table,
     FORCE_QOS,
+    node_args,
     stamp_msg,
     stamp_to_ns,
     STATE_QOS,
     subscribers_of,
 )
+from pentapod_sim.parameters import ParameterTable
 
 
 class LockstepSource(Node):
     """
     A node that answers each plant step with forces on some input ports.
 
-    Subclasses set ``sensor_ports`` / ``actuator_ports`` and call :meth:`setup`, then
-    implement :meth:`compute`.
+    Subclasses pass their parameter table (which includes
+    :data:`pentapod_sim.nodes.parameter_tables.SOURCE_PARAMS`), find the values in
+    ``self.params``, call :meth:`setup` and implement :meth:`compute`.
     """
 
-    def __init__(self, default_name: str, **kwargs):
+    def __init__(self, default_name: str, table: ParameterTable, **kwargs):
         super().__init__(default_name, **kwargs)
-        self.source_name = declare(self, 'source_name', self.get_name(), 'publishes forces on '
-                                   '/pentapod/forces/<source_name>', read_only=True)
-        self.wait_for = [n for n in declare(
-            self, 'wait_for_subscribers', [''], 'node names (e.g. a recorder) that must be '
-            "subscribed and matched to this node's information topics before it answers "
-            'step 0 (the plant re-sends step 0 meanwhile)', read_only=True, array='string[]')
-            if n]
+        self.params = declare_table(self, table, node_args(kwargs.get('cli_args')),
+                                    defaults={'source_name': self.get_name()})
+        self.source_name = self.params.source_name or self.get_name()
+        self.wait_for = self.params.wait_for_subscribers
         self.info_pubs: list = []   # subclasses add their diagnostic publishers
         self.rejected = {}
         self.answered = 0
@@ -87,8 +87,8 @@ class LockstepSource(Node):
         now = time.monotonic()
         if now - self._last_warn > 1.0:
             self._last_warn = now
-            self.get_logger().warn(f'rejected state message: {reason} '
-                                   f'({self.rejected[kind]} so far)')
+            self.get_logger().warning(f'rejected state message: {reason} '
+                                      f'({self.rejected[kind]} so far)')
 
     def subscribers_ready(self) -> bool:
         """True once every ``wait_for_subscribers`` node is matched on every info topic."""

@@ -21,8 +21,10 @@ from sensor_msgs.msg import JointState
 from pentapod_sim.errors import ConfigError, RunError
 from pentapod_sim.interface import CLOCK, force_topic, stamp_ns, state_layouts, step_of
 from pentapod_sim.nodes.common import (
-    declare,
+    declare_param,
+    declare_table,
     FORCE_QOS,
+    node_args,
     run_node,
     spin_until,
     stamp_msg,
@@ -30,34 +32,29 @@ from pentapod_sim.nodes.common import (
     STATE_QOS,
     subscribers_of,
 )
+from pentapod_sim.nodes.parameter_tables import PLANT
 from pentapod_sim.nodes.realtime_stats import LatenessStats
 from pentapod_sim.plant.build import load_or_build_model
-from pentapod_sim.sim.stepping import (
-    DEFAULT_MAX_STATE_NORM,
-    DiscretePlant,
-    ForceMixer,
-    parse_sources,
-)
+from pentapod_sim.sim.stepping import DiscretePlant, ForceMixer, parse_sources
 
 
 class PlantNode(Node):
-    """Discrete modal plant as a ROS 2 node (parameters: docs/nodes.md)."""
+    """Discrete modal plant as a ROS 2 node (parameters: docs/parameters.md)."""
 
     def __init__(self, **kwargs):
         super().__init__('plant', **kwargs)
-        self._declare()
-        model, origin = load_or_build_model(self.p['model_file'], self.p['position'],
-                                            self.p['model_cache_dir'])
+        self.params = declare_table(self, PLANT, node_args(kwargs.get('cli_args')))
+        ports = self._source_ports()
+        model, origin = load_or_build_model(self.params.model_file, self.params.position,
+                                            self.params.model_cache_dir)
         self.model = model
-        self.core = DiscretePlant(model.discretize(1.0 / self.p['sample_rate']),
-                                  max_state_norm=self.p['max_state_norm'])
+        self.core = DiscretePlant(model.discretize(1.0 / self.params.sample_rate),
+                                  max_state_norm=self.params.max_state_norm)
         self.dt = self.core.dt
         self.get_logger().info(f'plant model {origin}: {model.n_modes} modes, '
                                f'{len(model.input_names)} inputs, {len(model.output_names)} '
                                f'outputs, dt = {self.dt:.6g} s')
-        ports = {n: self.get_parameter_or_declare(f'source_ports.{n}')
-                 for n in self.p['sources']}
-        self.mixer = ForceMixer(self.core.input_names, parse_sources(self.p['sources'], ports))
+        self.mixer = ForceMixer(self.core.input_names, parse_sources(self.params.sources, ports))
         self.n_steps = self._n_steps()
         self.clock_pub = self.create_publisher(Clock, CLOCK, STATE_QOS)
         self.layouts = state_layouts(self.core.output_names)
@@ -70,70 +67,25 @@ class PlantNode(Node):
         self._last_warn = {}
         self._next_refresh = 0.0
 
-    def _declare(self) -> None:
-        """Declare every parameter (docs/nodes.md) into ``self.p``."""
-        d = self
-        self.p = {
-            'model_file': declare(d, 'model_file', '', 'saved PlantModel .npz; wins over '
-                                  'position', read_only=True),
-            'position': declare(d, 'position', 'P1', 'position name of config/positions.yaml '
-                                'to build the model for (cached)', read_only=True),
-            'model_cache_dir': declare(d, 'model_cache_dir', 'out/models',
-                                       'folder of cached built models', read_only=True),
-            'sample_rate': declare(d, 'sample_rate', 5000.0, 'plant sample rate [Hz]',
-                                   read_only=True, low=1.0, high=1.0e6),
-            'timing': declare(d, 'timing', 'lockstep', "'lockstep' or 'realtime'",
-                              read_only=True),
-            'duration': declare(d, 'duration', 1.0, 'simulated time [s] (if steps is 0)',
-                                read_only=True, low=0.0, high=1.0e7),
-            'steps': declare(d, 'steps', 0, 'number of steps; 0 = use duration',
-                             read_only=True, low=0, high=2 ** 62),
-            'sources': declare(d, 'sources', [''], 'force source names; each publishes on '
-                               '/pentapod/forces/<name>', read_only=True, array='string[]'),
-            'source_timeout': declare(d, 'source_timeout', 5.0, 'lockstep: max wall time [s] '
-                                      'a source may stay silent', low=1e-3, high=3600.0),
-            'startup_timeout': declare(d, 'startup_timeout', 30.0, 'max wall time [s] to '
-                                       'wait for the sources at step 0', low=0.0,
-                                       high=3600.0),
-            'resend_period': declare(d, 'resend_period', 0.2, 'lockstep: re-publish y_k '
-                                     'after this wall time [s] without all answers',
-                                     low=1e-3, high=60.0),
-            'max_state_norm': declare(d, 'max_state_norm', DEFAULT_MAX_STATE_NORM,
-                                      'instability bound on ||x||', low=1e-12, high=1e300),
-            'report_period': declare(d, 'report_period', 2.0, 'realtime: log timing every '
-                                     'this wall time [s]', low=0.1, high=3600.0),
-            'output_file': declare(d, 'output_file', '', 'write y_k, u_k of every step to '
-                                   'this .npz at the end (empty: no file)', read_only=True),
-            'wait_for_subscribers': declare(d, 'wait_for_subscribers', [''], 'node names '
-                                            '(e.g. a recorder) that must subscribe to an '
-                                            'output topic before step 0', read_only=True,
-                                            array='string[]'),
-            'subscriber_settle': declare(d, 'subscriber_settle', 0.5, 'wall time [s] '
-                                         'spun after the wait_for_subscribers nodes appeared',
-                                         low=0.0, high=60.0),
-            'ack_timeout': declare(d, 'ack_timeout', 10.0, 'max wall time [s] to wait at '
-                                   'the end until subscribers acknowledged every message',
-                                   low=0.0, high=3600.0),
-        }
-        self.p['sources'] = [s for s in self.p['sources'] if s]
-        self.p['wait_for_subscribers'] = [s for s in self.p['wait_for_subscribers'] if s]
-        if self.p['timing'] not in ('lockstep', 'realtime'):
-            raise ConfigError(f"parameter 'timing' must be 'lockstep' or 'realtime', got "
-                              f"{self.p['timing']!r}")
-
-    def get_parameter_or_declare(self, name: str) -> list:
-        """Declare ``source_ports.<source>`` (string array, empty = any input port)."""
-        ports = declare(self, name, [''], 'input ports this source may drive (empty: all)',
-                        read_only=True, array='string[]')
-        return [p for p in ports if p]
+    def _source_ports(self) -> dict[str, list[str]]:
+        """Declare ``source_ports.<source>`` of every source (ConfigError for other sources)."""
+        ports = {name: declare_param(self, PLANT, f'source_ports.{name}')
+                 for name in self.params.sources}
+        strays = sorted(name for name in self._parameter_overrides
+                        if name.startswith('source_ports.') and name not in
+                        {f'source_ports.{s}' for s in self.params.sources})
+        if strays:
+            raise ConfigError(f'parameter {strays[0]!r} names no source of parameter '
+                              f"'sources' = {self.params.sources}")
+        return ports
 
     def _n_steps(self) -> int:
         """Steps of the run from ``steps`` or ``duration``."""
-        if self.p['steps'] > 0:
-            return int(self.p['steps'])
-        n = int(round(self.p['duration'] / self.dt))
+        if self.params.steps > 0:
+            return int(self.params.steps)
+        n = int(round(self.params.duration / self.dt))
         if n <= 0:
-            raise ConfigError(f"parameters 'steps' = 0 and 'duration' = {self.p['duration']} "
+            raise ConfigError(f"parameters 'steps' = 0 and 'duration' = {self.params.duration} "
                               's give no step')
         return n
 
@@ -162,7 +114,7 @@ class PlantNode(Node):
         """Validate a force message; warn (throttled) and count rejects."""
         step = step_of(stamp_to_ns(msg.header.stamp), self.dt)
         reason = self.mixer.submit(source, msg.name, msg.effort, step, self.core.k,
-                                   exact=self.p['timing'] == 'lockstep')
+                                   exact=self.params.timing == 'lockstep')
         if reason is not None:
             kind = reason.split(':')[0]
             if reason.startswith(('stale', 'duplicate:')):
@@ -170,8 +122,8 @@ class PlantNode(Node):
             now = time.monotonic()
             if now - self._last_warn.get((source, kind), -1e9) > 1.0:
                 self._last_warn[(source, kind)] = now
-                self.get_logger().warn(f'rejected message from source {source!r}: {reason} '
-                                       f'({self.mixer.rejected[(source, kind)]} so far)')
+                self.get_logger().warning(f'rejected message from source {source!r}: {reason} '
+                                          f'({self.mixer.rejected[(source, kind)]} so far)')
 
     # -- runs ------------------------------------------------------------------------------
     def wait_for_sources(self, executor) -> None:
@@ -179,9 +131,9 @@ class PlantNode(Node):
         def missing():
             return [s for s in self.mixer.sources
                     if self.count_publishers(force_topic(s)) == 0]
-        if not spin_until(executor, lambda: not missing(), self.p['startup_timeout']):
+        if not spin_until(executor, lambda: not missing(), self.params.startup_timeout):
             raise RunError(f'force source(s) {", ".join(missing())} did not appear within '
-                           f'startup_timeout = {self.p["startup_timeout"]} s')
+                           f'startup_timeout = {self.params.startup_timeout} s')
 
     def output_topics(self) -> list[str]:
         """Topics the plant publishes every step (/clock and the state topics)."""
@@ -195,7 +147,7 @@ class PlantNode(Node):
         (to this plant and to the sources) are matched too: a recorder started with the run
         thus receives step 0. RunError names a node that did not appear.
         """
-        wanted = self.p['wait_for_subscribers']
+        wanted = self.params.wait_for_subscribers
 
         pubs = [self.clock_pub] + [pub for pub, _ in self.state_pubs]
 
@@ -209,29 +161,29 @@ class PlantNode(Node):
             return [n for n in wanted if n not in seen] + [f'match on {t}' for t in unmatched]
         if not wanted:
             return
-        if not spin_until(executor, lambda: not missing(), self.p['startup_timeout']):
+        if not spin_until(executor, lambda: not missing(), self.params.startup_timeout):
             raise RunError(f'subscriber node(s) {", ".join(missing())} did not appear within '
-                           f'startup_timeout = {self.p["startup_timeout"]} s')
-        spin_until(executor, lambda: False, self.p['subscriber_settle'])
+                           f'startup_timeout = {self.params.startup_timeout} s')
+        spin_until(executor, lambda: False, self.params.subscriber_settle)
         self.refresh_subscribers()
 
     def wait_for_acks(self) -> None:
         """Block until every subscriber acknowledged every message (reliable QoS)."""
-        timeout = Duration(seconds=self.p['ack_timeout'])
+        timeout = Duration(seconds=self.params.ack_timeout)
         for pub in [self.clock_pub] + [pub for pub, _ in self.state_pubs]:
             if pub.get_subscription_count() and not pub.wait_for_all_acked(timeout):
-                self.get_logger().warn(f'{pub.topic_name}: not every message acknowledged '
-                                       f'within ack_timeout = {self.p["ack_timeout"]} s')
+                self.get_logger().warning(f'{pub.topic_name}: not every message acknowledged '
+                                          f'within ack_timeout = {self.params.ack_timeout} s')
 
     def run_lockstep(self, executor, trace, n_steps: int | None = None) -> None:
         """Each step: publish y_k, wait for every source's u_k, advance."""
         core, mixer = self.core, self.mixer
-        resend, timeout = self.p['resend_period'], self.p['source_timeout']
+        resend, timeout = self.params.resend_period, self.params.source_timeout
         for k in range(self.n_steps if n_steps is None else n_steps):
             y = core.outputs()
             self.publish_outputs(y)
             start = last_sent = time.monotonic()
-            limit = self.p['startup_timeout'] if k == 0 else timeout
+            limit = self.params.startup_timeout if k == 0 else timeout
             while mixer.missing(k):
                 executor.spin_once(timeout_sec=resend / 4)
                 now = time.monotonic()
@@ -258,7 +210,7 @@ class PlantNode(Node):
         stats = LatenessStats(self.n_steps, dt)
         self.run_lockstep(executor, trace, n_steps=1)
         t0 = time.monotonic() - dt
-        next_report = t0 + self.p['report_period']
+        next_report = t0 + self.params.report_period
         for k in range(1, self.n_steps):
             target = t0 + k * dt
             now = time.monotonic()
@@ -276,7 +228,7 @@ class PlantNode(Node):
             core.advance(u)
             if now > next_report:
                 self.get_logger().info('realtime: ' + stats.summary(k + 1, now - t0))
-                next_report = now + self.p['report_period']
+                next_report = now + self.params.report_period
         stats.elapsed = time.monotonic() - t0
         return stats
 
@@ -306,15 +258,15 @@ class Trace:
 
 def run(node: PlantNode, executor) -> None:
     """Wait for the sources, run the configured number of steps, log a summary."""
-    trace = Trace(node.n_steps, node.core, bool(node.p['output_file']))
+    trace = Trace(node.n_steps, node.core, bool(node.params.output_file))
     node.wait_for_sources(executor)
     node.wait_for_subscribers(executor)
-    node.get_logger().info(f'{node.p["timing"]} run of {node.n_steps} steps with sources '
+    node.get_logger().info(f'{node.params.timing} run of {node.n_steps} steps with sources '
                            f'{list(node.mixer.sources) or "none"}')
     extra = {}
     wall = time.monotonic()
     try:
-        if node.p['timing'] == 'lockstep':
+        if node.params.timing == 'lockstep':
             node.run_lockstep(executor, trace)
         else:
             stats = node.run_realtime(executor, trace)
@@ -327,13 +279,13 @@ def run(node: PlantNode, executor) -> None:
         node.get_logger().info(f'ran {node.core.k} steps in {wall:.3f} s wall '
                                f'({node.core.k / max(wall, 1e-9):.0f} steps/s); '
                                + node.mixer.reject_summary())
-        if node.p['output_file']:
-            trace.save(node.p['output_file'], node, dict(extra, wall_time=wall))
+        if node.params.output_file:
+            trace.save(node.params.output_file, node, dict(extra, wall_time=wall))
 
 
 def main(argv=None) -> int:
     """Entry point of ``ros2 run pentapod_testbed plant``."""
-    return run_node(PlantNode, argv, run)
+    return run_node(PlantNode, argv, run, table=PLANT)
 
 
 if __name__ == '__main__':

@@ -8,9 +8,7 @@ time) when its type starts with a std_msgs/Header or a builtin Time (Clock), els
 receive time of the node clock. SIGINT/SIGTERM close the bag completely; after a SIGKILL the
 bag is readable up to the last periodic flush. The node publishes nothing.
 
-Parameters: ``topics`` (string array; empty = discover), ``output_dir``, ``bag_name`` (empty =
-``run_<UTC time>``), ``run_info`` (YAML mapping stored as custom_data), ``queue_depth``,
-``discovery_period`` [s], ``flush_period`` [s].
+Parameters: :data:`pentapod_sim.nodes.parameter_tables.RECORDER` (docs/parameters.md).
 """
 import datetime
 import importlib
@@ -18,16 +16,17 @@ from pathlib import Path
 import struct
 import time
 
-from rcl_interfaces.msg import ParameterDescriptor, ParameterType
 import rclpy
 from rclpy.clock import Clock, ClockType
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 import yaml
 
 from pentapod_sim import interface
-from pentapod_sim.errors import BagError
+from pentapod_sim.errors import BagError, ConfigError
+from pentapod_sim.nodes.common import declare_table, node_args, run_node
+from pentapod_sim.nodes.parameter_tables import RECORDER
 from pentapod_sim.recording import BagWriter, qos_profile
 from pentapod_sim.recording.msgdefs import has_header_stamp
 
@@ -49,41 +48,29 @@ class RecorderNode(Node):
 
     def __init__(self, **kwargs):
         super().__init__('recorder', **kwargs)
-        desc = ParameterDescriptor
-        self.declare_parameter('topics', [''], desc(
-            type=ParameterType.PARAMETER_STRING_ARRAY,
-            description='topics to record; empty: every /pentapod/* topic and /clock'))
-        self.declare_parameter('output_dir', 'out/bags', desc(description='folder of bags'))
-        self.declare_parameter('bag_name', '', desc(description='bag folder name'))
-        self.declare_parameter('run_info', '', desc(
-            description='YAML mapping stored in custom_data (model hash, pose, scenario)'))
-        self.declare_parameter('queue_depth', 100000, desc(
-            description='subscription depth (messages held while the writer catches up)'))
-        self.declare_parameter('discovery_period', 0.2, desc(description='[s], wall time'))
-        self.declare_parameter('flush_period', 0.5, desc(description='[s], wall time'))
-        self.declare_parameter('stop_when_idle', 0.0, desc(
-            description='[s] wall time without messages after which the recorder closes the '
-                        'bag and exits (0 = run until SIGINT/SIGTERM)'))
-        self.stop_when_idle = float(self.get_parameter('stop_when_idle').value)
+        self.params = params = declare_table(self, RECORDER, node_args(kwargs.get('cli_args')))
+        self.stop_when_idle = params.stop_when_idle
         self.last_message = None
         self.duplicates = {}
-        param = self.get_parameter
-        self.wanted = [t for t in (param('topics').value or []) if t]
-        name = param('bag_name').value or datetime.datetime.now(
+        self.wanted = params.topics
+        name = params.bag_name or datetime.datetime.now(
             datetime.timezone.utc).strftime('run_%Y%m%d_%H%M%S')
-        run_info = yaml.safe_load(param('run_info').value or '{}') or {}
+        try:
+            run_info = yaml.safe_load(params.run_info or '{}') or {}
+        except yaml.YAMLError as err:
+            raise ConfigError(f'parameter run_info is not YAML: {err}') from None
         if not isinstance(run_info, dict):
-            raise ValueError(f'run_info must be a YAML mapping, got {run_info!r}')
-        self.depth = int(param('queue_depth').value)
-        self.writer = BagWriter(Path(param('output_dir').value) / name, run_info=run_info,
+            raise ConfigError(f'parameter run_info must be a YAML mapping, got {run_info!r}')
+        self.depth = params.queue_depth
+        self.writer = BagWriter(Path(params.output_dir) / name, run_info=run_info,
                                 flush_period_s=0.0)
         self.subs = {}  # topic -> (subscription or None, msg_type, best_effort)
         for topic, msg_type in KNOWN_TOPICS.items():
             if self._selected(topic):
                 self._subscribe(topic, msg_type, [])
         steady = Clock(clock_type=ClockType.STEADY_TIME)
-        self.create_timer(float(param('discovery_period').value), self.discover, clock=steady)
-        self.create_timer(float(param('flush_period').value), self.flush, clock=steady)
+        self.create_timer(params.discovery_period, self.discover, clock=steady)
+        self.create_timer(params.flush_period, self.flush, clock=steady)
         self.discover()
         self.get_logger().info(f'recording to {self.writer.path}')
 
@@ -105,7 +92,7 @@ class RecorderNode(Node):
                 continue
             if known is not None:  # a best-effort publisher cannot match a reliable reader
                 self.destroy_subscription(known[0])
-                self.get_logger().warn(f'{topic}: best-effort publisher, messages may be lost')
+                self.get_logger().warning(f'{topic}: best-effort publisher, messages may be lost')
             try:
                 self._subscribe(topic, types[0], publishers)
             except (BagError, ImportError, AttributeError, ValueError) as err:
@@ -177,26 +164,22 @@ def _any_best_effort(publishers) -> bool:
     return any(p.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT for p in publishers)
 
 
-def main(argv=None) -> int:
-    """Run the recorder until SIGINT/SIGTERM; the bag is closed on the way out."""
-    rclpy.init(args=argv)
-    node = RecorderNode()
-    # the default executor: rclpy's EventsExecutor did not fire the steady-clock discovery and
-    # flush timers here
-    executor = SingleThreadedExecutor()
-    executor.add_node(node)
+def record(node: RecorderNode, executor) -> None:
+    """Spin until SIGINT/SIGTERM or ``stop_when_idle``; the bag is closed on the way out."""
     try:
         while rclpy.ok() and not node.idle():
             executor.spin_once(timeout_sec=0.05)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
     finally:
         node.close()
-        node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+
+
+def main(argv=None) -> int:
+    """Entry point of ``ros2 run pentapod_testbed recorder``."""
+    # the default executor: rclpy's EventsExecutor did not fire the steady-clock discovery and
+    # flush timers here
+    return run_node(RecorderNode, argv, record, table=RECORDER,
+                    executor=SingleThreadedExecutor)
 
 
 if __name__ == '__main__':
-    import sys
-    sys.exit(main())
+    raise SystemExit(main())

@@ -4,6 +4,10 @@ Scenario files: the one parser of config/scenarios/*.yaml and the resolution of 
 A scenario is an ordinary ROS 2 parameter file: one ``<node_name>: ros__parameters:`` section
 per node plus an optional ``/**`` section shared by all (e.g. ``sample_rate``). The executable
 of a node follows from its name's prefix (:data:`pentapod_sim.executables.NODE_KINDS`).
+Every node section is checked against its executable's parameter table
+(:func:`pentapod_sim.parameters.table_of`): an unknown name is refused naming the closest
+known one. A ``/**`` name must be known to at least one node executable; it reaches the nodes
+that declare it.
 """
 from __future__ import annotations
 
@@ -15,6 +19,7 @@ import yaml
 
 from pentapod_sim.errors import ConfigError
 from pentapod_sim.executables import module_of, NODE_KINDS
+from pentapod_sim.parameters import all_tables, did_you_mean, table_of
 from pentapod_sim.paths import scenario_dir
 
 
@@ -39,7 +44,8 @@ class Scenario:
     nodes : list of ScenarioNode
         Its nodes, sources first and the plant last.
     sections : dict
-        Parameters of every node with the ``/**`` section merged in (node entries win).
+        Parameters of every node: its own section's and those of the ``/**`` section its
+        executable declares (its own entries win); checked against its parameter table.
     shared : dict
         The ``/**`` section's parameters.
     """
@@ -88,7 +94,9 @@ def read_scenario(scenario: str | Path) -> Scenario:
     ------
     ConfigError
         If the file cannot be read, is not a mapping of ``<node>: {ros__parameters: {...}}``,
-        names a node of no known kind or has not exactly one plant; the message names the file.
+        names a node of no known kind, has a parameter its node does not know (naming the
+        closest known one) or a bad value, or has not exactly one plant; the message names
+        the file.
     """
     path = resolve(scenario)
     try:
@@ -101,6 +109,9 @@ def read_scenario(scenario: str | Path) -> Scenario:
     if not isinstance(shared_section, dict):
         raise ConfigError(f"{path}: section '/**' is not a mapping")
     shared = shared_section.get('ros__parameters') or {}
+    if not isinstance(shared, dict):
+        raise ConfigError(f"{path}: section '/**' has no ros__parameters mapping")
+    _check_shared(shared, f"{path}: section '/**'")
     sections, nodes = {}, []
     for name, body in doc.items():
         if str(name).startswith('/'):
@@ -111,9 +122,25 @@ def read_scenario(scenario: str | Path) -> Scenario:
             executable = executable_of(name)
         except ConfigError as err:
             raise ConfigError(f'{path}: {err}') from None
-        sections[name] = {**shared, **body['ros__parameters']}
+        table = table_of(executable)
+        own = body['ros__parameters']
+        table.check(own, f'{path}: node {name!r} ({executable})')
+        sections[name] = {**{k: v for k, v in shared.items() if k in table}, **own}
         nodes.append(ScenarioNode(name, module_of(executable), executable))
     if sum(n.executable == 'plant' for n in nodes) != 1:
         raise ConfigError(f'scenario file {path} needs exactly one plant node')
     nodes.sort(key=lambda n: n.executable == 'plant')
     return Scenario(path, nodes, sections, dict(shared))
+
+
+def _check_shared(shared: dict, source: str) -> None:
+    """Refuse a shared name no node executable knows, or a value wrong for one that does."""
+    tables = all_tables().values()
+    for name, value in shared.items():
+        knowing = [t for t in tables if name in t]
+        if not knowing:
+            known = sorted({p.name for t in tables for p in t})
+            raise ConfigError(f'{source}: no node has a parameter {name!r}'
+                              f'{did_you_mean(str(name), known)}')
+        for table in knowing:
+            table.check({name: value}, f'{source} (for {table.node})')

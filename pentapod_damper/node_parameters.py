@@ -1,0 +1,108 @@
+"""
+Parameters of the damper, PMA and example-controller nodes, and the laws they configure.
+
+The one home of the laws' defaults, ranges and construction: the nodes
+(:mod:`pentapod_damper.nodes`) declare their parameters from these tables and build their laws
+with :func:`damper_laws` and :func:`pma_law`; the offline equivalents of a scenario
+(:mod:`pentapod_damper.scenario_laws`, the study) call the same functions with the scenario
+file's sections. ROS-free.
+"""
+from __future__ import annotations
+
+from typing import Any, Mapping
+
+from pentapod_damper.laws import (
+    ProofMassActuator,
+    strut_axial_damper,
+    strut_bending_damper,
+    tcp_damper,
+    ViscousDamper,
+)
+from pentapod_sim.nodes.parameter_tables import SAMPLE_RATE, SOURCE_PARAMS
+from pentapod_sim.parameters import Param, ParameterTable, Values
+
+#: Upper bound of the damper gains.
+MAX_GAIN = 1.0e9
+
+DAMPER = ParameterTable('damper', [
+    Param('bending_struts', 'integer[]', [], 'struts (1..5) with bending dampers on both cardan '
+          'axes; [] or [0] = none'),
+    Param('bending_gain', 'float', 1000.0, 'bending damping b of each strut and cardan axis',
+          'N m s/rad', 0.0, MAX_GAIN, read_only=False),
+    Param('axial_struts', 'integer[]', [], 'struts (1..5) with axial dampers between strut and '
+          'BP ring'),
+    Param('axial_gain', 'float', 50000.0, 'axial damping b', 'N s/m', 0.0, MAX_GAIN,
+          read_only=False),
+    Param('tcp_directions', 'string[]', [], 'directions (x, y, z) of dampers from the TCP to '
+          'ground'),
+    Param('tcp_gain', 'float', 20000.0, 'TCP damping b', 'N s/m', 0.0, MAX_GAIN,
+          read_only=False),
+    *SOURCE_PARAMS,
+], summary='viscous velocity feedback u = -b * rate on struts and the TCP; the gains may be '
+           'changed while running.')
+
+PMA = ParameterTable('pma', [
+    SAMPLE_RATE,
+    Param('directions', 'string[]', ['x'], 'actuated axes (x, y, z)'),
+    Param('proof_mass', 'float', 5.0, 'proof mass m_a', 'kg', 1e-6, 1e6),
+    Param('gain', 'float', 4000.0, 'velocity gain g; damping b = m_a g [N s/m]', '1/s',
+          0.0, 1e9),
+    Param('highpass_hz', 'float', 0.0, 'corner of a 2nd-order Butterworth high-pass on the '
+          'velocity; 0 = none', 'Hz', 0.0, 1e5),
+    Param('stroke_limit', 'float', 0.0, 'max |stroke| of the proof mass; 0 = unlimited', 'm',
+          0.0, 10.0),
+    Param('force_limit', 'float', 0.0, 'max |force| commanded; 0 = unlimited', 'N', 0.0, 1e9),
+    *SOURCE_PARAMS,
+], summary='ideal proof-mass actuator on the working platform (damping b = m_a g).')
+
+EXAMPLE_CONTROLLER = ParameterTable('example_controller', [
+    Param('gain', 'float', 1000.0, 'damping of the TCP in x', 'N s/m', 0.0, MAX_GAIN),
+    Param('source_name', 'str', 'example', 'answers on /pentapod/forces/<source_name>'),
+], summary='template of a controller: a TCP damper in x, u = -gain * v_x.')
+
+
+def _values(table: ParameterTable, params: Mapping[str, Any] | Values, source: str) -> Values:
+    return params if isinstance(params, Values) else table.values(params, source)
+
+
+def damper_laws(params: Mapping[str, Any] | Values,
+                source: str = '') -> dict[str, ViscousDamper]:
+    """
+    The viscous dampers of one damper node, keyed by the name of their gain parameter.
+
+    Parameters
+    ----------
+    params : mapping or Values
+        The node's parameters (missing ones take the table's defaults); a mapping is checked
+        against :data:`DAMPER` (ConfigError naming ``source``).
+    source : str
+        Where a mapping comes from, for error messages.
+
+    Returns
+    -------
+    dict
+        ``bending_gain``, ``axial_gain``, ``tcp_gain`` -> law, for the dampers configured, in
+        this order (the order of the node's actuator ports).
+    """
+    v = _values(DAMPER, params, source)
+    laws = {}
+    if v.bending_struts:
+        laws['bending_gain'] = strut_bending_damper(v.bending_struts, v.bending_gain)
+    if v.axial_struts:
+        laws['axial_gain'] = strut_axial_damper(v.axial_struts, v.axial_gain)
+    if v.tcp_directions:
+        laws['tcp_gain'] = tcp_damper(v.tcp_directions, v.tcp_gain)
+    return laws
+
+
+def pma_law(params: Mapping[str, Any] | Values, dt: float,
+            source: str = '') -> ProofMassActuator:
+    """
+    The proof-mass actuator of one PMA node, integrating its proof mass with ``dt`` [s].
+
+    Parameters as in :func:`damper_laws`, checked against :data:`PMA`.
+    """
+    v = _values(PMA, params, source)
+    return ProofMassActuator(v.directions, v.proof_mass, v.gain, dt,
+                             highpass_hz=v.highpass_hz, stroke_limit=v.stroke_limit,
+                             force_limit=v.force_limit)

@@ -1,0 +1,112 @@
+"""
+Parameter tables of the plant, exciter and recorder nodes (ROS-free; docs/parameters.md).
+
+Also the parameters every lockstep force source shares (:data:`SOURCE_PARAMS`) and the one
+``sample_rate`` of plant, exciter and PMA (:data:`SAMPLE_RATE`). The exciter's signal defaults
+are those of :class:`pentapod_sim.sim.excitation.ExcitationSpec`; :func:`excitation_spec`
+turns the exciter's values into that spec.
+"""
+from __future__ import annotations
+
+import math
+
+from pentapod_sim.parameters import Param, ParameterTable, Values
+from pentapod_sim.sim.excitation import ExcitationSpec, KINDS
+from pentapod_sim.sim.stepping import DEFAULT_MAX_STATE_NORM
+
+#: The plant's sample rate; the exciter and the PMA must be given the same.
+SAMPLE_RATE = Param('sample_rate', 'float', 5000.0, 'plant sample rate (exciter and PMA: '
+                    "the same as the plant's)", 'Hz', 1.0, 1.0e6)
+
+#: Parameters of every lockstep force source (:class:`..lockstep_source.LockstepSource`).
+SOURCE_PARAMS = (
+    Param('source_name', 'str', '', 'publishes forces on /pentapod/forces/<source_name>; '
+          "empty: the node's name (the declared default)"),
+    Param('wait_for_subscribers', 'string[]', [], 'node names (e.g. a recorder) that must be '
+          "subscribed and matched to this node's information topics before it answers step 0 "
+          '(the plant re-sends step 0 meanwhile)'),
+)
+
+PLANT = ParameterTable('plant', [
+    Param('model_file', 'str', '', 'saved PlantModel .npz; wins over position'),
+    Param('position', 'str', 'P1', 'position name of config/positions.yaml to build the model '
+          'for (cached)'),
+    Param('model_cache_dir', 'str', 'out/models', 'folder of cached built models'),
+    SAMPLE_RATE,
+    Param('timing', 'str', 'lockstep', 'lockstep: wait for every source each step; realtime: '
+          'wall-clock paced, newest force held', choices=('lockstep', 'realtime')),
+    Param('duration', 'float', 1.0, 'simulated time (if steps is 0)', 's', 0.0, 1.0e7),
+    Param('steps', 'int', 0, 'number of steps; 0 = use duration', '', 0, 10 ** 12),
+    Param('sources', 'string[]', [], 'force source names; each publishes on '
+          '/pentapod/forces/<name>'),
+    Param('source_ports.<source>', 'string[]', [], 'input ports this source may drive '
+          '(empty: all)'),
+    Param('source_timeout', 'float', 5.0, 'lockstep: max wall time a source may stay silent',
+          's', 1e-3, 3600.0),
+    Param('startup_timeout', 'float', 30.0, 'max wall time to wait for the sources at step 0 '
+          '(and for wait_for_subscribers)', 's', 0.0, 3600.0),
+    Param('resend_period', 'float', 0.2, 'lockstep: re-publish y_k after this wall time '
+          'without all answers', 's', 1e-3, 60.0),
+    Param('max_state_norm', 'float', DEFAULT_MAX_STATE_NORM, 'instability bound on the norm '
+          'of the modal state ||x||; larger or NaN stops the run', '', 1e-12, 1e300),
+    Param('report_period', 'float', 2.0, 'realtime: log timing every this wall time', 's',
+          0.1, 3600.0),
+    Param('output_file', 'str', '', 'write y_k, u_k of every step to this .npz at the end '
+          '(empty: no file)'),
+    Param('wait_for_subscribers', 'string[]', [], 'node names (e.g. a recorder) that must '
+          'subscribe to an output topic before step 0'),
+    Param('subscriber_settle', 'float', 0.5, 'wall time spun after the wait_for_subscribers '
+          'nodes appeared', 's', 0.0, 60.0),
+    Param('ack_timeout', 'float', 10.0, 'max wall time to wait at the end until subscribers '
+          'acknowledged every message', 's', 0.0, 3600.0),
+], summary='integrates the modal plant; publishes /clock and the state topics, applies the '
+           'forces of its sources.')
+
+_SPEC = ExcitationSpec()
+
+EXCITER = ParameterTable('exciter', [
+    SAMPLE_RATE,
+    Param('kind', 'str', _SPEC.kind, 'signal', choices=KINDS),
+    Param('amplitude', 'float', _SPEC.amplitude, 'peak force (RMS for random)', 'N', -1e9, 1e9),
+    Param('direction', 'double[]', [float(v) for v in _SPEC.direction], 'force direction x, y, '
+          'z in the machine frame (normalised)'),
+    Param('frequency', 'float', _SPEC.frequency, 'sine frequency', 'Hz', 0.0, 1e6),
+    Param('f_start', 'float', _SPEC.f_start, 'chirp start / random band low edge', 'Hz',
+          0.0, 1e6),
+    Param('f_end', 'float', _SPEC.f_end, 'chirp end / random band high edge', 'Hz', 0.0, 1e6),
+    Param('duration', 'float', 0.0, 'signal length; 0 = endless (impulse, step, sine)', 's',
+          0.0, 1e7),
+    Param('start_delay', 'float', _SPEC.start_delay, 'time of the first non-zero force', 's',
+          0.0, 1e7),
+    Param('pulse_width', 'float', _SPEC.pulse_width, 'impulse length; 0 = one sample', 's',
+          0.0, 1e3),
+    Param('seed', 'int', _SPEC.seed, 'random seed', '', 0, 2 ** 31),
+    *SOURCE_PARAMS,
+], summary='a force at the TCP (impulse, step, sine, chirp, band-limited random), answering '
+           'every /clock tick.')
+
+RECORDER = ParameterTable('recorder', [
+    Param('topics', 'string[]', [], 'topics to record; empty: every /pentapod/* topic and '
+          '/clock'),
+    Param('output_dir', 'str', 'out/bags', 'folder of bags'),
+    Param('bag_name', 'str', '', 'bag folder name; empty: run_<UTC time>'),
+    Param('run_info', 'str', '', "YAML mapping stored in the bag's custom_data (model hash, "
+          'pose, scenario)'),
+    Param('queue_depth', 'int', 100000, 'subscription depth (messages held while the writer '
+          'catches up)', '', 1, 2 ** 31 - 1),
+    Param('discovery_period', 'float', 0.2, 'wall time between looks for new topics', 's',
+          1e-3, 3600.0),
+    Param('flush_period', 'float', 0.5, 'wall time between flushes of the bag to disk', 's',
+          1e-3, 3600.0),
+    Param('stop_when_idle', 'float', 0.0, 'wall time without messages after which the '
+          'recorder closes the bag and exits (0 = run until SIGINT/SIGTERM)', 's', 0.0, 1e6),
+], summary='writes chosen topics to a rosbag2-compatible MCAP bag.')
+
+
+def excitation_spec(values: Values) -> ExcitationSpec:
+    """The exciter's signal from its parameter values (duration 0 = endless)."""
+    return ExcitationSpec(
+        kind=values.kind, amplitude=values.amplitude, direction=values.direction,
+        frequency=values.frequency, f_start=values.f_start, f_end=values.f_end,
+        duration=values.duration or math.inf, start_delay=values.start_delay,
+        pulse_width=values.pulse_width, seed=values.seed)

@@ -1,0 +1,243 @@
+"""
+Nodes declare what their tables say, refuse unknown overrides and build the offline laws.
+
+Nodes are created in this process (rclpy, own context on the session's ROS domain); their
+descriptors are read back through the ``describe_parameters`` service, as ``ros2 param
+describe`` reads them.
+"""
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+from rcl_interfaces.msg import ParameterType
+from rcl_interfaces.srv import DescribeParameters, GetParameters
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter, parameter_value_to_python
+
+from fixtures.demo_model import demo_model
+from pentapod_damper.node_parameters import DAMPER, EXAMPLE_CONTROLLER, PMA
+from pentapod_damper.nodes.damper_node import DamperNode
+from pentapod_damper.nodes.example_controller import ExampleController
+from pentapod_damper.nodes.pma_node import PmaNode
+from pentapod_damper.scenario_laws import scenario_laws
+from pentapod_sim.errors import ConfigError
+from pentapod_sim.nodes.exciter_node import ExciterNode
+from pentapod_sim.nodes.parameter_tables import EXCITER, PLANT, RECORDER
+from pentapod_sim.nodes.plant_node import PlantNode
+from pentapod_sim.nodes.recorder_node import RecorderNode
+from pentapod_sim.parameters import ROS_NODE_PARAMETERS
+from pentapod_sim.paths import scenario_dir
+from pentapod_sim.scenario.files import read_scenario
+
+TYPES = {'bool': ParameterType.PARAMETER_BOOL, 'int': ParameterType.PARAMETER_INTEGER,
+         'float': ParameterType.PARAMETER_DOUBLE, 'str': ParameterType.PARAMETER_STRING,
+         'double[]': ParameterType.PARAMETER_DOUBLE_ARRAY,
+         'integer[]': ParameterType.PARAMETER_INTEGER_ARRAY,
+         'string[]': ParameterType.PARAMETER_STRING_ARRAY}
+
+
+@pytest.fixture
+def ctx():
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=int(os.environ.get('ROS_DOMAIN_ID', '0')))
+    yield context
+    rclpy.shutdown(context=context)
+
+
+def _ask(ctx, node, service: str, srv_type, request):
+    """Call one of the node's parameter services from another node; return the response."""
+    client_node = Node('asker', context=ctx)
+    executor = SingleThreadedExecutor(context=ctx)
+    try:
+        executor.add_node(node)
+        executor.add_node(client_node)
+        client = client_node.create_client(srv_type,
+                                           f'{node.get_fully_qualified_name()}/{service}')
+        assert client.wait_for_service(timeout_sec=30.0)
+        future = client.call_async(request)
+        executor.spin_until_future_complete(future, timeout_sec=30.0)
+        assert future.done()
+        return future.result()
+    finally:
+        executor.shutdown()
+        client_node.destroy_node()
+
+
+def _nodes(tmp_path):
+    model_file = demo_model(3).save(tmp_path / 'model.npz')
+    return [
+        (PlantNode, PLANT, ['-p', f'model_file:={model_file}', '-p', 'sources:=[exciter]'],
+         {'model_file': str(model_file), 'sources': ['exciter']}),
+        (ExciterNode, EXCITER, [], {'source_name': 'exciter'}),
+        (RecorderNode, RECORDER, ['-p', f'output_dir:={tmp_path / "bags"}'],
+         {'output_dir': str(tmp_path / 'bags')}),
+        (DamperNode, DAMPER, ['-p', "tcp_directions:=['x']"],
+         {'tcp_directions': ['x'], 'source_name': 'damper'}),
+        (PmaNode, PMA, [], {'source_name': 'pma'}),
+        (ExampleController, EXAMPLE_CONTROLLER, [], {}),
+    ]
+
+
+@pytest.mark.parametrize('index', range(6), ids=['plant', 'exciter', 'recorder', 'damper',
+                                                 'pma', 'example_controller'])
+def test_declared_descriptors_and_values_match_the_table(ctx, tmp_path, index):
+    cls, table, args, expected = _nodes(tmp_path)[index]
+    node = cls(context=ctx, cli_args=['--ros-args', *args])
+    try:
+        declared = set(node._parameters) - set(ROS_NODE_PARAMETERS)
+        instances = {f'source_ports.{s}' for s in expected.get('sources', [])}
+        assert declared == {p.name for p in table if p.pattern is None} | instances
+        names = sorted(declared)
+        described = _ask(ctx, node, 'describe_parameters', DescribeParameters,
+                         DescribeParameters.Request(names=names)).descriptors
+        values = _ask(ctx, node, 'get_parameters', GetParameters,
+                      GetParameters.Request(names=names)).values
+        for name, desc, value in zip(names, described, values):
+            param = table[name]
+            assert desc.name == name
+            assert desc.type == TYPES[param.type], name
+            assert desc.description == param.full_description(), name
+            if param.unit:
+                assert desc.description.endswith(f'[{param.unit}]')
+            assert desc.read_only == param.read_only, name
+            assert desc.additional_constraints == param.range_text(), name
+            ranges = {'float': list(desc.floating_point_range),
+                      'int': list(desc.integer_range)}.get(param.type, [])
+            if param.low is not None:
+                assert [(r.from_value, r.to_value) for r in ranges] == [(param.low, param.high)]
+            else:
+                assert not desc.floating_point_range and not desc.integer_range
+            want = expected.get(name, param.default)
+            assert param.clean(parameter_value_to_python(value)) == want, name
+    finally:
+        if isinstance(node, RecorderNode):
+            node.close()
+        node.destroy_node()
+
+
+def _facts(law):
+    """What defines a law, for comparing a node's law with the offline one."""
+    facts = {'type': type(law).__name__, 'actuators': law.actuator_ports,
+             'sensors': law.sensor_ports}
+    for attr in ('gains', 'mass', 'gain', 'dt', 'highpass_hz', 'stroke_limit', 'force_limit',
+                 'sos'):
+        value = getattr(law, attr, None)
+        facts[attr] = None if value is None else np.asarray(value).tolist()
+    return facts
+
+
+def _law_sections():
+    """(scenario file, node section) of every damper and PMA node of the shipped scenarios."""
+    cases = []
+    for path in sorted(scenario_dir().glob('*.yaml')):
+        for node in read_scenario(path).nodes:
+            if node.executable in ('damper', 'pma'):
+                cases.append((path, node.name))
+    return cases
+
+
+MINIMAL = """
+/**:
+  ros__parameters:
+    sample_rate: 2000.0
+plant:
+  ros__parameters:
+    sources: [damper_defaults, pma_defaults]
+damper_defaults:
+  ros__parameters:
+    tcp_directions: ['y']
+    bending_struts: [3, 1]
+pma_defaults:
+  ros__parameters:
+    highpass_hz: 3.0
+"""
+
+
+def test_shipped_scenarios_have_damper_and_pma_nodes():
+    """Both kinds are covered by the comparison below."""
+    assert {name.startswith('pma') for _, name in _law_sections()} == {True, False}
+
+
+@pytest.mark.parametrize(('path', 'name'), _law_sections() + [(None, 'damper_defaults'),
+                                                              (None, 'pma_defaults')],
+                         ids=lambda v: Path(v).stem if isinstance(v, Path) else str(v))
+def test_offline_laws_equal_the_nodes_laws(ctx, tmp_path, path, name):
+    """A scenario's laws built offline equal what its node builds from the same file."""
+    if path is None:
+        path = tmp_path / 'minimal.yaml'
+        path.write_text(MINIMAL)
+    sections = read_scenario(path).sections
+    is_pma = name.startswith('pma')
+    dt = 1.0 / PMA.values(sections[name]).sample_rate if is_pma else 1e-4
+    offline = scenario_laws({name: sections[name]}, dt)
+    cls = PmaNode if is_pma else DamperNode
+    node = cls(context=ctx, cli_args=['--ros-args', '-r', f'__node:={name}',
+                                      '--params-file', str(path)])
+    try:
+        online = [node.law] if is_pma else list(node.laws.values())
+        assert offline and [_facts(law) for law in online] == [_facts(law) for law in offline]
+        assert node.source_name == name
+    finally:
+        node.destroy_node()
+    if name == 'pma_defaults':     # defaults and the shared sample rate reached both sides
+        assert math.isclose(node.law.dt, 1 / 2000.0) and node.law.mass == PMA['proof_mass'].default
+    if name == 'damper_defaults':
+        assert list(node.laws) == ['bending_gain', 'tcp_gain']
+        assert set(node.laws['tcp_gain'].gains) == {DAMPER['tcp_gain'].default}
+
+
+def test_damper_gains_change_while_running_and_read_only_ones_do_not(ctx):
+    node = DamperNode(context=ctx, cli_args=['--ros-args', '-p', "tcp_directions:=['x']"])
+    try:
+        assert node.set_parameters([Parameter('tcp_gain', value=123.0)])[0].successful
+        assert list(node.laws['tcp_gain'].gains) == [123.0]
+        assert not node.set_parameters([Parameter('tcp_gain', value=-1.0)])[0].successful
+        assert not node.set_parameters([Parameter('tcp_directions', value=['y'])])[0].successful
+        assert list(node.laws['tcp_gain'].gains) == [123.0]
+    finally:
+        node.destroy_node()
+
+
+def _params_file(tmp_path, shared: str, own: str) -> str:
+    path = tmp_path / 'p.yaml'
+    path.write_text(f'/**:\n  ros__parameters:\n    {shared}\n'
+                    f'damper:\n  ros__parameters:\n    tcp_directions: [x]\n    {own}\n')
+    return str(path)
+
+
+def test_shared_entries_for_other_nodes_pass_misspelt_ones_do_not(ctx, tmp_path):
+    ok = _params_file(tmp_path, 'proof_mass: 2.0', 'tcp_gain: 10.0')     # proof_mass: PMA's
+    DamperNode(context=ctx, cli_args=['--ros-args', '--params-file', ok]).destroy_node()
+    for shared, own, bad, near in (('tcp_gian: 1.0', 'tcp_gain: 1.0', 'tcp_gian', 'tcp_gain'),
+                                   ('proof_mass: 2.0', 'proof_mass: 2.0', 'proof_mass', None)):
+        path = _params_file(tmp_path, shared, own)
+        with pytest.raises(ConfigError) as err:
+            DamperNode(context=ctx, cli_args=['--ros-args', '--params-file', path])
+        assert f"node 'damper': unknown parameter {bad!r}" in str(err.value)
+        assert near is None or f'did you mean {near!r}' in str(err.value)
+
+
+@pytest.mark.parametrize(('kwargs', 'match'), [
+    ({'cli_args': ['--ros-args', '-p', "tcp_directions:=['x']", '-p', 'gain:=5.0']},
+     "unknown parameter 'gain'"),                    # a PMA parameter given to a damper
+    ({'cli_args': ['--ros-args', '-p', "tcp_directions:=['x']"],
+      'parameter_overrides': [Parameter('axial_gian', value=1.0)]},
+     "unknown parameter 'axial_gian'; did you mean 'axial_gain'"),
+    ({'cli_args': ['--ros-args', '-p', 'tcp_directions:=[x]', '-p', 'tcp_gain:=5']},
+     "'tcp_gain' = 5 is an integer"),
+])
+def test_damper_refuses_unknown_or_bad_overrides(ctx, kwargs, match):
+    with pytest.raises(ConfigError, match=match):
+        DamperNode(context=ctx, **kwargs)
+
+
+def test_plant_refuses_source_ports_of_no_source(ctx, tmp_path):
+    model_file = demo_model(3).save(tmp_path / 'model.npz')
+    with pytest.raises(ConfigError, match=r"'source_ports.damperr' names no source"):
+        PlantNode(context=ctx, cli_args=[
+            '--ros-args', '-p', f'model_file:={model_file}', '-p', 'sources:=[damper]',
+            '-p', 'source_ports.damperr:=[tcp_force_x]'])
