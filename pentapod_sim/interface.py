@@ -37,10 +37,18 @@ EXCITATION = '/pentapod/excitation'
 PMA_STATE = '/pentapod/pma/state'
 #: A force source ``<name>`` publishes on ``FORCE_PREFIX + <name>``.
 FORCE_PREFIX = '/pentapod/forces/'
+#: Channels only the live view serves (Foxglove WebSocket, not ROS topics): its derived data.
+LIVE_PREFIX = '/pentapod/live/'
+#: Run status (sensor_msgs/JointState, one joint per figure: pentapod_sim.live.status).
+LIVE_STATUS = '/pentapod/live/status'
+#: Running amplitude spectrum of the TCP response: ``TCP_SPECTRUM_PREFIX + 'frequency'`` [Hz]
+#: and ``TCP_SPECTRUM_PREFIX + <joint>`` (tcp_x, ...) [m], std_msgs/Float64MultiArray each.
+TCP_SPECTRUM_PREFIX = '/pentapod/live/tcp_spectrum/'
 
 JOINT_STATE = 'sensor_msgs/msg/JointState'
 WRENCH_STAMPED = 'geometry_msgs/msg/WrenchStamped'
 CLOCK_TYPE = 'rosgraph_msgs/msg/Clock'
+FLOAT64_MULTI_ARRAY = 'std_msgs/msg/Float64MultiArray'
 #: Message type of every fixed topic (force topics are JOINT_STATE).
 TOPIC_TYPES = {CLOCK: CLOCK_TYPE, TCP_STATE: JOINT_STATE, STRUT_STATES: JOINT_STATE,
                PMA_MOUNT_STATE: JOINT_STATE, EXCITATION: WRENCH_STAMPED, PMA_STATE: JOINT_STATE}
@@ -49,6 +57,11 @@ TOPIC_TYPES = {CLOCK: CLOCK_TYPE, TCP_STATE: JOINT_STATE, STRUT_STATES: JOINT_ST
 def force_topic(source: str) -> str:
     """Topic of the force source ``source``."""
     return FORCE_PREFIX + source
+
+
+def tcp_spectrum_topic(name: str) -> str:
+    """Live-view channel of the TCP spectrum: ``'frequency'`` or a TCP joint name."""
+    return TCP_SPECTRUM_PREFIX + name
 
 
 def is_testbed_topic(topic: str) -> bool:

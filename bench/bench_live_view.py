@@ -1,0 +1,109 @@
+"""
+Benchmark of the live view: the lockstep loop with and without it.
+
+Lockstep runs of the plant node (demo model of 100 modes, 5 kHz) with one damper node, with and
+without the live view node and a Foxglove WebSocket client subscribed to every channel
+(test/fixtures/foxglove_client.py), in separate processes on a private ROS domain; once without
+and once with a recorder in both runs. The figure is the plant's steps per wall second; the
+ratio (with / without the live view) is 1 when the view costs the loop nothing.
+
+Without a recorder, the live view is what makes the plant publish all three state topics
+(the damper alone subscribes to strut_states only), so that row includes the plant's cost of
+publishing two more topics per step; with a recorder the plant publishes them anyway.
+
+Full: 20000 steps, best of 3 runs each; quick: 3000 steps, 1 run.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+import re
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+import bench_plant  # noqa: E402  (also puts the checkout and test/ on sys.path)
+
+from fixtures.demo_model import demo_model  # noqa: E402
+
+RATE = 5000.0
+CLIENT = HERE.parent / 'test' / 'fixtures' / 'foxglove_client.py'
+
+
+def _row(name, value, unit, baseline, baseline_value, note=''):
+    return {'name': name, 'value': value, 'unit': unit, 'baseline': baseline,
+            'baseline_value': baseline_value,
+            'ratio': value / baseline_value if baseline_value else float('nan'), 'note': note}
+
+
+def _port(log: Path, timeout: float = 120.0) -> int:
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        found = re.search(r'server on ws://[\d.]+:(\d+)', log.read_text() if log.exists() else '')
+        if found:
+            return int(found.group(1))
+        time.sleep(0.1)
+    raise RuntimeError(f'live view did not start: {log.read_text()}')
+
+
+def lockstep(folder: Path, model_file: Path, steps: int, live: bool, record: bool,
+             tag: str) -> float:
+    """One lockstep run of plant + damper (+ recorder) (+ live view and client): steps/s."""
+    session = bench_plant.Session(folder)
+    trace = folder / f'trace_{tag}.npz'
+    try:
+        session.node('pentapod_damper.nodes.damper_node', 'damper0', 'bending_struts:=[1]',
+                     'bending_gain:=100.0')
+        waits = []
+        if record:
+            session.node('pentapod_sim.nodes.recorder_node', 'recorder',
+                         f'output_dir:={folder}', f'bag_name:=bag_{tag}')
+            waits.append('recorder')
+        if live:
+            session.node('pentapod_sim.nodes.live_view_node', 'live_view', 'port:=0')
+            port = _port(folder / 'live_view.log')
+            session.start([str(CLIENT), f'ws://127.0.0.1:{port}'], f'client_{tag}.log')
+            waits.append('live_view')
+        plant = session.node('pentapod_sim.nodes.plant_node', 'plant',
+                             f'model_file:={model_file}', f'steps:={steps}',
+                             f'sample_rate:={RATE}', 'sources:=[damper0]',
+                             f"output_file:='{trace}'", 'startup_timeout:=120.0',
+                             'wait_for_subscribers:=[' + ', '.join(waits) + ']')
+        if plant.wait(timeout=900) != 0:
+            raise RuntimeError((folder / 'plant.log').read_text())
+    finally:
+        session.close()
+    with np.load(trace) as data:
+        return steps / float(data['wall_time'])
+
+
+def run(quick: bool) -> list[dict]:
+    """Rows: steps/s with the live view against the same run without it."""
+    steps, repeats = (3000, 1) if quick else (20000, 3)
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp)
+        model_file = demo_model(100, seed=1).save(folder / 'model.npz')
+        for record in (False, True):
+            best = {False: 0.0, True: 0.0}
+            for k in range(repeats):
+                for live in (False, True):         # alternate: drifts in load hit both
+                    tag = f'{int(record)}{int(live)}{k}'
+                    best[live] = max(best[live], lockstep(folder, model_file, steps, live,
+                                                          record, tag))
+            with_rec = ' + recorder' if record else ''
+            rows.append(_row(
+                f'lockstep plant + 1 controller{with_rec} + live view and 1 Foxglove client',
+                best[True], 'steps/s', 'same run without the live view',
+                best[False], note=f'{steps} steps of a 200-state demo model at {RATE:g} Hz, '
+                f'best of {repeats}; live view defaults (best effort, 100 Hz envelopes)'))
+    return rows
+
+
+if __name__ == '__main__':
+    for r in run('--quick' in sys.argv):
+        print(f'{r["name"]}: {r["value"]:.4g} {r["unit"]} | {r["baseline"]}: '
+              f'{r["baseline_value"]:.4g} | ratio {r["ratio"]:.3g} | {r["note"]}')

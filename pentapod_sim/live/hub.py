@@ -1,0 +1,214 @@
+"""
+The live view's worker: topic streams in, Foxglove WebSocket channels out (ROS-free).
+
+:class:`LiveHub` owns the foxglove-sdk WebSocket server and a worker thread. The ROS node
+hands it raw CDR bytes (:meth:`TopicStream.offer`, constant time on the executor thread); every
+``tick_period`` the worker decodes the backlogs, downsamples them to min/max envelopes, updates
+the TCP spectrum and the run status and logs the results on Foxglove channels whose schemas are
+the ros2msg definitions of the message types and whose payloads are CDR, as a ROS 2 graph
+would deliver them. Channel topics are the ROS topic names (plus the live-only channels of
+:data:`pentapod_sim.interface.LIVE_PREFIX`), so one Foxglove layout works live and on bags.
+Messages are serialised by an encoder the node passes in (rclpy), keeping this module ROS-free.
+"""
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from typing import Callable, Protocol, Sequence
+
+import foxglove
+from foxglove.websocket import Capability
+import numpy as np
+
+from pentapod_sim import interface
+from pentapod_sim.errors import ConfigError
+from pentapod_sim.live.spectrum import RunningSpectrum
+from pentapod_sim.live.status import RunStatus, STATUS_NAMES
+from pentapod_sim.live.streams import Shape, TopicStream
+from pentapod_sim.parameters import Values
+from pentapod_sim.recording.msgdefs import message_definition
+
+LOGGER = logging.getLogger(__name__)
+#: The TCP joints, in the plant's order (their spectrum channels are made at start).
+TCP_JOINTS = tuple(dict.fromkeys(joint for topic, joint, _ in interface.PORT_LOCATION.values()
+                                 if topic == interface.TCP_STATE))
+
+
+class Encoder(Protocol):
+    """Serialises the live view's messages (the node implements it with rclpy)."""
+
+    def joint_state(self, stamp_ns: int, frame_id: str, names: Sequence[str],
+                    fields: dict[str, list[float]]) -> bytes:
+        """sensor_msgs/JointState."""
+
+    def wrench(self, stamp_ns: int, frame_id: str, values: Sequence[float]) -> bytes:
+        """geometry_msgs/WrenchStamped (force x, y, z, torque x, y, z)."""
+
+    def float_array(self, label: str, values: Sequence[float]) -> bytes:
+        """std_msgs/Float64MultiArray with one dimension called ``label``."""
+
+
+class LiveHub:
+    """
+    Foxglove server, channels and worker thread of the live view.
+
+    Parameters
+    ----------
+    params : Values
+        The node's values (:data:`pentapod_sim.live.params.LIVE_VIEW`).
+    encoder : Encoder
+        Message serialiser.
+    clock : callable
+        Wall clock [s] (monotonic).
+    """
+
+    def __init__(self, params: Values, encoder: Encoder,
+                 clock: Callable[[], float] = time.monotonic):
+        self.p, self.encoder, self.clock = params, encoder, clock
+        self.period_ns = max(1, int(round(1e9 / params.display_rate)))
+        self.context = foxglove.Context()
+        self.streams: dict[str, TopicStream] = {}
+        self.channels: dict[str, foxglove.Channel] = {}
+        self.status = RunStatus()
+        self.spectrum = RunningSpectrum(params.spectrum_samples)
+        self._spectrum_joints: list[str] = []
+        self.server = None
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._arrival: dict[str, float] = {}
+        self._next = {'status': 0.0, 'spectrum': 0.0}
+        self._channel(interface.LIVE_STATUS, interface.JOINT_STATE)
+        for name in ('frequency',) + TCP_JOINTS:
+            self._channel(interface.tcp_spectrum_topic(name), interface.FLOAT64_MULTI_ARRAY)
+
+    # -- set-up (executor thread) ------------------------------------------------------------
+    def _channel(self, topic: str, msg_type: str) -> foxglove.Channel:
+        schema = foxglove.Schema(name=msg_type, encoding='ros2msg',
+                                 data=message_definition(msg_type).encode('utf-8'))
+        channel = foxglove.Channel(topic, message_encoding='cdr', schema=schema,
+                                   context=self.context)
+        self.channels[topic] = channel
+        return channel
+
+    def add_topic(self, topic: str, msg_type: str) -> TopicStream:
+        """Serve a topic: make its stream and its Foxglove channel."""
+        stream = TopicStream(topic, msg_type, self.period_ns, self.p.queue_depth)
+        self._channel(topic, msg_type)
+        self.streams[topic] = stream
+        return stream
+
+    def start(self) -> int:
+        """Start the WebSocket server and the worker; return the port it listens on."""
+        try:
+            self.server = foxglove.start_server(
+                name='pentapod live view', host=self.p.host, port=self.p.port,
+                capabilities=[Capability.Time], context=self.context)
+        except Exception as err:   # the SDK raises RuntimeError for a taken port, bad host
+            raise ConfigError(f'live view cannot listen on {self.p.host}:{self.p.port}: '
+                              f'{err}') from None
+        self._thread = threading.Thread(target=self._work, name='live_view_worker',
+                                        daemon=True)
+        self._thread.start()
+        return self.server.port
+
+    def stop(self) -> None:
+        """Stop the worker (after a last pass that sends every open window) and the server."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=10.0)
+        if self.server is not None:
+            self.server.stop()
+            self.server = None
+
+    # -- worker thread -----------------------------------------------------------------------
+    def _work(self) -> None:
+        while not self._stop.wait(self.p.tick_period):
+            self.tick(self.clock())
+        self.tick(self.clock(), final=True)
+
+    def tick(self, wall: float, final: bool = False) -> None:
+        """One pass: every backlog, idle flushes, status and spectrum when due."""
+        newest = -1
+        for stream in list(self.streams.values()):
+            self._pass(stream, wall, final)
+            newest = max(newest, stream.last_stamp)
+        if newest >= 0 and self.server is not None:
+            self.server.broadcast_time(newest)
+        if wall >= self._next['status'] or final:
+            self._next['status'] = wall + self.p.status_period
+            self._send_status(wall)
+        if wall >= self._next['spectrum'] or final:
+            self._next['spectrum'] = wall + self.p.spectrum_period
+            self._send_spectrum()
+
+    def _pass(self, stream: TopicStream, wall: float, final: bool) -> None:
+        batch = stream.take()
+        if batch:
+            self._arrival[stream.topic] = wall
+        for part in stream.process(batch):
+            if part.new_run:
+                self._new_run(stream.topic)
+            self._send(stream, part.display)
+            stamps, values = part.samples
+            if stream.topic in interface.STATE_TOPICS:
+                self.status.add(stamps)
+            if stream.topic == interface.TCP_STATE and len(stamps):
+                self._feed_spectrum(stream.shape, stamps, values)
+        quiet = wall - self._arrival.get(stream.topic, wall) >= self.p.idle_flush
+        if (quiet or final) and stream.envelope.pending:
+            self._send(stream, stream.flush())
+
+    def _new_run(self, topic: str) -> None:
+        """Stamps of a plant output went back: a new run; reset the derived figures."""
+        if topic in interface.STATE_TOPICS:
+            LOGGER.info('%s: stamps went back, a new run started', topic)
+            self.status.reset()
+            self.spectrum.reset()
+
+    def _send(self, stream: TopicStream, samples) -> None:
+        channel, shape = self.channels[stream.topic], stream.shape or Shape()
+        for stamp, row in samples:
+            if stream.msg_type == interface.WRENCH_STAMPED:
+                data = self.encoder.wrench(stamp, shape.frame_id, row.tolist())
+            else:
+                data = self.encoder.joint_state(stamp, shape.frame_id, shape.names,
+                                                shape.split(row))
+            channel.log(data, log_time=stamp)
+
+    def _feed_spectrum(self, shape: Shape, stamps, values) -> None:
+        field = self.p.spectrum_field
+        start = 0
+        for name, count in shape.fields:
+            if name == field:
+                cols = values[:, start:start + count]
+                wanted = [shape.names.index(j) for j in TCP_JOINTS if j in shape.names]
+                self.spectrum.add(stamps, cols[:, wanted])
+                self._spectrum_joints = [shape.names[i] for i in wanted]
+                return
+            start += count
+
+    def _send_spectrum(self) -> None:
+        result = self.spectrum.compute()
+        if result is None:
+            return
+        freq, amplitude = result
+        stamp = self.spectrum.newest
+        self.channels[interface.tcp_spectrum_topic('frequency')].log(
+            self.encoder.float_array('frequency', freq.tolist()), log_time=stamp)
+        for k, joint in enumerate(self._spectrum_joints):
+            self.channels[interface.tcp_spectrum_topic(joint)].log(
+                self.encoder.float_array(f'{joint}_{self.p.spectrum_field}_amplitude',
+                                         amplitude[:, k].tolist()), log_time=stamp)
+
+    def dropped(self) -> int:
+        """Messages every stream discarded (backlog full) or could not decode."""
+        return sum(s.dropped + s.rejected for s in list(self.streams.values()))
+
+    def _send_status(self, wall: float) -> None:
+        values = self.status.report(wall, self.dropped())
+        stamp = max(self.status.newest, 0)
+        data = self.encoder.joint_state(stamp, '', list(STATUS_NAMES),
+                                        {'position': np.asarray(values).tolist(),
+                                         'velocity': [], 'effort': []})
+        self.channels[interface.LIVE_STATUS].log(data, log_time=stamp)
