@@ -203,3 +203,19 @@ def test_check_model_is_cached(tmp_path):
     second, origin = load_or_build_check_model('P1', 1500.0, tmp_path)
     assert origin.startswith('loaded cached')
     assert second.content_hash() == first.content_hash()
+
+
+@pytest.mark.slow
+def test_statespace_closed_loop_refuses_a_loop_stable_only_thanks_to_truncation(tmp_path,
+                                                                                 capsys):
+    from pentapod_sim.cli.statespace import main
+    common = ['closed-loop', '--position', 'P1', '--sample-rate', '3000', '--on-unstable',
+              'refuse']
+    assert main([*common, '--out', str(tmp_path / 'a'), '--damper',
+                 'strut1_bending_moment_2=1000']) != 0
+    assert 'stable only thanks to truncation' in capsys.readouterr().err
+    assert not (tmp_path / 'a').exists()           # refused before writing anything
+    assert main([*common, '--out', str(tmp_path / 'b'), '--damper', 'tcp_force_y=2e4']) == 0
+    text = capsys.readouterr().out
+    assert 'sampled loop at 3000 Hz is stable;' in text and 'below 6000 Hz' in text
+    assert (tmp_path / 'b' / 'closed_loop_tcp_displacement_y_tcp_force_y_P1.png').exists()
