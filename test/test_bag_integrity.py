@@ -151,6 +151,20 @@ def test_cut_file_with_a_huge_chunk_length_keeps_what_precedes(intact, tmp_path)
     assert sum(d.messages_lost for d in bag.damage) == TOTAL - sum(c.n for c in chunks[:3])
 
 
+def test_cut_file_with_a_damaged_chunk_skips_it_and_reads_on(intact, tmp_path):
+    """Sequential read (no footer): the damaged chunk's loss comes from its Message Index."""
+    _, data, chunks, values = intact
+    damaged = bytearray(data[:chunks[6].start + 10])
+    damaged[(chunks[2].start + chunks[2].end) // 2] ^= 0x80
+    bag, _ = _open_quietly(_copy(intact, tmp_path, bytes(damaged)))
+    skipped, cut = bag.damage
+    assert skipped.offset == chunks[2].start and skipped.lost == chunks[2].counts
+    assert (skipped.start_ns, skipped.end_ns) == (chunks[2].start_ns, chunks[2].end_ns)
+    kept = sum(c.n for c in chunks[:6]) - chunks[2].n
+    assert returned_messages(bag, values) == kept
+    assert cut.offset == chunks[6].start and cut.messages_lost == TOTAL - kept - chunks[2].n
+
+
 def test_cut_inside_a_chunk_reports_its_time_span_and_loss(intact, tmp_path):
     _, data, chunks, values = intact
     chunk = chunks[4]

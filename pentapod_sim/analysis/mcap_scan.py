@@ -246,6 +246,8 @@ def _read_sequential(mcap: SimpleNamespace, stream, size: int, content: FileCont
             return
         body = stream.read(length)
         try:
+            if opcode == 0:  # reserved by the spec: zeros or garbage, not a record
+                raise RecordDamage('opcode 0')
             if chunked and opcode in (ops.MESSAGE, ops.SCHEMA, ops.CHANNEL):
                 raise RecordDamage(f'opcode {opcode} outside the chunks of a chunked file')
             if opcode == ops.CHUNK:
