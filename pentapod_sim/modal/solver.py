@@ -141,7 +141,8 @@ def _window_solve(K, M, sigma, k, lu_timer) -> tuple[np.ndarray, np.ndarray]:
     n = K.shape[0]
     opinv = spla.LinearOperator((n, n), matvec=lu.solve, dtype=float)
     k = min(k, n - 2)
-    lam, phi = spla.eigsh(K, k=k, M=M, sigma=sigma, OPinv=opinv, which='LM',
+    v0 = np.random.default_rng(n).standard_normal(n)   # same start whatever ran before
+    lam, phi = spla.eigsh(K, k=k, M=M, sigma=sigma, OPinv=opinv, which='LM', v0=v0,
                           ncv=min(n - 1, max(2 * k + 1, 20)), tol=LANCZOS_TOL)
     order = np.argsort(lam)
     return lam[order], phi[:, order]

@@ -1,0 +1,201 @@
+"""
+Closed loops of one pose: TCP compliance, dominant-mode damping, struts-1+2 share, PMA needs.
+
+Everything is the continuous loop with ideal viscous dampers (the paper's view), computed with
+the study's functions (:mod:`pentapod_damper.study.analytic`) on the plant restricted to the
+ports the loop and the results need. The closed-loop poles are the eigenvalues of the
+closed-loop A (:func:`pentapod_sim.plant.frf.damper_feedback`); each is paired with an open-loop
+mode by the modal assurance criterion in modal coordinates (mass-normalised modes, so it is
+the mass-weighted MAC of the FE shapes). The sampled lockstep loop's spectral radius
+(:func:`pentapod_sim.sim.stability.plant_radius`) says whether the testbed could run it.
+
+Units: compliance m/N, frequencies Hz, damping ratios -, stroke m, force N.
+"""
+from __future__ import annotations
+
+import numpy as np
+import scipy.linalg as sla
+
+from pentapod_damper.laws import ProofMassActuator
+from pentapod_damper.scenario_laws import continuous_dampers, scenario_laws
+from pentapod_damper.study.analytic import (
+    continuous_frf,
+    improvement_share,
+    peak_and_rms,
+    pma_requirements,
+)
+from pentapod_sim.plant.frf import damper_feedback
+from pentapod_sim.plant.model import PlantModel
+from pentapod_sim.plant.ports import collocated_output
+from pentapod_sim.sim.stability import controller_of, DiscreteController, plant_radius
+
+#: TCP directions; the compliance of direction d is displacement d / force d.
+DIRECTIONS = ('x', 'y', 'z')
+#: Largest eigenvector condition number of the eigen-decomposition FRF.
+COND_MAX = 1e10
+
+
+class Loop:
+    """
+    One damped loop: a scenario's laws with their gains scaled by ``factor``.
+
+    Attributes
+    ----------
+    dampers : dict
+        Input port -> viscous gain [N s/m or N m s/rad] (an ideal PMA is ``m_a g``).
+    pmas : list of ProofMassActuator
+        The scenario's PMAs (their gain g scaled by ``factor``).
+    controllers : list of DiscreteController
+        Linear models of the laws for the sampled-loop check.
+    """
+
+    def __init__(self, sections: dict, dt: float, factor: float = 1.0) -> None:
+        laws = scenario_laws(sections, dt)
+        self.factor = float(factor)
+        self.dampers = {p: g * factor for p, g in continuous_dampers(laws).items()}
+        self.pmas = [law for law in laws if isinstance(law, ProofMassActuator)]
+        self.controllers = []
+        for law in laws:
+            ctrl = controller_of(law)
+            self.controllers.append(DiscreteController.static(
+                ctrl.sensor_ports, ctrl.actuator_ports, ctrl.d * factor))
+
+
+def ports_needed(loops: list[Loop]) -> tuple[list[str], list[str]]:
+    """Inputs and outputs of the TCP pairs, every damper and every PMA mount."""
+    inputs = [f'tcp_force_{d}' for d in DIRECTIONS]
+    outputs = [f'tcp_displacement_{d}' for d in DIRECTIONS]
+    for loop in loops:
+        for port in loop.dampers:
+            inputs.append(port)
+            outputs.append(collocated_output(port, 'velocity'))
+        for ctrl in loop.controllers:
+            inputs += ctrl.actuator_ports
+            outputs += ctrl.sensor_ports
+    return list(dict.fromkeys(inputs)), list(dict.fromkeys(outputs))
+
+
+def dominant_modes(plant: PlantModel) -> dict[str, int]:
+    """
+    Index of the mode with the largest resonance peak of each TCP compliance.
+
+    The peak of mode j in |H_dd| is ``|c_dj b_jd| / (2 zeta_j omega_j^2)``.
+    """
+    out = {}
+    for d in DIRECTIONS:
+        o = plant.output_names.index(f'tcp_displacement_{d}')
+        i = plant.input_names.index(f'tcp_force_{d}')
+        peak = np.abs(plant.c_disp[o] * plant.b[:, i]) / (2 * plant.zeta * plant.omega ** 2)
+        out[d] = int(np.argmax(peak))
+    return out
+
+
+def paired_damping(lam: np.ndarray, vec: np.ndarray,
+                   modes: dict[str, int]) -> dict[str, tuple[float, float]]:
+    """
+    Damping ratio and frequency [Hz] of the closed-loop pole of each open-loop mode.
+
+    Parameters
+    ----------
+    lam, vec : ndarray
+        Eigenvalues and eigenvectors of the closed-loop A, states ``[q; dq]`` (modal
+        coordinates and their rates).
+    modes : dict
+        Name -> open-loop mode index j.
+
+    Returns
+    -------
+    dict
+        Name -> (zeta, f); the pole whose eigenvector's modal part has the largest share
+        ``|q_j|^2 / |q|^2`` (the MAC with mode j) among poles with Im >= 0.
+    """
+    m = vec.shape[0] // 2
+    upper = lam.imag >= 0
+    q = np.abs(vec[:m, upper]) ** 2
+    mac = q / np.maximum(q.sum(axis=0, keepdims=True), np.finfo(float).tiny)
+    out = {}
+    for name, j in modes.items():
+        pole = lam[upper][int(np.argmax(mac[j]))]
+        out[name] = (float(-pole.real / abs(pole)), float(abs(pole) / (2 * np.pi)))
+    return out
+
+
+def pair_frfs(sys, lam: np.ndarray, vec: np.ndarray, pairs: list[tuple[str, str]],
+              freq: np.ndarray, plant: PlantModel, dampers: dict) -> list[np.ndarray]:
+    """
+    FRFs ``output / input`` of a state space from its eigen-decomposition, pair by pair.
+
+    Only the pairs asked for are evaluated (``C v (jw - lambda)^-1 v^-1 B + D``, O(n F) each);
+    a (nearly) defective closed loop falls back to the study's
+    :func:`pentapod_damper.study.analytic.continuous_frf`.
+    """
+    if np.linalg.cond(vec) > COND_MAX:
+        return [continuous_frf(plant, dampers, freq, o, i) for o, i in pairs]
+    rows = [plant.output_names.index(o) for o, _ in pairs]
+    cols = [plant.input_names.index(i) for _, i in pairs]
+    left = sys.C[rows] @ vec
+    right = np.linalg.solve(vec, sys.B[:, cols]).T
+    resolvent = 1.0 / (2j * np.pi * freq[None, :] - lam[:, None])
+    h = (left * right) @ resolvent + sys.D[rows, cols][:, None]
+    return list(h)
+
+
+def loop_columns(plant: PlantModel, loops: dict[str, Loop], freq: np.ndarray,
+                 band: tuple[float, float], dt: float, pma_force: float,
+                 shares: list[tuple[str, str, str]]) -> dict:
+    """
+    Result columns of the open loop and of every damped loop at one pose.
+
+    Parameters
+    ----------
+    plant : PlantModel
+        Reduced plant of the pose.
+    loops : dict
+        Column label -> :class:`Loop`.
+    freq : (F,) ndarray
+        Uniform frequency grid [Hz].
+    band : (lo, hi)
+        Band [Hz] of peak and RMS.
+    dt : float
+        Sample time [s] of the sampled-loop check.
+    pma_force : float
+        Harmonic TCP force amplitude [N] of the PMA stroke and force.
+    shares : list
+        (suffix, label of struts 1+2, label of all struts) of the share columns.
+    """
+    lo, hi = band
+    in_band = (freq >= lo) & (freq <= hi)
+    inputs, outputs = ports_needed(list(loops.values()))
+    sub = plant.select(inputs, outputs)
+    dom = dominant_modes(sub)
+    row: dict = {}
+    for label, loop in [('open', None)] + list(loops.items()):
+        dampers = loop.dampers if loop else {}
+        sys = damper_feedback(sub, dampers) if dampers else sub.to_statespace()
+        lam, vec = sla.eig(sys.A)
+        damping = paired_damping(lam, vec, dom)
+        pmas = [(pma, port) for pma in (loop.pmas if loop else []) for port in pma.sensor_ports]
+        pairs = [(f'tcp_displacement_{d}', f'tcp_force_{d}') for d in DIRECTIONS]
+        pairs += [(port, f'tcp_force_{port[-1]}') for _, port in pmas]
+        frfs = pair_frfs(sys, lam, vec, pairs, freq, sub, dampers)
+        for d, h in zip(DIRECTIONS, frfs):
+            row[f'peak_{d}{d}_{label}'], row[f'rms_{d}{d}_{label}'] = peak_and_rms(h, freq, lo, hi)
+            row[f'zeta_{d}{d}_{label}'] = damping[d][0]
+            if loop is None:
+                row[f'f_peak_{d}{d}_open'] = float(freq[in_band][np.argmax(np.abs(h[in_band]))])
+                row[f'dom_f_{d}{d}'] = float(sub.frequencies_hz[dom[d]])
+        if loop is None:
+            continue
+        row[f'rho_{label}'] = plant_radius(sub, loop.controllers, dt)[0]
+        for (pma, port), v in zip(pmas, frfs[len(DIRECTIONS):]):
+            stroke, force = pma_requirements(v, freq, pma.mass, pma.gain * loop.factor,
+                                             pma_force)
+            row[f'pma_stroke_{port[-1]}_{label}'] = float(stroke[in_band].max())
+            row[f'pma_force_{port[-1]}_{label}'] = float(force[in_band].max())
+    for tail, partial, full in shares:
+        for d in DIRECTIONS:
+            for kind in ('peak', 'rms'):
+                row[f'share_{kind}_{d}{d}{tail}'] = improvement_share(
+                    row[f'{kind}_{d}{d}_open'], row[f'{kind}_{d}{d}_{partial}'],
+                    row[f'{kind}_{d}{d}_{full}'])
+    return row
