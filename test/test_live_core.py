@@ -2,6 +2,8 @@
 import json
 import math
 from pathlib import Path
+import subprocess
+import sys
 
 import numpy as np
 from numpy.testing import assert_allclose
@@ -179,3 +181,21 @@ def test_docs_list_every_status_figure():
     rows = [line.split('|')[1].strip().strip('`') for line in table.splitlines()
             if line.startswith('| `')]
     assert rows == list(STATUS_NAMES)
+
+
+def test_lower_priority_renices_every_thread():
+    script = (
+        'import os, threading, time\n'
+        'from pentapod_sim.live.hub import lower_priority\n'
+        'stop = threading.Event()\n'
+        'threading.Thread(target=stop.wait).start()\n'
+        'tids = [int(t) for t in os.listdir("/proc/self/task")]\n'
+        'before = [os.getpriority(os.PRIO_PROCESS, t) for t in tids]\n'
+        'n = lower_priority(3)\n'
+        'after = [os.getpriority(os.PRIO_PROCESS, t) for t in tids]\n'
+        'stop.set()\n'
+        'print(n, len(tids), *[a - b for a, b in zip(after, before)])\n')
+    out = subprocess.run([sys.executable, '-c', script], capture_output=True, text=True,
+                         cwd=ROOT, timeout=60, check=True).stdout.split()
+    assert int(out[0]) == int(out[1]) >= 2
+    assert set(out[2:]) == {'3'}

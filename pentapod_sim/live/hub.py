@@ -13,6 +13,8 @@ Messages are serialised by an encoder the node passes in (rclpy), keeping this m
 from __future__ import annotations
 
 import logging
+import os
+from pathlib import Path
 import threading
 import time
 from typing import Callable, Protocol, Sequence
@@ -33,6 +35,28 @@ LOGGER = logging.getLogger(__name__)
 #: The TCP joints, in the plant's order (their spectrum channels are made at start).
 TCP_JOINTS = tuple(dict.fromkeys(joint for topic, joint, _ in interface.PORT_LOCATION.values()
                                  if topic == interface.TCP_STATE))
+
+
+def lower_priority(increment: int) -> int:
+    """
+    Add ``increment`` to the niceness of every thread of this process; return how many.
+
+    Linux keeps a niceness per thread (``os.nice`` changes only the caller's), so each task of
+    /proc/self/task is reniced: the DDS, foxglove-sdk and worker threads alike.
+    """
+    if increment <= 0:
+        return 0
+    tasks = Path('/proc/self/task')
+    ids = [int(t) for t in os.listdir(tasks)] if tasks.is_dir() else [0]
+    changed = 0
+    for tid in ids:
+        try:
+            os.setpriority(os.PRIO_PROCESS, tid,
+                           min(19, os.getpriority(os.PRIO_PROCESS, tid) + increment))
+            changed += 1
+        except OSError:      # the thread ended meanwhile
+            pass
+    return changed
 
 
 class Encoder(Protocol):

@@ -35,5 +35,9 @@ LIVE_VIEW = ParameterTable('live_view', [
           choices=('best_effort', 'reliable')),
     Param('discovery_period', 'float', 0.5, 'wall time between two looks for new topics', 's',
           0.01, 3600.0),
+    Param('nice', 'int', 10, 'niceness added to every thread of the live view process: on a '
+          'busy machine the scheduler gives the plant and its controllers the CPU first and '
+          'the view falls behind instead (its best-effort subscriptions drop samples)', '',
+          0, 19),
 ], summary='serves the testbed topics (min/max envelopes at a display rate), a running TCP '
            'spectrum and the run status to Foxglove over its WebSocket protocol.')

@@ -24,7 +24,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
 from pentapod_sim import interface
-from pentapod_sim.live.hub import LiveHub
+from pentapod_sim.live.hub import LiveHub, lower_priority
 from pentapod_sim.live.params import LIVE_VIEW
 from pentapod_sim.live.streams import SUPPORTED_TYPES
 from pentapod_sim.nodes.common import declare_table, node_args, run_node, stamp_msg
@@ -102,7 +102,9 @@ class LiveViewNode(Node):
 def serve(node: LiveViewNode, executor) -> None:
     """Start the WebSocket server, spin (discovering topics) until SIGINT/SIGTERM."""
     port = node.hub.start()
-    node.get_logger().info(f'Foxglove WebSocket server on ws://{node.params.host}:{port}')
+    threads = lower_priority(node.params.nice)
+    node.get_logger().info(f'Foxglove WebSocket server on ws://{node.params.host}:{port} '
+                           f'(niceness +{node.params.nice} on {threads} threads)')
     try:
         next_look = time.monotonic() + node.params.discovery_period
         while rclpy.ok():
