@@ -1,4 +1,5 @@
 """Plant stepping core, force mixer and offline closed loop against closed forms."""
+import control
 import numpy as np
 from numpy.testing import assert_allclose
 import pytest
@@ -8,7 +9,7 @@ from pentapod_damper.laws import strut_bending_damper, tcp_damper
 from pentapod_sim.errors import ConfigError, PortError, RunError
 from pentapod_sim.plant.model import PlantModel
 from pentapod_sim.sim.closed_loop import excitation_matrix, simulate
-from pentapod_sim.sim.stepping import DiscretePlant, ForceMixer, ForceSource
+from pentapod_sim.sim.stepping import DiscretePlant, ForceMixer, ForceSource, modal_blocks
 
 TCP = ['tcp_force_x', 'tcp_force_y', 'tcp_force_z']
 
@@ -160,3 +161,101 @@ def test_energy_balance_of_damped_loop():
     assert dissipated > 0
     assert dissipated == pytest.approx(gain * np.trapezoid((v ** 2).sum(axis=1), dx=dt),
                                        rel=2e-3)
+
+
+def _dense_steps(sys, x0, inputs):
+    """Independent dense stepping x_{k+1} = A x_k + B u_k; returns the states x_1..x_N."""
+    x, out = np.array(x0, dtype=float), []
+    for u in inputs:
+        x = sys.A @ x + sys.B @ u
+        out.append(x)
+    return np.array(out)
+
+
+def test_modal_blocks_detects_the_layout():
+    model = demo_model(7, seed=4)
+    a = model.discrete_matrices(1e-3)[0]
+    blocks = modal_blocks(a)
+    phi = model.zoh_blocks(1e-3)[0]                     # (m, 2, 2) per mode
+    assert_allclose(blocks, phi.transpose(1, 2, 0), rtol=0, atol=0)
+    coupled = a.copy()
+    coupled[0, 1] = 1e-300                              # one entry coupling two modes
+    assert modal_blocks(coupled) is None
+    assert modal_blocks(np.eye(3)) is None              # odd number of states
+    assert DiscretePlant(model.discretize(1e-3)).modal
+
+
+@pytest.mark.parametrize('coupled', [False, True])
+def test_state_update_matches_dense_reference(coupled):
+    """Modal (blockwise) and dense (any A_d) paths both step x_{k+1} = A_d x_k + B_d u_k."""
+    model = demo_model(9, seed=6)
+    sys = model.discretize(1 / 4000)
+    if coupled:                                         # a weak coupling: not modal any more
+        a = sys.A.copy()
+        a[2, 9 + 4] += 1e-4
+        sys = control.ss(a, sys.B, sys.C, sys.D, sys.dt, inputs=sys.input_labels,
+                         outputs=sys.output_labels)
+    plant = DiscretePlant(sys)
+    assert plant.modal is not coupled
+    rng = np.random.default_rng(1)
+    x0, inputs = 1e-6 * rng.standard_normal(18), 30 * rng.standard_normal((500, 21))
+    plant.reset(x0)
+    states = []
+    for u in inputs:
+        plant.advance(u)
+        states.append(plant.x.copy())
+    ref = _dense_steps(sys, x0, inputs)
+    assert np.max(np.abs(np.array(states) - ref)) < 1e-12 * np.abs(ref).max()
+    assert_allclose(plant.outputs(), sys.C @ ref[-1] + sys.D @ inputs[-1], rtol=1e-12)
+
+
+def test_state_setter_checks_shape_and_copies():
+    plant = DiscretePlant(demo_model(3).discretize(1e-3))
+    x0 = np.arange(6.0)
+    plant.reset(x0)
+    x0[:] = 0.0                                         # the plant holds its own copy
+    assert_allclose(plant.x, np.arange(6.0))
+    with pytest.raises(ConfigError, match=r'\(6,\)'):
+        plant.reset(np.zeros(5))
+
+
+def test_offline_loop_is_bit_identical_to_the_node_loop():
+    """
+    simulate() gives the very bits of the plant node's loop.
+
+    simulate() writes outputs into its trace and builds u in place; the node takes fresh
+    outputs() and u summed by the ForceMixer from each source's message.
+    """
+    model = demo_model(12, seed=8)
+    dt, n = 1 / 5000, 1500
+    laws = [tcp_damper(['x', 'y'], 3000.0), strut_bending_damper([1, 4], 500.0)]
+    plant = DiscretePlant(model.discretize(dt))
+    rng = np.random.default_rng(2)
+    exc = excitation_matrix(plant, TCP, 40 * rng.standard_normal((n, 3)), n)
+    offline = simulate(plant, laws, exc)
+
+    for law in laws:
+        law.reset()
+    node = DiscretePlant(model.discretize(dt))
+    mixer = ForceMixer(node.input_names, [ForceSource('exciter', tuple(TCP))]
+                       + [ForceSource(f'law{i}') for i in range(len(laws))])
+    sensors = [[node.output_index[p] for p in law.sensor_ports] for law in laws]
+    ys, us = [], []
+    for k in range(n):
+        y = node.outputs()
+        mixer.submit('exciter', TCP, exc[k, :3], k, k)
+        for i, law in enumerate(laws):
+            mixer.submit(f'law{i}', law.actuator_ports, law.step(y[sensors[i]]), k, k)
+        u = mixer.total()
+        ys.append(y)
+        us.append(u)
+        node.advance(u)
+    assert np.array_equal(offline.y, np.array(ys))
+    assert np.array_equal(offline.u, np.array(us))
+    assert np.array_equal(plant.x, node.x)
+
+
+def test_simulate_rejects_an_excitation_of_the_wrong_width():
+    plant = DiscretePlant(demo_model(3).discretize(1e-3))
+    with pytest.raises(ConfigError, match=r'\(10, 3\)'):
+        simulate(plant, [], np.zeros((10, 3)))

@@ -3,9 +3,8 @@ Offline closed loop: the plant core plus damper/PMA laws in-process.
 
 :func:`simulate` steps :class:`pentapod_sim.sim.stepping.DiscretePlant` exactly as the lockstep ROS
 run does (y_k, then every law and the excitation answer u_k, then x_{k+1}); it is the reference
-a ROS run must reproduce. :func:`simulate_linear` gives the same response for memoryless linear
-laws much faster: it forms the closed-loop discrete system once and runs each of its
-(diagonalised) modes through ``scipy.signal.lfilter``.
+a ROS run must reproduce, bit for bit (test/test_plant_core.py). :func:`closed_loop_matrices`
+forms the closed-loop discrete system of memoryless linear laws for the analytic checks.
 
 Units: as the plant ports (N, N m in; m, m/s, rad, rad/s out); time in steps of dt [s].
 """
@@ -77,6 +76,13 @@ def _indices(names: Sequence[str], index: dict, what: str) -> npt.NDArray[np.int
         raise PortError(f'{what} port {err.args[0]!r} is not in the plant model') from None
 
 
+def _as_slice(index: npt.NDArray[np.intp]) -> npt.NDArray[np.intp] | slice:
+    """A run of consecutive indices as a slice (an in-place add on a view), else the indices."""
+    if len(index) and np.array_equal(index, np.arange(index[0], index[0] + len(index))):
+        return slice(int(index[0]), int(index[0]) + len(index))
+    return index
+
+
 def excitation_matrix(plant: DiscretePlant, ports: Sequence[str],
                       forces: npt.ArrayLike, n_steps: int) -> npt.NDArray[np.float64]:
     """Scatter excitation forces (n_steps, len(ports)) into a full input array (n_steps, n_in)."""
@@ -109,19 +115,24 @@ def simulate(plant: DiscretePlant, laws: Sequence[Law], excitation: npt.NDArray[
     -------
     Response
     """
+    n_in = len(plant.input_names)
+    excitation = np.asarray(excitation, dtype=float)
+    if excitation.ndim != 2 or excitation.shape[1] != n_in:
+        raise ConfigError(f'excitation has shape {excitation.shape}, expected (n_steps, {n_in})')
     n_steps = excitation.shape[0]
     bound = [(_indices(law.sensor_ports, plant.output_index, 'sensor'),
-              _indices(law.actuator_ports, plant.input_index, 'actuator'), law) for law in laws]
+              _as_slice(_indices(law.actuator_ports, plant.input_index, 'actuator')), law.step)
+             for law in laws]
     ys = np.empty((n_steps, len(plant.output_names)))
-    us = np.empty((n_steps, len(plant.input_names)))
+    us = excitation.copy()           # u_k is built in place from e_k
     every = max(1, n_steps // 10)
+    outputs, advance = plant.outputs, plant.advance
     for k in range(n_steps):
-        y = plant.outputs()
-        u = excitation[k].copy()
-        for sensors, actuators, law in bound:
-            u[actuators] += law.step(y[sensors])
-        ys[k], us[k] = y, u
-        plant.advance(u)
+        y = outputs(ys[k])
+        u = us[k]
+        for sensors, actuators, step in bound:
+            u[actuators] += step(y[sensors])
+        advance(u)
         if progress is not None and (k + 1) % every == 0:
             progress(k + 1, n_steps)
     return Response(ys, us, plant.dt, list(plant.output_names), list(plant.input_names))

@@ -33,6 +33,14 @@ class DiscretePlant:
     """
     Step a discrete state space with named ports by the lockstep convention.
 
+    A modal plant (the layout of :meth:`pentapod_sim.plant.model.PlantModel.discrete_matrices`:
+    states ``[q; dq]``, so A_d couples mode i only through the four diagonals of its m x m
+    blocks) is advanced with its 2x2 ZOH blocks, ``x_i <- (P_i0 q + P_i1 dq) + (B_d u)_i``,
+    elementwise on (2, m) arrays: four numpy calls per step (B_d u, the products, two sums)
+    instead of a dense (2m x 2m) product. Any other A_d is stepped densely. The two paths
+    round differently, but each is deterministic, so every user of this class (ROS node, offline
+    loop) gets the same bits.
+
     Parameters
     ----------
     sys : control.StateSpace
@@ -47,9 +55,11 @@ class DiscretePlant:
     k : int
         Index of the current step (outputs of step k are available, u_k not yet applied).
     x : (n,) ndarray
-        State x_k.
+        State x_k (assigning copies into the plant's buffer).
     u_prev : (n_in,) ndarray
         Input of the previous step u_{k-1} (feeds through D into y_k).
+    modal : bool
+        True if A_d has the modal 2x2-block layout and is stepped blockwise.
     """
 
     def __init__(self, sys: control.StateSpace, max_state_norm: float = DEFAULT_MAX_STATE_NORM):
@@ -58,7 +68,7 @@ class DiscretePlant:
         if not np.isfinite(max_state_norm) or max_state_norm <= 0:
             raise ConfigError(f'max_state_norm must be > 0, got {max_state_norm!r}')
         self.dt = float(sys.dt)
-        # contiguous float64 copies: the step is two small dense products (BLAS, 1 thread)
+        # contiguous float64 copies (dense A_d is kept for the closed-loop matrices)
         self.a = np.ascontiguousarray(sys.A, dtype=float)
         self.b = np.ascontiguousarray(sys.B, dtype=float)
         self.c = np.ascontiguousarray(sys.C, dtype=float)
@@ -69,6 +79,21 @@ class DiscretePlant:
         self.output_index = {n: i for i, n in enumerate(self.output_names)}
         self.has_feedthrough = bool(np.any(self.d))
         self.max_state_norm = float(max_state_norm)
+        self._max_sq = self.max_state_norm ** 2
+        blocks = modal_blocks(self.a)
+        self.modal = blocks is not None
+        n, m = self.n_states, self.n_states // 2
+        self._x = np.zeros(n)
+        if self.modal:
+            # work[j, i] = P_ij x_j (j = 0: q, 1: dq), work[2] = B_d u as (2, m);
+            # x_i = (work[0, i] + work[1, i]) + work[2, i]
+            self._blocks_t = np.ascontiguousarray(blocks.transpose(1, 0, 2))
+            self._work = np.zeros((3, 2, m))
+            self._products = self._work[:2]
+            self._forced = self._work[2].reshape(n)
+            self._x2 = self._x.reshape(2, m)
+            self._x_j = self._x2[:, None, :]
+            self._terms = tuple(self._work)
         self.reset()
 
     @property
@@ -81,17 +106,34 @@ class DiscretePlant:
         """Time of the current step t_k = k dt [s]."""
         return self.k * self.dt
 
+    @property
+    def x(self) -> npt.NDArray[np.float64]:
+        """State x_k (a view of the plant's buffer: copy it to keep it)."""
+        return self._x
+
+    @x.setter
+    def x(self, value: npt.ArrayLike) -> None:
+        value = np.asarray(value, dtype=float)
+        if value.shape != self._x.shape:
+            raise ConfigError(f'x0 has shape {value.shape}, expected ({self.n_states},)')
+        self._x[:] = value
+
     def reset(self, x0: npt.ArrayLike | None = None) -> None:
         """Set step 0 with state ``x0`` (default zero) and u_{-1} = 0."""
         self.k = 0
-        self.x = np.zeros(self.n_states) if x0 is None else np.array(x0, dtype=float)
-        if self.x.shape != (self.n_states,):
-            raise ConfigError(f'x0 has shape {self.x.shape}, expected ({self.n_states},)')
+        self.x = np.zeros(self.n_states) if x0 is None else x0
         self.u_prev = np.zeros(len(self.input_names))
 
-    def outputs(self) -> npt.NDArray[np.float64]:
-        """Return y_k = C x_k + D u_{k-1} (units of the output ports)."""
-        y = self.c @ self.x
+    def outputs(self, out: npt.NDArray[np.float64] | None = None) -> npt.NDArray[np.float64]:
+        """
+        Return y_k = C x_k + D u_{k-1} (units of the output ports).
+
+        Parameters
+        ----------
+        out : (n_out,) ndarray, optional
+            C-contiguous float64 array to write y_k into (same numbers as without).
+        """
+        y = np.dot(self.c, self._x, out=out)
         if self.has_feedthrough:
             y += self.d @ self.u_prev
         return y
@@ -105,16 +147,51 @@ class DiscretePlant:
         RunError
             If the new state is non-finite or its norm exceeds ``max_state_norm``.
         """
-        x = self.a @ self.x
-        x += self.b @ u
-        self.x = x
-        self.u_prev = np.array(u, dtype=float)
+        u = np.array(u, dtype=float)
+        x = self._x
+        if self.modal:
+            x2, (q_terms, dq_terms, forced) = self._x2, self._terms
+            np.dot(self.b, u, out=self._forced)
+            np.multiply(self._blocks_t, self._x_j, out=self._products)
+            np.add(q_terms, dq_terms, out=x2)
+            np.add(x2, forced, out=x2)
+        else:
+            new = self.a @ x
+            new += self.b @ u
+            x[:] = new
+        self.u_prev = u
         self.k += 1
-        norm = float(np.sqrt(x @ x))
-        if not norm <= self.max_state_norm:  # also catches NaN
+        if not np.dot(x, x) <= self._max_sq:  # also catches NaN
+            norm = float(np.sqrt(x @ x))
             raise RunError(f'plant unstable at step {self.k} (t = {self.time:.6g} s): state '
                            f'norm {norm:.3g} exceeds max_state_norm {self.max_state_norm:.3g}; '
                            'a feedback gain is probably too high')
+
+
+def modal_blocks(a: npt.NDArray[np.float64]) -> npt.NDArray[np.float64] | None:
+    """
+    The 2x2 blocks of a modal A_d, or None if A_d is not of that layout.
+
+    Parameters
+    ----------
+    a : (2m, 2m) ndarray
+        State matrix with states ``[q_1..q_m, dq_1..dq_m]``.
+
+    Returns
+    -------
+    (2, 2, m) ndarray or None
+        ``P[i, j]`` = diagonal of block (i, j) of A_d, if A_d has no other non-zero entry.
+    """
+    n = a.shape[0]
+    if n == 0 or n % 2:
+        return None
+    m = n // 2
+    idx = np.arange(m)
+    rows, cols = np.array([[idx, idx], [idx + m, idx + m]]), np.array([[idx, idx + m]] * 2)
+    blocks = a[rows, cols]
+    rebuilt = np.zeros_like(a)
+    rebuilt[rows, cols] = blocks
+    return blocks if np.array_equal(rebuilt, a) else None
 
 
 @dataclass
