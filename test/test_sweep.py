@@ -1,5 +1,6 @@
 """Workspace sweep: Dask equals the serial loop, resume after an interrupt, bad poses recorded."""
 from pathlib import Path
+import re
 import signal
 import subprocess
 import sys
@@ -253,6 +254,29 @@ def test_maps_and_claim_summary_of_a_grid(settings, tmp_path):
     data = as_arrays(store.load())
     expected = int(np.sum(np.delete(shares, 4) >= 0.7))
     assert claim_fractions(data)[('peak', 'xx')] == (expected, 8)
-    paths = [p.name for p in all_figures(store.load(), store.schema, tmp_path / 'fig')]
+    paths = [p.name for p in all_figures(store.load(), store.schema, tmp_path / 'fig',
+                                          groups=('share',))]
     assert 'share_z0.850_a0.0_b0.0.png' in paths and 'claim_summary.png' in paths
     assert all((tmp_path / 'fig' / p).stat().st_size > 10000 for p in paths)
+
+
+def test_docs_column_table_matches_the_columns(settings):
+    """docs/sweep.md's column table names every column of a sweep, and nothing else."""
+    text = (ROOT / 'docs' / 'sweep.md').read_text()
+    table = text.split('<!-- columns:begin -->')[1].split('<!-- columns:end -->')[0]
+    fields = {'dd': '(xx|yy|zz)', 'loop': '[a-z0-9_.]+', 'label': '[a-z0-9_.]+', 'a': '[xyz]',
+              'tail': '(_x[0-9.]+)?'}
+    patterns, units = [], {}
+    for line in table.splitlines()[3:]:
+        names, unit = line.split('|')[1:3]
+        for name in re.findall(r'`([^`]+)`', names):
+            regex = re.sub(r'\\\{(\w+)\\\}', lambda m: fields[m.group(1)], re.escape(name))
+            patterns.append(re.compile(regex))
+            units[regex] = unit.strip()
+    doubled = make_settings(SCENARIOS, [1.0, 2.0], n_points=N_POINTS)
+    cols = columns(settings) + columns(doubled)
+    for name, _, unit, _ in cols:
+        match = [p for p in patterns if p.fullmatch(name)]
+        assert match, f'{name} is not in docs/sweep.md'
+        assert units[match[0].pattern] == unit, name
+    assert all(any(p.fullmatch(c[0]) for c in cols) for p in patterns)

@@ -45,8 +45,9 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument('--n-points', type=int, help='points of the FRF grid (default the '
                                                      "study's)")
     parser.add_argument('--out', default='out/sweep', help='output folder')
-    parser.add_argument('--scheduler', help='address of a running Dask scheduler '
-                                            '(default: start a LocalCluster)')
+    parser.add_argument('--scheduler', help='address (tcp://host:8786) or scheduler file '
+                                            '(*.json) of a running Dask scheduler (default: '
+                                            'start a LocalCluster)')
     parser.add_argument('--workers', type=int, default=DEFAULT_WORKERS,
                         help='LocalCluster worker processes (1 thread each)')
     parser.add_argument('--batch', type=int, default=1, help='poses per Dask task')

@@ -132,7 +132,8 @@ def evaluate(pose: np.ndarray, settings: SweepSettings) -> dict:
     return row
 
 
-def _peak_rss_mb() -> float:
+def peak_rss_mb() -> float:
+    """Peak resident memory [MB] of this process so far (VmHWM)."""
     try:
         with open('/proc/self/status', encoding='ascii') as stream:
             for line in stream:
@@ -167,7 +168,7 @@ def compute_pose(pose: Sequence[float], key: str, settings: SweepSettings) -> di
     except Exception as err:  # noqa: BLE001 -- recorded, the sweep goes on
         row.update(status=FAILED, error=f'{type(err).__name__}: {err}')
     row.update(seconds=time.perf_counter() - t0, worker=f'{socket.gethostname()}:{os.getpid()}',
-               peak_rss_mb=_peak_rss_mb(), finished_at=time.time())
+               peak_rss_mb=peak_rss_mb(), finished_at=time.time())
     return row
 
 

@@ -96,7 +96,8 @@ def run_sweep(poses: np.ndarray, settings: SweepSettings, out_dir, *,
     out_dir : str or Path
         Folder of the result dataset.
     scheduler : str, optional
-        Address of a running Dask scheduler (``tcp://host:8786``); default a LocalCluster.
+        Address of a running Dask scheduler (``tcp://host:8786``) or its scheduler file
+        (``*.json``); default a LocalCluster.
     n_workers : int
         Processes of the LocalCluster.
     batch : int
@@ -156,7 +157,10 @@ def run_sweep(poses: np.ndarray, settings: SweepSettings, out_dir, *,
 def _run_dask(tasks, settings, scheduler, n_workers, compute, finish, report) -> None:
     from distributed import as_completed, Client
     cluster = None if scheduler else local_cluster(n_workers)
-    client = Client(scheduler or cluster)
+    if scheduler and scheduler.endswith('.json'):     # dask scheduler --scheduler-file
+        client = Client(scheduler_file=scheduler)
+    else:
+        client = Client(scheduler or cluster)
     futures = []
     try:
         report.workers = len(client.scheduler_info()['workers'])

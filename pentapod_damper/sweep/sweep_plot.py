@@ -125,8 +125,14 @@ def _reductions(data: dict) -> None:
                                                     / data[f'{kind}_{dd}_{label}'])
 
 
-def all_figures(table: pa.Table, schema: pa.Schema, fig_dir: str | Path) -> list[Path]:
-    """Every map of every slice, and the claim summary; returns the written files."""
+def all_figures(table: pa.Table, schema: pa.Schema, fig_dir: str | Path,
+                groups: tuple[str, ...] | None = None) -> list[Path]:
+    """
+    Maps of every slice and the claim summary; returns the written files.
+
+    ``groups`` limits the maps to some of ``modes``, ``compliance``, ``share`` and ``loop``
+    (default all).
+    """
     fig_dir = Path(fig_dir)
     data = as_arrays(table)
     if not data.get('key', np.array([])).size:
@@ -155,6 +161,8 @@ def all_figures(table: pa.Table, schema: pa.Schema, fig_dir: str | Path) -> list
                             + [(c, c.split('_' + label)[0].replace('_', ' ')) for c in data
                                if c.startswith('pma_') and c.endswith('_' + label)], {}))
         for stem, title, panels, style in figures:
+            if groups is not None and stem.split('_')[0] not in groups:
+                continue
             units.update({c: units.get(c, '-') for c, _ in panels})
             units.update({c: '-' for c, _ in panels if c.startswith('red_')})
             path = map_figure(data, units, zab, panels, fig_dir / f'{stem}_{name}.png', title,
