@@ -110,6 +110,7 @@ def pma_requirements_plot(freq: np.ndarray, curves: Mapping[str, tuple],
             ax.axvspan(band[0], band[1], color='grey', alpha=0.08)
         for f in marks:
             ax.axvline(f, color='grey', lw=0.8, ls=':')
+        ax.set_xscale('log')            # the ideal law's stroke grows as 1/f at low frequency
         ax.grid(True, which='both', alpha=0.3)
     ax_s.set_ylabel('stroke amplitude [mm]')
     ax_f.set_ylabel('force amplitude [N]')
