@@ -189,16 +189,7 @@ def did_you_mean(name: str, known: Sequence[str]) -> str:
 
 
 class Values:
-    """
-    Parameter values of a node by attribute (``values.sample_rate``), typed by its table.
-
-    Parameters
-    ----------
-    table : ParameterTable
-        The table the values follow.
-    values : mapping
-        Value of every plain parameter of the table.
-    """
+    """Parameter values of a node by attribute (``values.sample_rate``), typed by its table."""
 
     def __init__(self, table: ParameterTable, values: Mapping[str, Any]):
         object.__setattr__(self, '_table', table)
@@ -240,8 +231,7 @@ class ParameterTable:
         self.node = node
         self.params = tuple(params)
         self.summary = summary
-        names = [p.name for p in self.params]
-        if len(set(names)) != len(names):
+        if len(set(self.names)) != len(self.params):
             raise ValueError(f'table {node!r} repeats a parameter name')
 
     def __iter__(self) -> Iterator[Param]:
