@@ -18,6 +18,7 @@ IMPORT_KEYS = {
     'control': 'python-control-pip',
     'dask': 'python3-dask-pip',
     'distributed': 'python3-distributed-pip',
+    'foxglove': 'python3-foxglove-sdk-pip',
     'geometry_msgs': 'geometry_msgs',
     'lz4': 'python3-lz4-pip',
     'matplotlib': 'python3-matplotlib',
