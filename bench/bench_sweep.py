@@ -88,6 +88,9 @@ def run(quick: bool) -> list[dict]:
                 raise RuntimeError(f'{label}: {report.counts} of {n} poses; {report.errors}')
             figures[label] = (60.0 * n / seconds, seconds)
             rows_of[label] = _rows(out, settings)
+            if label == 'serial loop':
+                table = ResultStore(out, columns(settings), settings.digest).load()
+                cpu = float(np.median(table.column('cpu_seconds').to_numpy()))
     agree = all(_same(rows_of['serial loop'], rows_of[k]) for k in ('1 worker', '2 workers'))
     base, base_s = figures['serial loop']
     rows = []
@@ -96,8 +99,9 @@ def run(quick: bool) -> list[dict]:
         rows.append({'name': f'sweep, {label}', 'value': ppm, 'unit': 'poses/min',
                      'baseline': 'sweep, serial loop', 'baseline_value': base,
                      'ratio': ppm / base,
-                     'note': f'{n} poses in {seconds:.1f} s (serial {base_s:.1f} s), LocalCluster '
-                             f'start included; rows {"equal" if agree else "DIFFER"}'})
+                     'note': f'{n} poses in {seconds:.1f} s (serial {base_s:.1f} s, median CPU '
+                             f'{cpu:.2f} s per pose), LocalCluster start included; rows '
+                             f'{"equal" if agree else "DIFFER"}'})
     mem = _memory()
     rows.append({'name': 'sweep, peak memory per task', 'value': mem['after'] - mem['before'],
                  'unit': 'MB', 'baseline': 'process after imports and settings',

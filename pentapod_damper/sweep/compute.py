@@ -31,7 +31,7 @@ STRUT_GROUPS = ('struts',)
 #: Outcome of a pose.
 OK, UNREACHABLE, FAILED = 'ok', 'unreachable', 'failed'
 #: Columns that describe how a row was computed, not what (differ between runs).
-BOOKKEEPING = ('seconds', 'worker', 'peak_rss_mb', 'finished_at')
+BOOKKEEPING = ('seconds', 'cpu_seconds', 'worker', 'peak_rss_mb', 'finished_at')
 
 
 def columns(settings: SweepSettings) -> list[tuple[str, str, str, str]]:
@@ -78,6 +78,7 @@ def columns(settings: SweepSettings) -> list[tuple[str, str, str, str]]:
                 cols.append((f'share_{kind}_{d}{d}{tail}', 'float', '-', f'struts-1+2 share '
                              f'of the all-struts {kind} improvement'))
     cols += [('seconds', 'float', 's', 'wall time of the pose'),
+             ('cpu_seconds', 'float', 's', 'CPU time of the pose in its process'),
              ('worker', 'str', '-', 'host:pid that computed it'),
              ('peak_rss_mb', 'float', 'MB', 'peak resident memory of that process so far'),
              ('finished_at', 'float', 's', 'Unix time the row was made')]
@@ -158,7 +159,7 @@ def compute_pose(pose: Sequence[float], key: str, settings: SweepSettings) -> di
     settings : SweepSettings
         What to compute.
     """
-    t0 = time.perf_counter()
+    t0, cpu0 = time.perf_counter(), time.process_time()
     row = {'key': key, 'status': OK, 'error': '',
            **{a: float(v) for a, v in zip(AXES, pose)}}
     try:
@@ -167,7 +168,8 @@ def compute_pose(pose: Sequence[float], key: str, settings: SweepSettings) -> di
         row.update(status=UNREACHABLE, error=str(err))
     except Exception as err:  # noqa: BLE001 -- recorded, the sweep goes on
         row.update(status=FAILED, error=f'{type(err).__name__}: {err}')
-    row.update(seconds=time.perf_counter() - t0, worker=f'{socket.gethostname()}:{os.getpid()}',
+    row.update(seconds=time.perf_counter() - t0, cpu_seconds=time.process_time() - cpu0,
+               worker=f'{socket.gethostname()}:{os.getpid()}',
                peak_rss_mb=peak_rss_mb(), finished_at=time.time())
     return row
 

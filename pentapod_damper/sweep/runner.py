@@ -77,7 +77,7 @@ def local_cluster(n_workers: int):
     logging.getLogger('distributed').setLevel(logging.ERROR)    # no start/stop chatter
     with dask.config.set({'distributed.nanny.pre-spawn-environ': environ}):
         return LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True,
-                            dashboard_address=None, silence_logs=logging.ERROR)
+                            dashboard_address=':0', silence_logs=logging.ERROR)
 
 
 def run_sweep(poses: np.ndarray, settings: SweepSettings, out_dir, *,
