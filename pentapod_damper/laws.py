@@ -3,14 +3,19 @@ Damper and proof-mass-actuator laws, free of ROS (used by the nodes and the offl
 
 A law reads plant output ports (``sensor_ports``) and drives plant input ports
 (``actuator_ports``). :meth:`step` is called once per plant step k with the outputs y_k and
-returns u_k for its actuator ports (lockstep convention of docs/architecture.md). Laws that are
-memoryless and linear also return their gain matrix from :meth:`linear_gain`, which the
-offline fast path folds into a closed-loop system.
+returns u_k for its actuator ports (lockstep convention of docs/architecture.md): sampled
+feedback with a zero-order hold, u_k answers y_k. Viscous dampers may carry actuator/sensor
+dynamics (:class:`Dynamics`: a first- or second-order low-pass and a pure delay of n samples,
+``delay_steps`` = 1 being the one-sample computational delay of a real digital controller);
+they then have controller states and offer their discrete state space from
+:meth:`ViscousDamper.discrete_model`. Memoryless linear laws return their gain matrix from
+:meth:`linear_gain`.
 
 Units: forces N, moments N m, velocities m/s, angular rates rad/s, masses kg, gains as stated.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 import logging
 from typing import Sequence
 
@@ -20,6 +25,7 @@ import scipy.signal
 
 from pentapod_sim.errors import ConfigError
 from pentapod_sim.plant.ports import AXES, collocated_output, N_STRUTS
+from pentapod_sim.sim.controllers import DiscreteController
 
 LOG = logging.getLogger(__name__)
 
@@ -33,9 +39,94 @@ def _positive(name: str, value: float, allow_zero: bool = False) -> float:
     return value
 
 
+#: Filter orders of :class:`Dynamics`: 0 = none, 1 = first-order, 2 = second-order low-pass.
+FILTER_ORDERS = (0, 1, 2)
+
+
+@dataclass(frozen=True)
+class Dynamics:
+    """
+    Actuator/sensor dynamics of a law: a low-pass on each channel, then a delay of n samples.
+
+    The low-pass is ``w / (s + w)`` (order 1) or ``w^2 / (s^2 + 2 zeta w s + w^2)`` (order 2)
+    with ``w = 2 pi bandwidth_hz``, discretised exactly for a sampled input held over each step
+    (zero-order hold; its discrete poles are ``exp(s_i dt)``). Its output at step k depends on
+    the samples before k only. ``delay_steps`` = n shifts the filtered signal by n samples:
+    0 = plain sampled feedback (u_k answers y_k), 1 = one-sample computational delay.
+
+    Attributes
+    ----------
+    order : int
+        0, 1 or 2 (0 = no low-pass).
+    bandwidth_hz : float
+        Corner frequency [Hz], > 0 and below Nyquist when ``order`` > 0.
+    damping : float
+        Damping ratio zeta [-] of the second-order low-pass (> 0).
+    delay_steps : int
+        Pure delay [samples], >= 0.
+    """
+
+    order: int = 0
+    bandwidth_hz: float = 0.0
+    damping: float = 0.7071067811865476
+    delay_steps: int = 0
+
+    def __post_init__(self) -> None:
+        """Check the values (ConfigError names the bad one)."""
+        if self.order not in FILTER_ORDERS:
+            raise ConfigError(f'filter order must be one of {FILTER_ORDERS}, got {self.order!r}')
+        if self.order:
+            _positive('filter bandwidth [Hz]', self.bandwidth_hz)
+            _positive('filter damping ratio [-]', self.damping)
+        if int(self.delay_steps) != self.delay_steps or self.delay_steps < 0:
+            raise ConfigError(f'delay_steps must be an integer >= 0, got {self.delay_steps!r}')
+
+    @property
+    def is_static(self) -> bool:
+        """True without filter and delay (the law stays memoryless)."""
+        return self.order == 0 and self.delay_steps == 0
+
+    def siso(self, dt: float) -> tuple[np.ndarray, ...]:
+        """
+        Discrete state space (a, b, c, d) of one channel at sample time ``dt`` [s].
+
+        Raises
+        ------
+        ConfigError
+            If the bandwidth is not below the Nyquist frequency ``0.5 / dt``.
+        """
+        if self.order and self.bandwidth_hz >= 0.5 / dt:
+            raise ConfigError(f'filter bandwidth {self.bandwidth_hz} Hz must be below Nyquist '
+                              f'{0.5 / dt:g} Hz')
+        w = 2 * np.pi * self.bandwidth_hz
+        if self.order == 1:
+            cont = ([[-w]], [[w]], [[1.0]], [[0.0]])
+        elif self.order == 2:
+            cont = ([[0.0, 1.0], [-w * w, -2 * self.damping * w]], [[0.0], [w * w]],
+                    [[1.0, 0.0]], [[0.0]])
+        if self.order:
+            a, b, c, d, _ = scipy.signal.cont2discrete(tuple(np.array(m, dtype=float)
+                                                             for m in cont), dt, method='zoh')
+        else:
+            a, b, c, d = np.zeros((0, 0)), np.zeros((0, 1)), np.zeros((1, 0)), np.ones((1, 1))
+        n = int(self.delay_steps)
+        if n == 0:
+            return a, b, c, d
+        # series: filter, then a shift register of n samples (its last cell is the output)
+        nf = a.shape[0]
+        shift = np.eye(n, k=-1)
+        a_s = np.block([[a, np.zeros((nf, n))], [np.zeros((n, nf)), shift]])
+        a_s[nf, :nf] = c[0]
+        b_s = np.vstack([b, np.zeros((n, 1))])
+        b_s[nf, 0] = d[0, 0]
+        c_s = np.zeros((1, nf + n))
+        c_s[0, -1] = 1.0
+        return a_s, b_s, c_s, np.zeros((1, 1))
+
+
 class ViscousDamper:
     """
-    Collocated viscous velocity feedback ``u_j = -b_j * rate_j``.
+    Collocated viscous velocity feedback ``u_j = -b_j * rate_j``, optionally through dynamics.
 
     Parameters
     ----------
@@ -43,47 +134,104 @@ class ViscousDamper:
         Input ports driven (forces [N] or moments [N m]).
     gains : float or sequence of float
         Damping b per actuator: N s/m for forces, N m s/rad for moments; >= 0.
+    dynamics : Dynamics, optional
+        Low-pass and delay between sensor and actuator, the same on every channel; default
+        none (memoryless).
+    dt : float, optional
+        Sample time [s]; needed when ``dynamics`` has a filter or a delay.
 
     Notes
     -----
     The sensor of each actuator is its collocated velocity output
-    (:func:`pentapod_sim.plant.ports.collocated_output`), so the law only removes energy.
+    (:func:`pentapod_sim.plant.ports.collocated_output`), so the memoryless law only removes
+    energy. With dynamics ``u = -b H(z) rate``; the gains may still be changed between steps.
     """
 
-    def __init__(self, actuator_ports: Sequence[str], gains: float | Sequence[float]):
+    def __init__(self, actuator_ports: Sequence[str], gains: float | Sequence[float],
+                 dynamics: Dynamics | None = None, dt: float | None = None):
         self.actuator_ports = list(actuator_ports)
         self.sensor_ports = [collocated_output(p, 'velocity') for p in self.actuator_ports]
         gains = np.broadcast_to(np.asarray(gains, dtype=float), (len(self.actuator_ports),))
         for port, gain in zip(self.actuator_ports, gains):
             _positive(f'damping gain of {port}', gain, allow_zero=True)
         self.gains = np.array(gains)
+        self.dynamics = dynamics or Dynamics()
+        self.dt = None if dt is None else _positive('sample time dt [s]', dt)
+        if self.dynamics.is_static:
+            self._siso = None
+        elif self.dt is None:
+            raise ConfigError(f'dampers on {self.actuator_ports} have dynamics '
+                              f'{self.dynamics}; they need the sample time dt')
+        else:
+            self._siso = self.dynamics.siso(self.dt)
+        self.reset()
 
     def reset(self) -> None:
-        """Memoryless: nothing to reset."""
+        """Controller states (filter and delay line of every channel) to zero."""
+        n = 0 if self._siso is None else self._siso[0].shape[0]
+        self._state = np.zeros((len(self.actuator_ports), n))
 
     def step(self, sensors: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
-        """Return the actuator efforts -b * rate for the sensor values of this step."""
-        return -self.gains * sensors
+        """Return the actuator efforts -b * H rate for the sensor values of this step."""
+        if self._siso is None:
+            return -self.gains * sensors
+        a, b, c, d = self._siso
+        x = self._state
+        filtered = x @ c[0] + d[0, 0] * sensors
+        self._state = x @ a.T + np.multiply.outer(sensors, b[:, 0])
+        return -self.gains * filtered
 
-    def linear_gain(self) -> npt.NDArray[np.float64]:
-        """Gain matrix (n_actuators, n_sensors) of u = K y."""
-        return -np.diag(self.gains)
+    def linear_gain(self) -> npt.NDArray[np.float64] | None:
+        """Gain matrix (n_actuators, n_sensors) of u = K y; None with dynamics (memory)."""
+        return -np.diag(self.gains) if self._siso is None else None
+
+    def viscous_gains(self) -> npt.NDArray[np.float64]:
+        """The nominal damping b per actuator (the ideal viscous damper the law stands for)."""
+        return self.gains.copy()
+
+    def discrete_model(self) -> DiscreteController:
+        """The law's discrete state space on its ports (controller states channel by channel)."""
+        eye = np.eye(len(self.actuator_ports))
+        if self._siso is None:
+            return DiscreteController.static(self.sensor_ports, self.actuator_ports,
+                                             self.linear_gain())
+        a, b, c, d = self._siso
+        g = -np.diag(self.gains)
+        return DiscreteController(self.sensor_ports, self.actuator_ports, np.kron(eye, a),
+                                  np.kron(eye, b), g @ np.kron(eye, c), g * d[0, 0])
 
 
-def strut_bending_damper(struts: Sequence[int], gain: float) -> ViscousDamper:
-    """Bending dampers on both cardan axes (2, 3) of each strut; gain [N m s/rad]."""
+def strut_bending_damper(struts: Sequence[int], gain: float, dynamics: Dynamics | None = None,
+                         dt: float | None = None) -> ViscousDamper:
+    """Rotational bending dampers on both cardan axes (2, 3) of each strut; gain [N m s/rad].
+
+    The port is the rotation of the strut's WP end relative to its rear end (paper Fig. 6).
+    """
     return ViscousDamper([f'strut{i}_bending_moment_{k}' for i in _struts(struts)
-                          for k in (2, 3)], gain)
+                          for k in (2, 3)], gain, dynamics, dt)
 
 
-def strut_axial_damper(struts: Sequence[int], gain: float) -> ViscousDamper:
+def chord_damper(struts: Sequence[int], gain: float, dynamics: Dynamics | None = None,
+                 dt: float | None = None) -> ViscousDamper:
+    """Translational lateral dampers at the strut's chord point, along e2 and e3; gain [N s/m].
+
+    Force on the strut at the chord point against its chord between the joints
+    (:mod:`pentapod_sim.plant.ports`, ``strut<i>_chord_force_<k>``).
+    """
+    return ViscousDamper([f'strut{i}_chord_force_{k}' for i in _struts(struts)
+                          for k in (2, 3)], gain, dynamics, dt)
+
+
+def strut_axial_damper(struts: Sequence[int], gain: float, dynamics: Dynamics | None = None,
+                       dt: float | None = None) -> ViscousDamper:
     """Axial dampers between strut and BP ring; gain [N s/m]."""
-    return ViscousDamper([f'strut{i}_axial_force' for i in _struts(struts)], gain)
+    return ViscousDamper([f'strut{i}_axial_force' for i in _struts(struts)], gain, dynamics, dt)
 
 
-def tcp_damper(directions: Sequence[str], gain: float) -> ViscousDamper:
+def tcp_damper(directions: Sequence[str], gain: float, dynamics: Dynamics | None = None,
+               dt: float | None = None) -> ViscousDamper:
     """Dampers from the TCP to ground in the given directions (x, y, z); gain [N s/m]."""
-    return ViscousDamper([f'tcp_force_{a}' for a in _axes(directions)], gain)
+    return ViscousDamper([f'tcp_force_{a}' for a in _axes(directions)], gain, dynamics, dt)
 
 
 def _struts(struts: Sequence[int]) -> list[int]:

@@ -12,23 +12,45 @@ from __future__ import annotations
 from typing import Any, Mapping
 
 from pentapod_damper.laws import (
+    chord_damper,
+    Dynamics,
     ProofMassActuator,
     strut_axial_damper,
     strut_bending_damper,
     tcp_damper,
     ViscousDamper,
 )
+from pentapod_sim.errors import ConfigError
 from pentapod_sim.nodes.parameter_tables import SAMPLE_RATE, SOURCE_PARAMS
 from pentapod_sim.parameters import Param, ParameterTable, Values
 
 #: Upper bound of the damper gains.
 MAX_GAIN = 1.0e9
 
+#: Parameters of the actuator/sensor dynamics of a law (:class:`pentapod_damper.laws.Dynamics`).
+DYNAMICS_PARAMS = (
+    Param('filter_order', 'int', 0, 'low-pass between velocity sensor and actuator force: 0 = '
+          'none, 1 = first order, 2 = second order (zero-order-hold discretisation)', '', 0, 2),
+    Param('bandwidth_hz', 'float', 0.0, 'corner frequency of the low-pass (below Nyquist)',
+          'Hz', 0.0, 1.0e6),
+    Param('filter_damping', 'float', 0.7071067811865476, 'damping ratio of the second-order '
+          'low-pass', '', 1.0e-3, 10.0),
+    Param('delay_steps', 'int', 0, 'pure delay of the force in samples: 0 = sampled feedback '
+          'with zero-order hold (u_k answers y_k), 1 = one-sample computational delay',
+          'samples', 0, 1000),
+)
+
 DAMPER = ParameterTable('damper', [
-    Param('bending_struts', 'integer[]', [], 'struts (1..5) with bending dampers on both cardan '
-          'axes; [] or [0] = none'),
+    SAMPLE_RATE,
+    Param('bending_struts', 'integer[]', [], 'struts (1..5) with rotational bending dampers on '
+          'both cardan axes (end-rotation difference); [] or [0] = none'),
     Param('bending_gain', 'float', 1000.0, 'bending damping b of each strut and cardan axis',
           'N m s/rad', 0.0, MAX_GAIN, read_only=False),
+    Param('chord_struts', 'integer[]', [], 'struts (1..5) with translational chord dampers '
+          'along e2 and e3 at the chord point (config/reduction.yaml chord_position, default '
+          'mid-span) against the chord between the joints; [] or [0] = none'),
+    Param('chord_gain', 'float', 20000.0, 'chord damping b of each strut and direction',
+          'N s/m', 0.0, MAX_GAIN, read_only=False),
     Param('axial_struts', 'integer[]', [], 'struts (1..5) with axial dampers between strut and '
           'BP ring'),
     Param('axial_gain', 'float', 50000.0, 'axial damping b', 'N s/m', 0.0, MAX_GAIN,
@@ -37,8 +59,10 @@ DAMPER = ParameterTable('damper', [
           'ground'),
     Param('tcp_gain', 'float', 20000.0, 'TCP damping b', 'N s/m', 0.0, MAX_GAIN,
           read_only=False),
+    *DYNAMICS_PARAMS,
     *SOURCE_PARAMS,
-], summary='viscous velocity feedback u = -b * rate on struts and the TCP; the gains may be '
+], summary='viscous velocity feedback u = -b * rate on struts and the TCP, optionally through '
+           'a low-pass and a delay (the same for every damper of the node); the gains may be '
            'changed while running.')
 
 PMA = ParameterTable('pma', [
@@ -65,8 +89,17 @@ def _values(table: ParameterTable, params: Mapping[str, Any] | Values, source: s
     return params if isinstance(params, Values) else table.values(params, source)
 
 
-def damper_laws(params: Mapping[str, Any] | Values,
-                source: str = '') -> dict[str, ViscousDamper]:
+def dynamics(params: Mapping[str, Any] | Values, source: str = '') -> Dynamics:
+    """The actuator/sensor dynamics of a damper node's parameters (:data:`DYNAMICS_PARAMS`)."""
+    v = _values(DAMPER, params, source)
+    try:
+        return Dynamics(v.filter_order, v.bandwidth_hz, v.filter_damping, v.delay_steps)
+    except ConfigError as err:
+        raise ConfigError(f'{source}: {err}' if source else str(err)) from None
+
+
+def damper_laws(params: Mapping[str, Any] | Values, source: str = '',
+                dt: float | None = None) -> dict[str, ViscousDamper]:
     """
     The viscous dampers of one damper node, keyed by the name of their gain parameter.
 
@@ -77,21 +110,27 @@ def damper_laws(params: Mapping[str, Any] | Values,
         against :data:`DAMPER` (ConfigError naming ``source``).
     source : str
         Where a mapping comes from, for error messages.
+    dt : float, optional
+        Sample time [s] of the laws' dynamics; default ``1 / sample_rate``.
 
     Returns
     -------
     dict
-        ``bending_gain``, ``axial_gain``, ``tcp_gain`` -> law, for the dampers configured, in
-        this order (the order of the node's actuator ports).
+        ``bending_gain``, ``chord_gain``, ``axial_gain``, ``tcp_gain`` -> law, for the dampers
+        configured, in this order (the order of the node's actuator ports).
     """
     v = _values(DAMPER, params, source)
+    dyn = dynamics(v, source)
+    dt = 1.0 / v.sample_rate if dt is None else dt
     laws = {}
-    if v.bending_struts:
-        laws['bending_gain'] = strut_bending_damper(v.bending_struts, v.bending_gain)
-    if v.axial_struts:
-        laws['axial_gain'] = strut_axial_damper(v.axial_struts, v.axial_gain)
+    if v.bending_struts and v.bending_struts != [0]:
+        laws['bending_gain'] = strut_bending_damper(v.bending_struts, v.bending_gain, dyn, dt)
+    if v.chord_struts and v.chord_struts != [0]:
+        laws['chord_gain'] = chord_damper(v.chord_struts, v.chord_gain, dyn, dt)
+    if v.axial_struts and v.axial_struts != [0]:
+        laws['axial_gain'] = strut_axial_damper(v.axial_struts, v.axial_gain, dyn, dt)
     if v.tcp_directions:
-        laws['tcp_gain'] = tcp_damper(v.tcp_directions, v.tcp_gain)
+        laws['tcp_gain'] = tcp_damper(v.tcp_directions, v.tcp_gain, dyn, dt)
     return laws
 
 

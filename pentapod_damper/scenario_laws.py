@@ -25,13 +25,14 @@ def scenario_laws(sections: Mapping[str, Mapping[str, Any]], dt: float) -> list:
     sections : mapping
         ``Scenario.sections`` of :func:`pentapod_sim.scenario.files.read_scenario`.
     dt : float
-        Plant sample time [s] (the PMA integrates its proof mass with it).
+        Plant sample time [s] (the PMA integrates its proof mass with it, the dampers'
+        filters and delays are discretised with it).
     """
     laws: list = []
     for name, params in sections.items():
         kind = executable_of(name)
         if kind == 'damper':
-            laws += damper_laws(params, f'node {name!r}').values()
+            laws += damper_laws(params, f'node {name!r}', dt).values()
         elif kind == 'pma':
             laws.append(pma_law(params, dt, f'node {name!r}'))
     return laws
@@ -39,9 +40,11 @@ def scenario_laws(sections: Mapping[str, Mapping[str, Any]], dt: float) -> list:
 
 def continuous_dampers(laws) -> dict[str, float]:
     """
-    Equivalent viscous gains per input port of memoryless linear laws.
+    Equivalent viscous gains per input port: the ideal dampers the laws stand for.
 
-    An ideal PMA without filter or limits is the viscous damper ``b = m_a g`` on its mount.
+    A viscous damper counts with its nominal ``b`` (its actuator/sensor dynamics left out: the
+    continuous closed loop is the paper's ideal damper); an ideal PMA without filter or limits
+    is the viscous damper ``b = m_a g`` on its mount.
 
     Raises
     ------
@@ -50,6 +53,11 @@ def continuous_dampers(laws) -> dict[str, float]:
     """
     gains: dict[str, float] = {}
     for law in laws:
+        viscous = getattr(law, 'viscous_gains', None)
+        if viscous is not None:
+            for port, b in zip(law.actuator_ports, viscous()):
+                gains[port] = gains.get(port, 0.0) + float(b)
+            continue
         k = law.linear_gain()
         if k is None:
             raise ConfigError(f'{type(law).__name__} on {law.actuator_ports} has a filter or '

@@ -50,9 +50,13 @@ def small_model(seed: int = 0, n_extra_nodes: int = 4) -> FEModel:
             k[ib, ia] -= block
     root = rng.normal(size=(n, n)) * 0.05
     m = root @ root.T + np.diag(rng.uniform(1.0, 5.0, n))
-    nodes = rng.permutation(n_nodes)[:len(POINT_NAMES)]
+    perm = rng.permutation(n_nodes)
+    nodes, spare = perm[:len(POINT_NAMES)], perm[len(POINT_NAMES):]
+    # one inner node on each strut's active span (chord ports), on the spare nodes
+    named = list(zip(POINT_NAMES, nodes)) + [
+        (f'strut{i}_span1', spare[(i - 1) % len(spare)]) for i in range(1, 6)]
     points = {}
-    for name, node in zip(POINT_NAMES, nodes):
+    for name, node in named:
         points[name] = sp.csr_matrix((np.ones(6), (np.arange(6), 6 * node + np.arange(6))),
                                      shape=(6, n))
     K = sp.csr_matrix(k)

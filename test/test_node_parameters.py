@@ -172,7 +172,7 @@ def test_offline_laws_equal_the_nodes_laws(ctx, tmp_path, path, name):
         path.write_text(MINIMAL)
     sections = read_scenario(path).sections
     is_pma = name.startswith('pma')
-    dt = 1.0 / PMA.values(sections[name]).sample_rate if is_pma else 1e-4
+    dt = 1.0 / (PMA if is_pma else DAMPER).values(sections[name]).sample_rate
     offline = scenario_laws({name: sections[name]}, dt)
     cls = PmaNode if is_pma else DamperNode
     node = cls(context=ctx, cli_args=['--ros-args', '-r', f'__node:={name}',

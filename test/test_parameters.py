@@ -121,7 +121,7 @@ def test_shared_section_reaches_only_the_nodes_that_declare_it(tmp_path):
     scenario = read_scenario(_write(tmp_path, SCENARIO))
     assert scenario.sections['pma']['sample_rate'] == 5000.0
     assert scenario.sections['plant']['sample_rate'] == 5000.0
-    assert 'sample_rate' not in scenario.sections['damper_tcp']
+    assert scenario.sections['damper_tcp']['sample_rate'] == 5000.0   # filters and delays
     with pytest.raises(ConfigError, match=r"'/\*\*'.*'sample_rat'.*did you mean "
                                           r"'sample_rate'"):
         read_scenario(_write(tmp_path, SCENARIO.replace('sample_rate:', 'sample_rat:')))

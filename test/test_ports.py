@@ -21,9 +21,9 @@ def _displacement(model, moves: dict) -> np.ndarray:
 
 
 def test_names_match_architecture_counts():
-    assert len(ports.INPUT_NAMES) == 3 + 5 * 3 + 3
-    assert len(ports.OUTPUT_NAMES) == 6 + 5 * 6 + 3
-    assert len(set(ports.INPUT_NAMES + ports.OUTPUT_NAMES)) == 21 + 39
+    assert len(ports.INPUT_NAMES) == 3 + 5 * 5 + 3
+    assert len(ports.OUTPUT_NAMES) == 6 + 5 * 10 + 3
+    assert len(set(ports.INPUT_NAMES + ports.OUTPUT_NAMES)) == 31 + 59
     kinds = {n: ports.port(small_model(0).points, small_model(0).strut_frames, n).kind
              for n in ports.OUTPUT_NAMES}
     assert set(kinds.values()) == {'displacement', 'velocity'}

@@ -2,8 +2,11 @@
 Damper node: viscous velocity feedback u = -b * rate on struts and the TCP.
 
 One node may serve several dampers: strut bending dampers (moment pairs about e2 and e3 from
-the bending rates, b [N m s/rad]), strut axial dampers (force from the axial velocity,
-b [N s/m]) and TCP dampers against ground (force from the TCP velocity, b [N s/m]). It answers
+the bending rates, b [N m s/rad]), strut chord dampers (lateral force pairs along e2 and e3 at
+the chord point against the chord, b [N s/m]), strut axial dampers (force from the axial
+velocity, b [N s/m]) and TCP dampers against ground (force from the TCP velocity, b [N s/m]),
+all optionally through the same low-pass and delay (``filter_order``, ``bandwidth_hz``,
+``filter_damping``, ``delay_steps``; controller states reset with every new plant run). It answers
 every plant step on /pentapod/forces/<source_name> (lockstep contract, docs/nodes.md). The
 gains may be changed at run time (``ros2 param set``); everything else is read-only.
 """
@@ -25,8 +28,8 @@ class DamperNode(LockstepSource):
         super().__init__('damper', DAMPER, **kwargs)
         self.laws = damper_laws(self.params)
         if not self.laws:
-            raise ConfigError('damper node has no damper: set bending_struts, axial_struts '
-                              'or tcp_directions')
+            raise ConfigError('damper node has no damper: set bending_struts, chord_struts, '
+                              'axial_struts or tcp_directions')
         laws = list(self.laws.values())
         self.setup([p for law in laws for p in law.sensor_ports],
                    [p for law in laws for p in law.actuator_ports])
@@ -45,6 +48,11 @@ class DamperNode(LockstepSource):
                 law = self.laws[p.name]
                 law.gains = np.full(len(law.actuator_ports), float(p.value))
         return SetParametersResult(successful=True)
+
+    def reset(self) -> None:
+        """Filter and delay states of every law back to zero (a new plant run started)."""
+        for law in self.laws.values():
+            law.reset()
 
     def compute(self, ns: int, sensors: np.ndarray) -> np.ndarray:
         """U = -b * rate for every damper of this node."""

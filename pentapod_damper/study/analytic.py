@@ -4,8 +4,9 @@ Analytic FRFs of a scenario: the continuous closed loop and the sampled lockstep
 The continuous FRF (:func:`pentapod_sim.plant.frf.closed_loop_frf`) is the paper's view: ideal
 viscous dampers. The discrete FRF is what the testbed runs: plain sampled feedback, the
 zero-order-hold plant with every law answering ``u_k`` to the outputs ``y_k`` of the same step
-(docs/architecture.md; no computational delay), evaluated at ``z = exp(j w dt)``; a recorded
-lockstep run must match it up to estimation error.
+(docs/architecture.md), through the laws' own actuator/sensor dynamics and delays
+(``delay_steps`` = 1: one-sample computational delay), evaluated at ``z = exp(j w dt)``; a
+recorded lockstep run must match it up to estimation error.
 """
 from __future__ import annotations
 
@@ -17,7 +18,7 @@ import numpy.typing as npt
 
 from pentapod_sim.plant.frf import closed_loop_frf, modal_frf
 from pentapod_sim.plant.model import PlantModel
-from pentapod_sim.sim.closed_loop import closed_loop_matrices, feedback_gain
+from pentapod_sim.sim.closed_loop import closed_loop_system
 from pentapod_sim.sim.stepping import DiscretePlant
 
 #: Largest eigenvector condition number for the eigen-decomposition path.
@@ -89,8 +90,9 @@ def discrete_frf(plant: PlantModel, laws: Sequence, dt: float, freq_hz: npt.Arra
     plant : PlantModel
         Continuous modal plant; discretised here with zero-order hold at ``dt``.
     laws : sequence
-        Memoryless linear laws (``linear_gain()`` not None), e.g. viscous dampers or an
-        unfiltered PMA; empty for the open loop.
+        Linear laws: memoryless (``linear_gain()``, e.g. viscous dampers or an unfiltered PMA)
+        or with a discrete model (``discrete_model()``: dampers with a low-pass or a delay);
+        empty for the open loop.
     dt : float
         Sample time [s].
     freq_hz : (F,) array_like
@@ -100,9 +102,7 @@ def discrete_frf(plant: PlantModel, laws: Sequence, dt: float, freq_hz: npt.Arra
     """
     freq = np.asarray(freq_hz, dtype=float)
     core = DiscretePlant(plant.discretize(dt))
-    gain = feedback_gain(core, laws) if laws else np.zeros((len(core.input_names),
-                                                             len(core.output_names)))
-    a, b, c_y, c_u, augmented = closed_loop_matrices(core, gain)
+    a, b, c_y, c_u, augmented = closed_loop_system(core, laws)
     j = core.input_names.index(input_)
     z = np.exp(2j * np.pi * freq * dt)
     lam, vec = np.linalg.eig(a)

@@ -150,8 +150,11 @@ def _struts_and_joints(mesh: _Mesh, state: StrutState, bracket_col: dict[int, in
         wp_end = mesh.node(w_pt, f'strut{s}_wp_end')
         rear = mesh.node(b_pt - overhang * e1, f'strut{s}_rear_end')
         for a, b in ((rear, at_bp), (at_bp, wp_end)):
+            first = mesh.n_nodes
             mesh.member(a, b, m.struts.section, frame[1], 'struts', 'struts',
                         m.struts.screw_mass_per_length)
+        for j, node in enumerate(range(first, mesh.n_nodes), start=1):   # chord ports
+            mesh.named[f'strut{s}_span{j}'] = node
         mesh.spring(at_bp, gimbal, frame,
                     [fd.nut_axial_stiffness, fd.guide_lateral_stiffness,
                      fd.guide_lateral_stiffness, fd.torsion_stiffness, fd.bending_stiffness,

@@ -46,10 +46,35 @@ from pentapod_sim.plant.reduction import (
 LOG = logging.getLogger(__name__)
 
 
+def modal_damping(frequencies_hz: npt.ArrayLike, damping_ratio: npt.ArrayLike,
+                  groups: Sequence = ()) -> np.ndarray:
+    """
+    Damping ratio of every mode: ``damping_ratio``, overridden in the bands of ``groups``.
+
+    Parameters
+    ----------
+    frequencies_hz : (m,) array_like
+        Natural frequencies [Hz].
+    damping_ratio : float or (m,) array_like
+        Uniform (or per-mode) modal damping ratio [-].
+    groups : sequence of DampingGroup
+        Modes with ``f_min <= f < f_max`` [Hz] get the group's ``ratio`` [-].
+    """
+    freq = np.asarray(frequencies_hz, dtype=float)
+    zeta = np.asarray(damping_ratio, dtype=float)
+    if zeta.ndim > 0 and zeta.shape != freq.shape:
+        raise ConfigError(f'damping ratios: {zeta.size} given for {freq.size} modes')
+    zeta = np.broadcast_to(zeta, freq.shape).copy()
+    for group in groups:
+        zeta[(freq >= group.f_min) & (freq < group.f_max)] = group.ratio
+    return zeta
+
+
 def from_modal_data(frequencies_hz: npt.ArrayLike, point_shapes: Mapping[str, npt.ArrayLike],
                     strut_frames: npt.ArrayLike | None, inputs: Sequence[str],
                     outputs: Sequence[str], zeta: npt.ArrayLike = 0.001,
-                    d: npt.ArrayLike | None = None, meta: dict | None = None) -> PlantModel:
+                    d: npt.ArrayLike | None = None, meta: dict | None = None,
+                    chord_position: float = 0.5) -> PlantModel:
     """
     Plant model from modal data: frequencies and mass-normalised shapes at named points.
 
@@ -70,13 +95,15 @@ def from_modal_data(frequencies_hz: npt.ArrayLike, point_shapes: Mapping[str, np
         Feed-through (static correction); default zero.
     meta : dict, optional
         Provenance stored with the model.
+    chord_position : float
+        Chord point of the chord ports (0 = BP joint, 1 = WP joint).
     """
     check_names(inputs, 'input')
     check_names(outputs, 'output')
     omega = 2 * np.pi * np.asarray(frequencies_hz, dtype=float)
     frames = np.full((5, 3, 3), np.nan) if strut_frames is None else strut_frames
-    in_ports = port_list(point_shapes, frames, inputs)
-    out_ports = port_list(point_shapes, frames, outputs)
+    in_ports = port_list(point_shapes, frames, inputs, chord_position)
+    out_ports = port_list(point_shapes, frames, outputs, chord_position)
     for p in in_ports + out_ports:
         if not np.all(np.isfinite(p.vector)):
             raise ModelFileError(f'port {p.name!r} needs strut frames, none were given')
@@ -141,12 +168,14 @@ def plant_from_fe(fe, reduction_cfg: ReductionConfig, progress: Callable[[str], 
     modes = solve_modes(fe.K, fe.M, f_max=cfg.modes_f_max)
     say(f'{modes.n_modes} modes, {modes.frequencies[0]:.2f} .. {modes.frequencies[-1]:.2f} Hz')
     inputs, outputs = list(cfg.inputs), list(cfg.outputs)
+    chord = getattr(cfg, 'chord_position', 0.5)
+    zeta = modal_damping(modes.frequencies, cfg.damping_ratio, getattr(cfg, 'damping_groups', ()))
     plant_all = from_modal_data(modes.frequencies, modal_points(fe.points, modes.shapes),
-                                fe.strut_frames, inputs, outputs, cfg.damping_ratio)
+                                fe.strut_frames, inputs, outputs, zeta, chord_position=chord)
     keep = keep_by_relevance(plant_all, cfg.relevance)
-    c_disp_full, _ = output_matrices(port_list(fe.points, fe.strut_frames, outputs))
-    g_full = static_compliance(fe.K, input_matrix(port_list(fe.points, fe.strut_frames, inputs)),
-                               c_disp_full)
+    c_disp_full, _ = output_matrices(port_list(fe.points, fe.strut_frames, outputs, chord))
+    g_full = static_compliance(fe.K, input_matrix(port_list(fe.points, fe.strut_frames, inputs,
+                                                            chord)), c_disp_full)
     plant_all.d = g_full - modal_dc_gains(plant_all.omega, plant_all.b,
                                           plant_all.c_disp).sum(axis=0)
     plant_all.meta.update({

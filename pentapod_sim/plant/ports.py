@@ -27,6 +27,8 @@ from pentapod_sim.errors import PortError
 
 N_STRUTS = 5
 AXES = ('x', 'y', 'z')
+#: Default chord point of the chord ports: share of the way from the BP joint to the WP joint.
+CHORD_POSITION = 0.5
 KINDS = ('force', 'displacement', 'velocity')
 
 
@@ -85,8 +87,35 @@ def _strut_terms(i: int, what: str, k: int, frames: npt.NDArray) -> tuple:
             (f'bp_ring{i}', e1, 'translation', -1.0))
 
 
-def _definitions(frames: npt.NDArray) -> dict[str, _Definition]:
-    """All port definitions for the given strut frames (5, 3, 3), keyed by name."""
+def _chord_terms(i: int, k: int, frames: npt.NDArray, n_span: int, position: float) -> tuple:
+    """
+    Terms of strut i's chord port along e_k: the chord point minus the chord between joints.
+
+    The active span (BP joint ``strut<i>_at_bp`` to WP joint ``strut<i>_wp_end``) has
+    ``n_span`` equal elements with the inner nodes ``strut<i>_span<j>``; the point at
+    ``position`` (0..1) is interpolated linearly between its neighbouring nodes, the chord
+    point linearly between the joints. As an input: a force at the point and the reactions
+    ``-(1 - s)`` and ``-s`` of it at the joints (no net force or moment).
+    """
+    e = frames[i - 1, k - 1]
+    nodes = ([f'strut{i}_at_bp'] + [f'strut{i}_span{j}' for j in range(1, n_span)]
+             + [f'strut{i}_wp_end'])
+    q = position * n_span
+    j0 = min(int(np.floor(q)), n_span - 1)
+    t = q - j0
+    return ((nodes[j0], e, 'translation', 1.0 - t), (nodes[j0 + 1], e, 'translation', t),
+            (nodes[0], e, 'translation', -(1.0 - position)),
+            (nodes[-1], e, 'translation', -position))
+
+
+def _definitions(frames: npt.NDArray, n_span: dict[int, int] | None = None,
+                 chord_position: float = CHORD_POSITION) -> dict[str, _Definition]:
+    """
+    All port definitions for the given strut frames (5, 3, 3), keyed by name.
+
+    ``n_span`` gives each strut's number of elements on its active span (chord ports); without
+    it the chord ports have no terms (names and metadata only).
+    """
     defs: dict[str, _Definition] = {}
     unit_vectors = np.eye(3)
     for a, axis in enumerate(AXES):
@@ -122,6 +151,18 @@ def _definitions(frames: npt.NDArray) -> dict[str, _Definition]:
             'N', f'proof-mass actuator force at the PMA mount along global {axis}', 'force', pma)
         defs[f'pma_mount_velocity_{axis}'] = _Definition(
             'm/s', f'PMA mount velocity along global {axis}', 'velocity', pma)
+    for i in range(1, N_STRUTS + 1):
+        for k in (2, 3):
+            terms = (_chord_terms(i, k, frames, n_span[i], chord_position)
+                     if n_span and i in n_span else ())
+            defs[f'strut{i}_chord_force_{k}'] = _Definition(
+                'N', f'lateral force along e{k} on strut {i} at its chord point, reacted at its '
+                'two joints in proportion to the chord interpolation', 'force', terms)
+            defs[f'strut{i}_chord_{k}'] = _Definition(
+                'm', f'strut {i} lateral displacement along e{k} of its chord point relative to '
+                'the chord between its joints', 'displacement', terms)
+            defs[f'strut{i}_chord_velocity_{k}'] = _Definition(
+                'm/s', f'rate of strut {i} chord displacement along e{k}', 'velocity', terms)
     return defs
 
 
@@ -132,7 +173,9 @@ OUTPUT_NAMES: tuple[str, ...] = tuple(
     + [f'strut{i}_{what}' for i in range(1, N_STRUTS + 1)
        for what in ('bending_2', 'bending_3', 'bending_rate_2', 'bending_rate_3',
                     'axial_displacement', 'axial_velocity')]
-    + [f'pma_mount_velocity_{a}' for a in AXES])
+    + [f'pma_mount_velocity_{a}' for a in AXES]
+    + [f'strut{i}_{what}_{k}' for i in range(1, N_STRUTS + 1)
+       for what in ('chord', 'chord_velocity') for k in (2, 3)])
 
 
 def _collocated_table() -> dict[tuple[str, str], str]:
@@ -148,6 +191,9 @@ def _collocated_table() -> dict[tuple[str, str], str]:
             table[(f'strut{i}_bending_moment_{k}', 'velocity')] = f'strut{i}_bending_rate_{k}'
         table[(f'strut{i}_axial_force', 'displacement')] = f'strut{i}_axial_displacement'
         table[(f'strut{i}_axial_force', 'velocity')] = f'strut{i}_axial_velocity'
+        for k in (2, 3):
+            table[(f'strut{i}_chord_force_{k}', 'displacement')] = f'strut{i}_chord_{k}'
+            table[(f'strut{i}_chord_force_{k}', 'velocity')] = f'strut{i}_chord_velocity_{k}'
     return table
 
 
@@ -201,7 +247,20 @@ def _point_rows(points: Mapping, name: str) -> npt.NDArray[np.float64]:
     return matrix.toarray() if sp.issparse(matrix) else np.asarray(matrix, dtype=float)
 
 
-def port(points: Mapping, strut_frames: npt.ArrayLike, name: str) -> Port:
+def _span_counts(points: Mapping) -> dict[int, int]:
+    """Elements of each strut's active span: one more than its ``strut<i>_span<j>`` points."""
+    counts = {}
+    for i in range(1, N_STRUTS + 1):
+        n = 1
+        while f'strut{i}_span{n}' in points:
+            n += 1
+        if n > 1:
+            counts[i] = n
+    return counts
+
+
+def port(points: Mapping, strut_frames: npt.ArrayLike, name: str,
+         chord_position: float = CHORD_POSITION) -> Port:
     """
     Build one port on the given point matrices.
 
@@ -213,6 +272,9 @@ def port(points: Mapping, strut_frames: npt.ArrayLike, name: str) -> Port:
         Rows e1, e2, e3 of each strut frame (unit vectors, global frame).
     name : str
         Port name.
+    chord_position : float
+        Chord point of the chord ports: share of the way from the BP joint to the WP joint
+        (0..1, default mid-span). They need the points ``strut<i>_span<j>``.
 
     Returns
     -------
@@ -220,8 +282,14 @@ def port(points: Mapping, strut_frames: npt.ArrayLike, name: str) -> Port:
         With ``vector`` of length n.
     """
     check_names([name])
+    if not 0.0 <= chord_position <= 1.0:
+        raise PortError(f'chord_position must be within 0..1, got {chord_position!r}')
     frames = np.asarray(strut_frames, dtype=float)
-    definition = _definitions(frames)[name]
+    counts = _span_counts(points) if '_chord' in name else None
+    definition = _definitions(frames, counts, chord_position)[name]
+    if '_chord' in name and not definition.terms:
+        raise PortError(f"port {name!r} needs the points of the strut's active span "
+                        f'(strut<i>_span<j>); the model has none')
     vector: np.ndarray | None = None
     for point_name, direction, part, sign in definition.terms:
         rows = _point_rows(points, point_name)
@@ -233,9 +301,10 @@ def port(points: Mapping, strut_frames: npt.ArrayLike, name: str) -> Port:
     return Port(name, definition.unit, definition.description, definition.kind, vector)
 
 
-def ports(points: Mapping, strut_frames: npt.ArrayLike, names: Sequence[str]) -> list[Port]:
+def ports(points: Mapping, strut_frames: npt.ArrayLike, names: Sequence[str],
+          chord_position: float = CHORD_POSITION) -> list[Port]:
     """Build several ports; see :func:`port`."""
-    return [port(points, strut_frames, name) for name in names]
+    return [port(points, strut_frames, name, chord_position) for name in names]
 
 
 def input_matrix(port_list: Sequence[Port]) -> npt.NDArray[np.float64]:

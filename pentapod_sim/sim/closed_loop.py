@@ -3,8 +3,10 @@ Offline closed loop: the plant core plus damper/PMA laws in-process.
 
 :func:`simulate` steps :class:`pentapod_sim.sim.stepping.DiscretePlant` exactly as the lockstep ROS
 run does (y_k, then every law and the excitation answer u_k, then x_{k+1}); it is the reference
-a ROS run must reproduce, bit for bit (test/test_plant_core.py). :func:`closed_loop_matrices`
-forms the closed-loop discrete system of memoryless linear laws for the analytic checks.
+a ROS run must reproduce, bit for bit (test/test_plant_core.py). :func:`closed_loop_system`
+forms the closed-loop discrete system of linear laws -- memoryless ones as static gains, laws
+with actuator/sensor dynamics or delays with their controller states -- for the analytic checks
+(:func:`closed_loop_matrices` is its static-gain special case).
 
 Units: as the plant ports (N, N m in; m, m/s, rad, rad/s out); time in steps of dt [s].
 """
@@ -18,6 +20,7 @@ import numpy as np
 import numpy.typing as npt
 
 from pentapod_sim.errors import ConfigError, PortError
+from pentapod_sim.sim.controllers import controller_of, loop_system, LoopSystem
 from pentapod_sim.sim.stepping import DiscretePlant
 
 LOG = logging.getLogger(__name__)
@@ -158,9 +161,32 @@ def feedback_gain(plant: DiscretePlant, laws: Sequence[Law]) -> npt.NDArray[np.f
     return gain
 
 
+def closed_loop_system(plant: DiscretePlant, laws: Sequence[Law]) -> LoopSystem:
+    """
+    Discrete closed loop of the plant and linear laws, as :func:`simulate` steps it.
+
+    Each law enters through its discrete model
+    (:func:`pentapod_sim.sim.controllers.controller_of`): ``discrete_model()`` for laws with
+    actuator/sensor dynamics or delays, ``linear_gain()`` for memoryless ones.
+
+    Returns
+    -------
+    LoopSystem
+        ``(a, b, c_y, c_u, augmented)`` as :func:`closed_loop_matrices`, with the
+        controllers' states after the plant's.
+
+    Raises
+    ------
+    ConfigError
+        If a law has no linear model (limits, or a filter without a model).
+    """
+    return loop_system(plant.a, plant.b, plant.c, plant.d, plant.input_names,
+                       plant.output_names, [controller_of(law) for law in laws])
+
+
 def closed_loop_matrices(plant: DiscretePlant, gain: npt.NDArray[np.float64]):
     """
-    Discrete closed loop with one-step controller delay.
+    Discrete closed loop of a static gain ``u_k = K y_k`` (sampled feedback, zero-order hold).
 
     Returns ``(a, b, c_y, c_u, augmented)`` with ``z_{k+1} = a z_k + b e_k``,
     ``u_k = c_u z_k + e_k`` and ``y_k = c_y z_k`` (e: external input). The state is
