@@ -18,6 +18,7 @@ A quantity the model lacks is published as NaN.
 from __future__ import annotations
 
 from dataclasses import dataclass
+import math
 from typing import Sequence
 
 import numpy as np
@@ -35,6 +36,10 @@ PMA_MOUNT_STATE = '/pentapod/pma_mount_state'
 STATE_TOPICS = (TCP_STATE, STRUT_STATES, PMA_MOUNT_STATE)
 EXCITATION = '/pentapod/excitation'
 PMA_STATE = '/pentapod/pma/state'
+#: Run status of the plant (diagnostic_msgs/DiagnosticStatus, reliable, transient local):
+#: ``running`` at the start, ``finished`` or ``stopped`` with the steps run at the end; see
+#: :data:`RUN_STATUS_KEYS` and docs/recording.md.
+RUN_STATUS = '/pentapod/run_status'
 #: A force source ``<name>`` publishes on ``FORCE_PREFIX + <name>``.
 FORCE_PREFIX = '/pentapod/forces/'
 #: Channels only the live view serves (Foxglove WebSocket, not ROS topics): its derived data.
@@ -49,14 +54,32 @@ JOINT_STATE = 'sensor_msgs/msg/JointState'
 WRENCH_STAMPED = 'geometry_msgs/msg/WrenchStamped'
 CLOCK_TYPE = 'rosgraph_msgs/msg/Clock'
 FLOAT64_MULTI_ARRAY = 'std_msgs/msg/Float64MultiArray'
-#: Message type of every fixed topic (force topics are JOINT_STATE).
+DIAGNOSTIC_STATUS = 'diagnostic_msgs/msg/DiagnosticStatus'
+#: Message type of every fixed data topic (force topics are JOINT_STATE; RUN_STATUS is
+#: DIAGNOSTIC_STATUS).
 TOPIC_TYPES = {CLOCK: CLOCK_TYPE, TCP_STATE: JOINT_STATE, STRUT_STATES: JOINT_STATE,
                PMA_MOUNT_STATE: JOINT_STATE, EXCITATION: WRENCH_STAMPED, PMA_STATE: JOINT_STATE}
+#: Topics that carry one message per plant step (stamp t_k) when they are published at all;
+#: force topics (:data:`FORCE_PREFIX`) do too. The recorder expects one message per step on them.
+STEP_TOPICS = (CLOCK, *STATE_TOPICS, EXCITATION, PMA_STATE)
+
+#: Values of the ``state`` key of a run-status message (DiagnosticStatus.message holds it too).
+RUN_RUNNING, RUN_FINISHED, RUN_STOPPED = 'running', 'finished', 'stopped'
+#: Keys of a run-status message: ``state`` (see above), ``steps`` (steps run: stamps
+#: t_0 ... t_{steps-1} were published), ``dt`` [s], ``last_stamp_ns`` (stamp of the last step,
+#: -1 for none) and ``step_topics`` (comma-separated topics the plant published or awaited
+#: every step: /clock, its state topics with subscribers, its sources' force topics).
+RUN_STATUS_KEYS = ('state', 'steps', 'dt', 'last_stamp_ns', 'step_topics')
 
 
 def force_topic(source: str) -> str:
     """Topic of the force source ``source``."""
     return FORCE_PREFIX + source
+
+
+def is_step_topic(topic: str) -> bool:
+    """True for a topic that carries one message per step (:data:`STEP_TOPICS`, forces)."""
+    return topic in STEP_TOPICS or topic.startswith(FORCE_PREFIX)
 
 
 def tcp_spectrum_topic(name: str) -> str:
@@ -72,7 +95,7 @@ def is_testbed_topic(topic: str) -> bool:
 @dataclass(frozen=True)
 class QosSpec:
     """
-    QoS of one class of topics, as plain data (every testbed topic is reliable and volatile).
+    QoS of one class of topics, as plain data (every testbed topic is reliable).
 
     Attributes
     ----------
@@ -86,12 +109,35 @@ class QosSpec:
     durability: str = 'volatile'
 
 
-#: History of the state and information streams: how far a slow reader (a recorder on a busy
-#: machine) may fall behind, in steps.
-STREAM_DEPTH = 10000
+#: Highest sample rate [Hz] of the shipped configurations (config/scenarios/*.yaml: 5 kHz,
+#: config/study.yaml: 3 kHz; test/test_recording_stalls.py checks them). A lockstep run with a
+#: controller steps slower (about 2,000 steps/s here), a realtime run at the sample rate.
+MAX_SHIPPED_RATE = 5000.0
+#: Wall time [s] a recorder may stall (SIGSTOP, swapping, a busy disk) without losing a message.
+RECORDER_STALL = 5.0
+#: Extra wall time [s] the history must cover after a stall until the reader has asked for what
+#: it missed: Fast DDS repairs after the writer's next heartbeat (period 3 s by default).
+REPAIR_TIME = 3.0
+#: History depth [messages] of every per-step stream (states, /clock, forces, excitation, PMA
+#: state): (RECORDER_STALL + REPAIR_TIME) s at MAX_SHIPPED_RATE = 40,000 messages. A reliable
+#: KEEP_LAST writer drops its oldest message, acknowledged or not, when its history is full.
+STREAM_DEPTH = int(math.ceil((RECORDER_STALL + REPAIR_TIME) * MAX_SHIPPED_RATE))
 #: QoS per class of topic: plant outputs and /clock ('state'), forces from the sources
-#: ('force'; one message per step), diagnostics such as PMA state and excitation ('info').
-QOS = {'state': QosSpec(STREAM_DEPTH), 'force': QosSpec(100), 'info': QosSpec(STREAM_DEPTH)}
+#: ('force'; one message per step), diagnostics such as PMA state and excitation ('info'), the
+#: run status ('status': the last one kept for a late reader).
+QOS = {'state': QosSpec(STREAM_DEPTH), 'force': QosSpec(STREAM_DEPTH),
+       'info': QosSpec(STREAM_DEPTH), 'status': QosSpec(4, durability='transient_local')}
+
+
+def qos_class(topic: str) -> str | None:
+    """Class of :data:`QOS` the testbed's publishers of ``topic`` use (None: not a testbed one)."""
+    if topic in (CLOCK, *STATE_TOPICS):
+        return 'state'
+    if topic.startswith(FORCE_PREFIX):
+        return 'force'
+    if topic in (EXCITATION, PMA_STATE):
+        return 'info'
+    return 'status' if topic == RUN_STATUS else None
 
 
 def _table() -> dict[str, tuple[str, str, str]]:

@@ -151,7 +151,6 @@ recorder:
     topics: {topics}
     output_dir: bags
     bag_name: installed
-    stop_when_idle: 2.0
 """
 
 

@@ -97,7 +97,7 @@ def run_sections(scenario: str, position: str, model_file: Path, cfg: StudyConfi
     info = dict(run_info, scenario_parameters=dict(doc))   # the nodes' sections, as run
     doc['recorder'] = {'ros__parameters': {
         'topics': RECORDED_TOPICS, 'output_dir': str(bag_dir.parent), 'bag_name': bag_dir.name,
-        'run_info': yaml.safe_dump(info, sort_keys=False), 'stop_when_idle': 2.0}}
+        'run_info': yaml.safe_dump(info, sort_keys=False)}}
     return doc
 
 

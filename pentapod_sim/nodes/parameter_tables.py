@@ -89,7 +89,8 @@ RECORDER = ParameterTable('recorder', [
     Param('topics', 'string[]', [], 'topics to record; empty: every /pentapod/* topic and '
           '/clock'),
     Param('output_dir', 'str', 'out/bags', 'folder of bags'),
-    Param('bag_name', 'str', '', 'bag folder name; empty: run_<UTC time>'),
+    Param('bag_name', 'str', '', 'bag folder name, {utc} replaced by the UTC time '
+          '(20260101T120000Z); empty: run-{utc}'),
     Param('run_info', 'str', '', "YAML mapping stored in the bag's custom_data (model hash, "
           'pose, scenario)'),
     Param('queue_depth', 'int', 100000, 'subscription depth (messages held while the writer '
@@ -98,8 +99,11 @@ RECORDER = ParameterTable('recorder', [
           1e-3, 3600.0),
     Param('flush_period', 'float', 0.5, 'wall time between flushes of the bag to disk', 's',
           1e-3, 3600.0),
-    Param('stop_when_idle', 'float', 0.0, 'wall time without messages after which the '
-          'recorder closes the bag and exits (0 = run until SIGINT/SIGTERM)', 's', 0.0, 1e6),
+    Param('stop_at_run_end', 'bool', True, 'close the bag and exit once the plant announced '
+          'the end of the run and every per-step topic holds its last step (false: run until '
+          'SIGINT/SIGTERM)'),
+    Param('drain_timeout', 'float', 30.0, 'wall time after the end announcement after which '
+          'the bag is closed even if steps are missing (they are reported)', 's', 0.0, 1e6),
 ], summary='writes chosen topics to a rosbag2-compatible MCAP bag.')
 
 

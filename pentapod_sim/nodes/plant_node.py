@@ -12,12 +12,14 @@ from __future__ import annotations
 
 import time
 
+from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 import numpy as np
 from rclpy.duration import Duration
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
+from pentapod_sim import interface
 from pentapod_sim.errors import ConfigError, RunError
 from pentapod_sim.interface import CLOCK, force_topic, stamp_ns, state_layouts, step_of
 from pentapod_sim.nodes.common import (
@@ -25,6 +27,7 @@ from pentapod_sim.nodes.common import (
     declare_table,
     FORCE_QOS,
     node_args,
+    qos,
     run_node,
     spin_until,
     stamp_msg,
@@ -64,6 +67,8 @@ class PlantNode(Node):
             JointState, force_topic(name),
             lambda msg, name=name: self._on_force(name, msg), FORCE_QOS)
             for name in self.mixer.sources]
+        self.status_pub = self.create_publisher(DiagnosticStatus, interface.RUN_STATUS,
+                                                qos('status'))
         self._last_warn = {}
         self._next_refresh = 0.0
 
@@ -124,6 +129,24 @@ class PlantNode(Node):
                 self._last_warn[(source, kind)] = now
                 self.get_logger().warning(f'rejected message from source {source!r}: {reason} '
                                           f'({self.mixer.rejected[(source, kind)]} so far)')
+
+    def announce(self, state: str) -> None:
+        """Publish the run status (docs/recording.md): state, steps run, per-step topics."""
+        if not self.context.ok():
+            return    # after a signal nothing can be published any more
+        if state == interface.RUN_RUNNING:
+            self.refresh_subscribers()
+        steps = self.core.k
+        topics = ([self.clock_pub.topic_name] if self._clock_active else []) + [
+            pub.topic_name for pub, _ in self._active] + [force_topic(s)
+                                                          for s in self.mixer.sources]
+        values = {'state': state, 'steps': steps, 'dt': repr(self.dt),
+                  'last_stamp_ns': stamp_ns(steps - 1, self.dt) if steps else -1,
+                  'step_topics': ','.join(topics)}
+        level = DiagnosticStatus.WARN if state == interface.RUN_STOPPED else DiagnosticStatus.OK
+        self.status_pub.publish(DiagnosticStatus(
+            level=level, name=self.get_fully_qualified_name(), message=state,
+            values=[KeyValue(key=k, value=str(v)) for k, v in values.items()]))
 
     # -- runs ------------------------------------------------------------------------------
     def wait_for_sources(self, executor) -> None:
@@ -265,6 +288,7 @@ def run(node: PlantNode, executor) -> None:
                            f'{list(node.mixer.sources) or "none"}')
     extra = {}
     wall = time.monotonic()
+    node.announce(interface.RUN_RUNNING)
     try:
         if node.params.timing == 'lockstep':
             node.run_lockstep(executor, trace)
@@ -275,6 +299,8 @@ def run(node: PlantNode, executor) -> None:
             extra = stats.as_dict()
     finally:
         wall = time.monotonic() - wall
+        node.announce(interface.RUN_FINISHED if node.core.k == node.n_steps
+                      else interface.RUN_STOPPED)
         node.wait_for_acks()
         node.get_logger().info(f'ran {node.core.k} steps in {wall:.3f} s wall '
                                f'({node.core.k / max(wall, 1e-9):.0f} steps/s); '

@@ -5,8 +5,13 @@ Subscriptions are raw (CDR bytes, no deserialisation) and reliable with a deep q
 publisher only offers best effort; the bag is written by the ROS-free
 :class:`pentapod_sim.recording.BagWriter`. The log time of a message is its header stamp (sim
 time) when its type starts with a std_msgs/Header or a builtin Time (Clock), else the
-receive time of the node clock. SIGINT/SIGTERM close the bag completely; after a SIGKILL the
-bag is readable up to the last periodic flush. The node publishes nothing.
+receive time of the node clock. With ``stop_at_run_end`` the recorder closes the bag once the
+plant announced the end of the run (:data:`pentapod_sim.interface.RUN_STATUS`) and every
+per-step topic holds the last step, or ``drain_timeout`` s after the announcement; it logs
+expected vs recorded messages per topic and stores them in the bag
+(:mod:`pentapod_sim.recording.run_end`, docs/recording.md). SIGINT/SIGTERM close the bag
+completely; after a SIGKILL the bag is readable up to the last periodic flush. The node
+publishes nothing.
 
 Parameters: :data:`pentapod_sim.nodes.parameter_tables.RECORDER` (docs/parameters.md).
 """
@@ -21,6 +26,7 @@ from rclpy.clock import Clock, ClockType
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.serialization import deserialize_message
 import yaml
 
 from pentapod_sim import interface
@@ -29,12 +35,17 @@ from pentapod_sim.nodes.common import declare_table, node_args, run_node
 from pentapod_sim.nodes.parameter_tables import RECORDER
 from pentapod_sim.recording import BagWriter, qos_profile
 from pentapod_sim.recording.msgdefs import has_header_stamp
+from pentapod_sim.recording.run_end import RunStatus, shortfalls, StepLedger
+
+#: Name of the MCAP metadata record (and custom_data key) with expected vs recorded counts.
+RECORDING_RECORD = 'pentapod_recording'
 
 # topics of docs/architecture.md: subscribed at start (before any publisher exists), so that a
 # recorder started before the plant misses no step; others are found by discovery
 KNOWN_TOPICS = {t: interface.TOPIC_TYPES[t] for t in (
-    interface.CLOCK, interface.TCP_STATE, interface.STRUT_STATES, interface.EXCITATION,
-    interface.PMA_STATE)}
+    interface.CLOCK, interface.TCP_STATE, interface.STRUT_STATES, interface.PMA_MOUNT_STATE,
+    interface.EXCITATION, interface.PMA_STATE)}
+KNOWN_TOPICS[interface.RUN_STATUS] = interface.DIAGNOSTIC_STATUS
 
 
 def message_class(msg_type: str):
@@ -49,12 +60,14 @@ class RecorderNode(Node):
     def __init__(self, **kwargs):
         super().__init__('recorder', **kwargs)
         self.params = params = declare_table(self, RECORDER, node_args(kwargs.get('cli_args')))
-        self.stop_when_idle = params.stop_when_idle
-        self.last_message = None
         self.duplicates = {}
         self.wanted = params.topics
-        name = params.bag_name or datetime.datetime.now(
-            datetime.timezone.utc).strftime('run_%Y%m%d_%H%M%S')
+        utc = datetime.datetime.now(datetime.timezone.utc).strftime('%Y%m%dT%H%M%SZ')
+        name = (params.bag_name or 'run-{utc}').replace('{utc}', utc)
+        self.ledger = StepLedger(self._selected)
+        self.end = None           # RunStatus once the plant announced the end of the run
+        self.end_seen = None      # monotonic time of that announcement
+        self.report = None        # expected vs recorded counts, set by close()
         try:
             run_info = yaml.safe_load(params.run_info or '{}') or {}
         except yaml.YAMLError as err:
@@ -66,7 +79,7 @@ class RecorderNode(Node):
                                 flush_period_s=0.0)
         self.subs = {}  # topic -> (subscription or None, msg_type, best_effort)
         for topic, msg_type in KNOWN_TOPICS.items():
-            if self._selected(topic):
+            if self._selected(topic) or topic == interface.RUN_STATUS:
                 self._subscribe(topic, msg_type, [])
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.create_timer(params.discovery_period, self.discover, clock=steady)
@@ -77,7 +90,7 @@ class RecorderNode(Node):
     def _selected(self, topic: str) -> bool:
         if self.wanted:
             return topic in self.wanted
-        return interface.is_testbed_topic(topic)
+        return interface.is_testbed_topic(topic) and not topic.startswith(interface.LIVE_PREFIX)
 
     def discover(self) -> None:
         """Subscribe to new selected topics with a publisher; follow best-effort publishers."""
@@ -101,34 +114,54 @@ class RecorderNode(Node):
 
     def _subscribe(self, topic: str, msg_type: str, publishers) -> None:
         best_effort = _any_best_effort(publishers)
+        status = topic == interface.RUN_STATUS   # transient local: a late recorder gets it too
         qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=self.depth,
                          reliability=(ReliabilityPolicy.BEST_EFFORT if best_effort
                                       else ReliabilityPolicy.RELIABLE),
-                         durability=DurabilityPolicy.VOLATILE)
+                         durability=(DurabilityPolicy.TRANSIENT_LOCAL if status
+                                     else DurabilityPolicy.VOLATILE))
         stamped = has_header_stamp(msg_type)
-        sub = self.create_subscription(message_class(msg_type), topic,
-                                       self._callback(topic, msg_type, stamped), qos, raw=True)
+        callback = self._callback(topic, msg_type, stamped, self._selected(topic))
+        if status:
+            callback = self._status_callback(callback)
+        sub = self.create_subscription(message_class(msg_type), topic, callback, qos, raw=True)
         self.subs[topic] = (sub, msg_type, best_effort)
         self.get_logger().info(f'subscribed {topic} [{msg_type}]'
                                f'{" best effort" if best_effort else ""}')
 
     def _register(self, topic: str, msg_type: str) -> None:
         """Add the topic to the bag at its first message, with the publishers' offered QoS."""
-        offered = [qos_profile(p.qos_profile.reliability.name.lower(), self.depth,
-                               p.qos_profile.durability.name.lower())
+        offered = [offered_qos(topic, p.qos_profile)
                    for p in self.get_publishers_info_by_topic(topic)]
         self.writer.add_topic(topic, msg_type, offered or None)
 
-    def _callback(self, topic: str, msg_type: str, stamped: bool):
-        clock, write = self.get_clock(), self.writer.write
+    def _status_callback(self, record):
+        """Callback of the run status: record it, then note the end of the run."""
+        def on_status(data: bytes) -> None:
+            record(data)
+            msg = deserialize_message(data, message_class(interface.DIAGNOSTIC_STATUS))
+            try:
+                status = RunStatus.from_values({kv.key: kv.value for kv in msg.values})
+            except BagError as err:
+                self.get_logger().error(f'{interface.RUN_STATUS}: {err}')
+                return
+            if status.ended:
+                self.end, self.end_seen = status, time.monotonic()
+                self.get_logger().info(f'run {status.state} after {status.steps} steps; '
+                                       'draining')
+        return on_status
+
+    def _callback(self, topic: str, msg_type: str, stamped: bool, selected: bool = True):
+        clock, write, note = self.get_clock(), self.writer.write, self.ledger.note
         registered = []
 
         def on_message(data: bytes) -> None:
+            if not selected:
+                return
             received = clock.now().nanoseconds
             if not registered:
                 self._register(topic, msg_type)
                 registered.append(True)
-            self.last_message = time.monotonic()
             if stamped:
                 sec, nanosec = struct.unpack_from('<iI', data, 4)
                 stamp = sec * 1_000_000_000 + nanosec
@@ -137,6 +170,7 @@ class RecorderNode(Node):
                     return  # a lockstep plant re-sends a step while it waits: keep one copy
                 last_stamp[:], last_data[:] = [stamp], [data]
                 write(topic, data, stamp, received)
+                note(topic, stamp)
             else:
                 write(topic, data, received, received)
         last_stamp, last_data = [], []
@@ -146,18 +180,80 @@ class RecorderNode(Node):
         """Push the open chunk to disk and rewrite metadata.yaml."""
         self.writer.flush()
 
-    def idle(self) -> bool:
-        """True once messages came and none arrived for ``stop_when_idle`` seconds."""
-        return (self.stop_when_idle > 0 and self.last_message is not None
-                and time.monotonic() - self.last_message > self.stop_when_idle)
+    def expected_topics(self) -> list:
+        """Per-step topics that must hold every step of the announced run."""
+        present = set(self.writer.topic_counts()) | {
+            t for t, (sub, _, _) in self.subs.items()
+            if sub is not None and self.count_publishers(t) > 0}
+        return self.ledger.expected_topics(self.end, present)
+
+    def done(self) -> bool:
+        """
+        True once the run ended and every per-step topic holds its last step.
+
+        Also after ``drain_timeout`` s of wall time since the end announcement; never without
+        ``stop_at_run_end``.
+        """
+        if not self.params.stop_at_run_end or self.end is None:
+            return False
+        if self.ledger.drained(self.end, self.expected_topics()):
+            return True
+        if time.monotonic() - self.end_seen > self.params.drain_timeout:
+            self.get_logger().warning(f'drain_timeout = {self.params.drain_timeout} s after '
+                                      'the end of the run; closing with steps missing')
+            return True
+        return False
+
+    def store_report(self) -> None:
+        """Log expected vs recorded counts per topic and store them in the bag."""
+        if self.end is None:
+            return
+        self.report = report = self.ledger.report(
+            self.end, self.expected_topics(), self.writer.topic_counts())
+        short = shortfalls(report)
+        self.writer.add_record(RECORDING_RECORD, {
+            'run_state': self.end.state, 'steps': self.end.steps,
+            'expected': _flow({t: c['expected'] for t, c in report.items()}),
+            'recorded': _flow({t: c['recorded'] for t, c in report.items()}),
+            'missing': _flow(short)})
+        text = ', '.join(f'{t} {c["recorded"]}/{c["expected"]}' for t, c in report.items())
+        log = self.get_logger()
+        if short:
+            log.warning(f'recorded/expected messages: {text}; MISSING {short}')
+        else:
+            log.info(f'recorded/expected messages: {text}; none missing')
 
     def close(self) -> None:
-        """Finish the bag (summary, footer, metadata.yaml)."""
+        """Store the counts, finish the bag (summary, footer, metadata.yaml)."""
+        if self.context.ok():  # after a signal the graph and rosout are gone
+            self.store_report()
         self.writer.close()
         if self.duplicates:
             self.get_logger().info(f'skipped re-sent copies of a step: {self.duplicates}')
-        if self.context.ok():  # after a signal the rosout publisher is gone
+        if self.context.ok():
             self.get_logger().info(f'closed {self.writer.path}: {self.writer.topic_counts()}')
+
+
+def offered_qos(topic: str, profile) -> dict:
+    """
+    The rosbag2 QoS entry of one publisher of ``topic``.
+
+    Reliability and durability come from discovery. DDS discovery does not carry the history
+    depth (rmw reports 0, history unknown), so a testbed topic gets the depth its publishers
+    use (:data:`pentapod_sim.interface.QOS`), another topic rosbag2's unknown/0.
+    """
+    kind = interface.qos_class(topic)
+    entry = qos_profile(profile.reliability.name.lower(),
+                        interface.QOS[kind].depth if kind else 0,
+                        profile.durability.name.lower())
+    if kind is None:
+        entry['history'] = 'unknown'
+    return entry
+
+
+def _flow(mapping: dict) -> str:
+    return yaml.safe_dump(mapping, default_flow_style=True, sort_keys=False,
+                          width=1 << 20).strip()
 
 
 def _any_best_effort(publishers) -> bool:
@@ -165,9 +261,9 @@ def _any_best_effort(publishers) -> bool:
 
 
 def record(node: RecorderNode, executor) -> None:
-    """Spin until SIGINT/SIGTERM or ``stop_when_idle``; the bag is closed on the way out."""
+    """Spin until a signal or the drained end of the run; the bag is closed on the way out."""
     try:
-        while rclpy.ok() and not node.idle():
+        while rclpy.ok() and not node.done():
             executor.spin_once(timeout_sec=0.05)
     finally:
         node.close()

@@ -155,6 +155,18 @@ class BagWriter:
         self._topics[topic] = _Topic(topic, msg_type, channel_id, profiles)
         self.write_metadata_yaml()
 
+    def add_record(self, name: str, data: Mapping) -> None:
+        """
+        Store ``data`` as an MCAP metadata record ``name`` and in metadata.yaml.
+
+        Values are converted to str; metadata.yaml's ``custom_data`` holds them as
+        ``<name>.<key>``.
+        """
+        data = {str(k): str(v) for k, v in data.items()}
+        self._writer.add_metadata(name, data)
+        self.custom_data.update({f'{name}.{k}': v for k, v in data.items()})
+        self.write_metadata_yaml()
+
     def write(self, topic: str, data: bytes, log_time_ns: int,
               publish_time_ns: Optional[int] = None) -> None:
         """

@@ -58,21 +58,24 @@ def stop(procs: dict[str, subprocess.Popen], grace: float = 5.0) -> None:
 def drain_recorders(scenario: Scenario, procs: dict[str, subprocess.Popen],
                     limit: float = 120.0) -> None:
     """
-    Let recorders with ``stop_when_idle`` finish writing before the run is stopped.
+    Let the recorders write every step before the run is stopped.
 
-    A recorder may still be working through its queue when the plant ends; it closes its bag
-    and exits by itself once idle. After ``limit`` seconds it is stopped like the others
-    (its bag is still complete then, only messages still queued are not in it).
+    A recorder with ``stop_at_run_end`` (the default) closes its bag and exits by itself once
+    it holds the last step the plant announced on every per-step topic (or ``drain_timeout``
+    s after the announcement); the sources must live until then, since the messages a stalled
+    recorder has not fetched yet are in their publishers' histories. After ``limit`` seconds
+    (at least the recorder's ``drain_timeout`` + 10 s) it is stopped like the others (its bag
+    is complete then; it holds what arrived).
     """
-    idle = [n.name for n in scenario.of_kind('recorder')
-            if float(scenario.sections[n.name].get('stop_when_idle', 0)) > 0]
-    end = time.monotonic() + limit
-    for name in idle:
+    waiting = [n.name for n in scenario.of_kind('recorder')
+               if scenario.sections[n.name].get('stop_at_run_end', True)]
+    timeouts = [float(scenario.sections[n].get('drain_timeout', 30.0)) for n in waiting]
+    end = time.monotonic() + max([limit] + [t + 10.0 for t in timeouts])
+    for name in waiting:
         try:
             procs[name].wait(timeout=max(0.1, end - time.monotonic()))
         except subprocess.TimeoutExpired:
-            LOG.warning('recorder %s still busy %.0f s after the plant ended; stopping it',
-                        name, limit)
+            LOG.warning('recorder %s still busy after the plant ended; stopping it', name)
 
 
 def run_scenario(path: Path, plant_overrides: dict, timeout: float,

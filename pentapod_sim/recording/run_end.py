@@ -1,0 +1,122 @@
+"""
+The end of a run as the plant announces it, and the recorder's check that every step is in.
+
+The plant publishes its run status on :data:`pentapod_sim.interface.RUN_STATUS` (key/value
+pairs :data:`pentapod_sim.interface.RUN_STATUS_KEYS`): ``running`` at the start, ``finished``
+or ``stopped`` with the number of steps run at the end. Reliable delivery is in order per
+publisher, so once a per-step topic holds the stamp of the last step, everything before it that
+was not lost is in as well: the recorder stops then (:meth:`StepLedger.drained`), not after a
+wall time without messages. See docs/recording.md.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable, Iterable, Mapping
+
+from pentapod_sim.errors import BagError
+from pentapod_sim.interface import (
+    is_step_topic,
+    RUN_FINISHED,
+    RUN_RUNNING,
+    RUN_STATUS_KEYS,
+    RUN_STOPPED,
+)
+
+
+@dataclass(frozen=True)
+class RunStatus:
+    """
+    One run-status message.
+
+    Attributes
+    ----------
+    state : str
+        ``running``, ``finished`` or ``stopped``.
+    steps : int
+        Steps run so far (stamps t_0 ... t_{steps-1} were published).
+    dt : float
+        Sample time [s].
+    last_stamp_ns : int
+        Stamp [ns] of the last step run; -1 if none.
+    step_topics : tuple of str
+        Topics the plant published or awaited every step.
+    """
+
+    state: str
+    steps: int
+    dt: float
+    last_stamp_ns: int
+    step_topics: tuple[str, ...]
+
+    @property
+    def ended(self) -> bool:
+        """True for ``finished`` and ``stopped``."""
+        return self.state in (RUN_FINISHED, RUN_STOPPED)
+
+    @classmethod
+    def from_values(cls, values: Mapping[str, str]) -> RunStatus:
+        """Parse the key/value pairs of a status message (BagError names a bad value)."""
+        missing = [k for k in RUN_STATUS_KEYS if k not in values]
+        if missing:
+            raise BagError(f'run status lacks key(s) {missing}: {dict(values)}')
+        state = values['state']
+        if state not in (RUN_RUNNING, RUN_FINISHED, RUN_STOPPED):
+            raise BagError(f'run status has unknown state {state!r}')
+        try:
+            steps, dt = int(values['steps']), float(values['dt'])
+            last = int(values['last_stamp_ns'])
+        except ValueError as err:
+            raise BagError(f'run status has a bad number: {err}') from None
+        if steps < 0:
+            raise BagError(f'run status has steps = {steps} < 0')
+        topics = tuple(t for t in values['step_topics'].split(',') if t)
+        return cls(state, steps, dt, last, topics)
+
+
+class StepLedger:
+    """
+    Newest stamp per per-step topic a recorder wrote, and what the end of the run implies.
+
+    Parameters
+    ----------
+    selected : callable
+        ``selected(topic)`` is True for topics the recorder records.
+    """
+
+    def __init__(self, selected: Callable[[str], bool]) -> None:
+        self.selected = selected
+        self.newest: dict[str, int] = {}
+
+    def note(self, topic: str, stamp_ns: int) -> None:
+        """Record that a message of ``topic`` with stamp ``stamp_ns`` was written."""
+        if stamp_ns > self.newest.get(topic, -1):
+            self.newest[topic] = stamp_ns
+
+    def expected_topics(self, end: RunStatus, present: Iterable[str]) -> list[str]:
+        """
+        Topics that must hold one message per step.
+
+        These are the plant's announced per-step topics and every other per-step topic
+        (excitation, PMA state, forces) that has a publisher or a message (``present``), as
+        far as the recorder selects them.
+        """
+        topics = [t for t in end.step_topics if self.selected(t)]
+        topics += sorted(t for t in set(present) - set(topics)
+                         if is_step_topic(t) and self.selected(t))
+        return topics
+
+    def drained(self, end: RunStatus, topics: Iterable[str]) -> bool:
+        """True once every topic of ``topics`` holds the stamp of the last step."""
+        return all(self.newest.get(t, -1) >= end.last_stamp_ns for t in topics)
+
+    def report(self, end: RunStatus, topics: Iterable[str],
+               counts: Mapping[str, int]) -> dict[str, dict[str, int]]:
+        """Return ``{topic: {'expected': steps, 'recorded': messages}}``."""
+        return {t: {'expected': end.steps, 'recorded': int(counts.get(t, 0))}
+                for t in topics}
+
+
+def shortfalls(report: Mapping[str, Mapping[str, int]]) -> dict[str, int]:
+    """Return ``{topic: missing messages}`` of the topics with fewer than expected."""
+    return {t: c['expected'] - c['recorded'] for t, c in report.items()
+            if c['recorded'] < c['expected']}
