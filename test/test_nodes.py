@@ -1,7 +1,6 @@
 """Nodes in real processes (rclpy, DDS on localhost): lockstep, energy, PMA, failures, help."""
 import os
 from pathlib import Path
-import random
 import signal
 import subprocess
 import sys
@@ -25,10 +24,9 @@ TCP = ['tcp_force_x', 'tcp_force_y', 'tcp_force_z']
 
 @pytest.fixture
 def ros_env():
-    """Environment with a domain id unique to this test run."""
+    """The session's isolated environment (conftest.py reserves its ROS domain)."""
     env = dict(os.environ)
-    env['ROS_DOMAIN_ID'] = str(random.randint(1, 100))
-    env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    assert env.get('ROS_DOMAIN_ID') and env.get('ROS_AUTOMATIC_DISCOVERY_RANGE')
     return env
 
 

@@ -21,13 +21,17 @@ from builtin_interfaces.msg import Time
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType
 import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.impl.implementation_singleton import rclpy_implementation
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.signals import SignalHandlerOptions
 from rclpy.utilities import remove_ros_args
 
-from pentapod_sim import interface
+from pentapod_sim import interface, shutdown
 from pentapod_sim.errors import ConfigError, RunError
 from pentapod_sim.nodes.overrides import override_origins
 from pentapod_sim.parameters import all_tables, Param, ParameterTable, Values
+
+RCLError = rclpy_implementation.RCLError
 
 
 def qos(kind: str) -> QoSProfile:
@@ -221,16 +225,25 @@ def run_node(factory: Callable[..., object], argv=None, run: Callable | None = N
     """
     Jazzy-style main: init, build the node, spin or ``run(node, executor)``, clean shutdown.
 
-    ``--help`` prints the usage and ``table`` and starts nothing. Returns 0 on a clean end
-    (also SIGINT), 1 after printing one ``error: ...`` line on a ConfigError/RunError.
+    ``--help`` prints the usage and ``table`` and starts nothing. Returns 0 on a clean end,
+    1 after printing one ``error: ...`` line on a ConfigError/RunError, and 128 + the signal
+    number after a clean stop on SIGINT, SIGTERM or SIGHUP (:mod:`pentapod_sim.shutdown`).
     """
     global _process_args
     args = list(sys.argv if argv is None else argv)
-    if table is not None and wants_help(args):
-        print(usage(table))
-        return 0
+    try:
+        if table is not None and wants_help(args):
+            print(usage(table))
+            return 0
+    except RCLError as err:            # e.g. a parameter file rcl cannot parse
+        print(f'error: {str(err).splitlines()[0]}', file=sys.stderr)
+        return 1
     _process_args = args
-    rclpy.init(args=args)
+    # SIGINT/SIGTERM/SIGHUP only request a stop (pentapod_sim.shutdown); rclpy's own handlers
+    # would invalidate the context at once, so a node could neither finish its step nor
+    # publish, write its files or wait for acknowledgements.
+    shutdown.install()
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     node = None
     code = 0
     try:
@@ -240,7 +253,7 @@ def run_node(factory: Callable[..., object], argv=None, run: Callable | None = N
         if run is not None:
             run(node, spinner)
         else:
-            while rclpy.ok():
+            while rclpy.ok() and not shutdown.requested():
                 spinner.spin_once(timeout_sec=0.1)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
@@ -251,4 +264,7 @@ def run_node(factory: Callable[..., object], argv=None, run: Callable | None = N
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
+    if code == 0 and shutdown.requested():
+        print(f'stopped by {shutdown.signal_name()}', file=sys.stderr)
+        code = shutdown.exit_code()
     return code

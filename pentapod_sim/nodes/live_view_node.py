@@ -23,7 +23,7 @@ from rclpy.serialization import serialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
-from pentapod_sim import interface
+from pentapod_sim import interface, shutdown
 from pentapod_sim.live.hub import LiveHub, lower_priority
 from pentapod_sim.live.params import LIVE_VIEW
 from pentapod_sim.live.streams import SUPPORTED_TYPES
@@ -107,7 +107,7 @@ def serve(node: LiveViewNode, executor) -> None:
                            f'(niceness +{node.params.nice} on {threads} threads)')
     try:
         next_look = time.monotonic() + node.params.discovery_period
-        while rclpy.ok():
+        while rclpy.ok() and not shutdown.requested():
             executor.spin_once(timeout_sec=0.1)
             if time.monotonic() > next_look:
                 node.discover()

@@ -34,7 +34,9 @@ PLANT = ParameterTable('plant', [
     Param('model_cache_dir', 'str', 'out/models', 'folder of cached built models'),
     SAMPLE_RATE,
     Param('timing', 'str', 'lockstep', 'lockstep: wait for every source each step; realtime: '
-          'wall-clock paced, newest force held', choices=('lockstep', 'realtime')),
+          'y_k published at the start of period k, u_k applied if it arrives before the end '
+          'of the period, else the last force held and the miss counted',
+          choices=('lockstep', 'realtime')),
     Param('duration', 'float', 1.0, 'simulated time (if steps is 0)', 's', 0.0, 1.0e7),
     Param('steps', 'int', 0, 'number of steps; 0 = use duration', '', 0, 10 ** 12),
     Param('sources', 'string[]', [], 'force source names; each publishes on '
@@ -57,8 +59,16 @@ PLANT = ParameterTable('plant', [
           'subscribe to an output topic before step 0'),
     Param('subscriber_settle', 'float', 0.5, 'wall time spun after the wait_for_subscribers '
           'nodes appeared', 's', 0.0, 60.0),
-    Param('ack_timeout', 'float', 10.0, 'max wall time to wait at the end until subscribers '
-          'acknowledged every message', 's', 0.0, 3600.0),
+    Param('ack_timeout', 'float', 60.0, 'max wall time to wait at the end until subscribers '
+          'acknowledged every message (a recorder repairing a stall needs a while)', 's', 0.0,
+          3600.0),
+    Param('max_effort', 'float', 1.0e6, 'largest accepted |effort| per input port; larger '
+          'efforts are rejected and counted like NaN', 'N or N m', 0.0, 1e300),
+    Param('shared_source_topics', 'bool', False, 'accept a force topic with more than one '
+          'publisher (default: refused, naming the publishers)'),
+    Param('lost_source_policy', 'str', 'zero', 'realtime: force of a source whose publisher '
+          'left the graph (zero, or hold its last force); lockstep stops the run',
+          choices=('zero', 'hold')),
 ], summary='integrates the modal plant; publishes /clock and the state topics, applies the '
            'forces of its sources.')
 

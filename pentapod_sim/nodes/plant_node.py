@@ -19,7 +19,7 @@ from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
-from pentapod_sim import interface
+from pentapod_sim import interface, shutdown
 from pentapod_sim.errors import ConfigError, RunError
 from pentapod_sim.interface import CLOCK, force_topic, stamp_ns, state_layouts, step_of
 from pentapod_sim.nodes.common import (
@@ -39,6 +39,7 @@ from pentapod_sim.nodes.parameter_tables import PLANT
 from pentapod_sim.nodes.realtime_stats import LatenessStats
 from pentapod_sim.plant.build import load_or_build_model
 from pentapod_sim.sim.stepping import DiscretePlant, ForceMixer, parse_sources
+from pentapod_sim.sim.trace import Trace
 
 
 class PlantNode(Node):
@@ -57,7 +58,10 @@ class PlantNode(Node):
         self.get_logger().info(f'plant model {origin}: {model.n_modes} modes, '
                                f'{len(model.input_names)} inputs, {len(model.output_names)} '
                                f'outputs, dt = {self.dt:.6g} s')
-        self.mixer = ForceMixer(self.core.input_names, parse_sources(self.params.sources, ports))
+        self.mixer = ForceMixer(self.core.input_names, parse_sources(self.params.sources, ports),
+                                max_effort=self.params.max_effort)
+        self.lost: set[str] = set()       # sources whose publisher left the graph
+        self.misses: dict[str, int] = dict.fromkeys(self.mixer.sources, 0)
         self.n_steps = self._n_steps()
         self.clock_pub = self.create_publisher(Clock, CLOCK, STATE_QOS)
         self.layouts = state_layouts(self.core.output_names)
@@ -123,7 +127,7 @@ class PlantNode(Node):
         if reason is not None:
             kind = reason.split(':')[0]
             if reason.startswith(('stale', 'duplicate:')):
-                return  # repeated answers to re-published steps are expected
+                return  # repeated answers to re-published steps, or late ones, are expected
             now = time.monotonic()
             if now - self._last_warn.get((source, kind), -1e9) > 1.0:
                 self._last_warn[(source, kind)] = now
@@ -154,9 +158,34 @@ class PlantNode(Node):
         def missing():
             return [s for s in self.mixer.sources
                     if self.count_publishers(force_topic(s)) == 0]
-        if not spin_until(executor, lambda: not missing(), self.params.startup_timeout):
+        if not spin_until(executor, lambda: not missing() or shutdown.requested(),
+                          self.params.startup_timeout):
             raise RunError(f'force source(s) {", ".join(missing())} did not appear within '
                            f'startup_timeout = {self.params.startup_timeout} s')
+        self.check_sources()
+
+    def check_sources(self) -> list[str]:
+        """
+        Refuse shared force topics; return the sources whose publisher left the graph.
+
+        Raises
+        ------
+        RunError
+            If a force topic has more than one publisher and ``shared_source_topics`` is
+            false; the message names the topic and every publishing node.
+        """
+        gone = []
+        for name in self.mixer.sources:
+            infos = self.get_publishers_info_by_topic(force_topic(name))
+            if len(infos) > 1 and not self.params.shared_source_topics:
+                nodes = ', '.join(sorted(f'{i.node_namespace.rstrip("/")}/{i.node_name}'
+                                         for i in infos))
+                raise RunError(f'force topic {force_topic(name)} has {len(infos)} publishers '
+                               f'({nodes}); one source per topic (parameter '
+                               'shared_source_topics allows more)')
+            if not infos:
+                gone.append(name)
+        return gone
 
     def output_topics(self) -> list[str]:
         """Topics the plant publishes every step (/clock and the state topics)."""
@@ -191,30 +220,49 @@ class PlantNode(Node):
         self.refresh_subscribers()
 
     def wait_for_acks(self) -> None:
-        """Block until every subscriber acknowledged every message (reliable QoS)."""
-        timeout = Duration(seconds=self.params.ack_timeout)
+        """
+        Wait until every subscriber acknowledged every message (reliable QoS).
+
+        Waits in slices of 0.1 s and ends early when a topic has no subscriber left (a
+        subscriber that died), or after ``ack_timeout`` in all.
+        """
+        end = time.monotonic() + self.params.ack_timeout
         for pub in [self.clock_pub] + [pub for pub, _ in self.state_pubs]:
-            if pub.get_subscription_count() and not pub.wait_for_all_acked(timeout):
-                self.get_logger().warning(f'{pub.topic_name}: not every message acknowledged '
-                                          f'within ack_timeout = {self.params.ack_timeout} s')
+            while pub.get_subscription_count():
+                if pub.wait_for_all_acked(Duration(seconds=0.1)):
+                    break
+                if time.monotonic() > end:
+                    self.get_logger().warning(
+                        f'{pub.topic_name}: not every message acknowledged within '
+                        f'ack_timeout = {self.params.ack_timeout} s')
+                    return
 
     def run_lockstep(self, executor, trace, n_steps: int | None = None) -> None:
         """Each step: publish y_k, wait for every source's u_k, advance."""
         core, mixer = self.core, self.mixer
         resend, timeout = self.params.resend_period, self.params.source_timeout
         for k in range(self.n_steps if n_steps is None else n_steps):
+            if shutdown.requested():
+                return
             y = core.outputs()
             self.publish_outputs(y)
             start = last_sent = time.monotonic()
             limit = self.params.startup_timeout if k == 0 else timeout
             while mixer.missing(k):
                 executor.spin_once(timeout_sec=resend / 4)
+                if shutdown.requested():
+                    return
                 now = time.monotonic()
                 if now - start > limit:
                     raise RunError(f'force source(s) {", ".join(mixer.missing(k))} silent '
                                    f'for {now - start:.3g} s at step {k} (t = '
                                    f'{core.time:.6g} s); source_timeout = {timeout} s')
                 if now - last_sent > resend:
+                    gone = [s for s in self.check_sources() if s in mixer.missing(k)]
+                    if gone:
+                        raise RunError(f'force source(s) {", ".join(gone)} left the ROS graph '
+                                       f'(no publisher on {force_topic(gone[0])}) at step {k} '
+                                       f'(t = {core.time:.6g} s)')
                     self.refresh_subscribers()
                     self.publish_outputs(y)
                     last_sent = now
@@ -224,69 +272,80 @@ class PlantNode(Node):
 
     def run_realtime(self, executor, trace) -> LatenessStats:
         """
-        Wall-clock paced steps with the newest force of each source held.
+        Wall-clock periods with the lockstep contract kept whenever an answer is in time.
 
-        Step 0 waits for every source as in lockstep (discovery, first messages); the wall
-        clock starts at step 1.
+        Period k starts at ``t0 + k dt``: the plant publishes y_k, then takes in answers until
+        every source answered step k or the period ends (the deadline). In time, u_k answers
+        y_k exactly as in lockstep, so a run without misses equals the lockstep run bit for
+        bit. A source that missed the deadline keeps its last force for step k and the miss is
+        counted; a source whose publisher left the graph gets ``lost_source_policy`` (zero or
+        hold) with a warning. Step 0 waits for every source as in lockstep (discovery).
         """
         core, mixer, dt = self.core, self.mixer, self.dt
         stats = LatenessStats(self.n_steps, dt)
         self.run_lockstep(executor, trace, n_steps=1)
         t0 = time.monotonic() - dt
         next_report = t0 + self.params.report_period
+        next_check = t0 + 0.25
         for k in range(1, self.n_steps):
-            target = t0 + k * dt
+            if shutdown.requested():
+                break
+            start = t0 + k * dt
             now = time.monotonic()
-            spun = now < target
-            while now < target:
-                executor.spin_once(timeout_sec=target - now)
+            while now < start:              # idle until the period starts
+                executor.spin_once(timeout_sec=start - now)
                 now = time.monotonic()
-            if not spun:     # late: still take in what arrived
-                executor.spin_once(timeout_sec=0.0)
-            stats.add(k, now - target)
+            stats.add(k, now - start)
             y = core.outputs()
             self.publish_outputs(y)
+            deadline = start + dt
+            while mixer.missing(k) and now < deadline:
+                executor.spin_once(timeout_sec=deadline - now)
+                now = time.monotonic()
+            late = [s for s in mixer.missing(k) if s not in self.lost]
+            for source in late:
+                self.misses[source] += 1
+            stats.missed(k, len(late))
             u = mixer.total()
             trace.record(k, y, u)
             core.advance(u)
+            if now > next_check:
+                self._watch_lost_sources()
+                next_check = now + 0.25
             if now > next_report:
                 self.get_logger().info('realtime: ' + stats.summary(k + 1, now - t0))
                 next_report = now + self.params.report_period
         stats.elapsed = time.monotonic() - t0
         return stats
 
-
-class Trace:
-    """Per-step record of y_k and u_k, written to an .npz file at the end (optional)."""
-
-    def __init__(self, n_steps: int, core: DiscretePlant, enabled: bool):
-        self.enabled = enabled
-        shape = (n_steps if enabled else 0)
-        self.y = np.zeros((shape, len(core.output_names)))
-        self.u = np.zeros((shape, len(core.input_names)))
-
-    def record(self, k: int, y: np.ndarray, u: np.ndarray) -> None:
-        """Store step k."""
-        if self.enabled:
-            self.y[k], self.u[k] = y, u
-
-    def save(self, path: str, node: PlantNode, extra: dict) -> None:
-        """Write y, u, dt, port names, reject counts and ``extra`` (e.g. timing stats)."""
-        rejected = [f'{s}/{r}={c}' for (s, r), c in node.mixer.rejected.items()]
-        np.savez(path, y=self.y, u=self.u, dt=node.dt, x_final=node.core.x,
-                 output_names=np.array(node.core.output_names),
-                 input_names=np.array(node.core.input_names),
-                 rejected=np.array(rejected, dtype=str), **extra)
+    def _watch_lost_sources(self) -> None:
+        """Realtime: apply ``lost_source_policy`` to sources whose publisher left, warn once."""
+        for source in self.check_sources():
+            if source in self.lost:
+                continue
+            self.lost.add(source)
+            if self.params.lost_source_policy == 'zero':
+                self.mixer.drop(source)
+            self.get_logger().warning(
+                f'force source {source!r} left the ROS graph at step {self.core.k}; its force '
+                f'is {"set to zero" if self.params.lost_source_policy == "zero" else "held"} '
+                '(lost_source_policy)')
 
 
 def run(node: PlantNode, executor) -> None:
-    """Wait for the sources, run the configured number of steps, log a summary."""
+    """
+    Wait for the sources, run the configured number of steps, log a summary.
+
+    However the run ends (finished, stopped by a signal, an error), the steps run are
+    acknowledged, summarised and written to ``output_file``.
+    """
     trace = Trace(node.n_steps, node.core, bool(node.params.output_file))
     node.wait_for_sources(executor)
     node.wait_for_subscribers(executor)
     node.get_logger().info(f'{node.params.timing} run of {node.n_steps} steps with sources '
                            f'{list(node.mixer.sources) or "none"}')
     extra = {}
+    end = 'finished'
     wall = time.monotonic()
     node.announce(interface.RUN_RUNNING)
     try:
@@ -294,19 +353,26 @@ def run(node: PlantNode, executor) -> None:
             node.run_lockstep(executor, trace)
         else:
             stats = node.run_realtime(executor, trace)
-            node.get_logger().info('realtime final: ' + stats.summary(node.n_steps,
+            node.get_logger().info('realtime final: ' + stats.summary(node.core.k,
                                                                        stats.elapsed))
-            extra = stats.as_dict()
+            extra = dict(stats.as_dict(node.core.k), misses_per_source=str(node.misses),
+                         missed_per_step=stats.misses[:node.core.k])
+    except RunError as err:
+        end = f'error: {err}'
+        raise
     finally:
         wall = time.monotonic() - wall
+        if shutdown.requested():
+            end = f'stopped by {shutdown.signal_name()}'
         node.announce(interface.RUN_FINISHED if node.core.k == node.n_steps
                       else interface.RUN_STOPPED)
         node.wait_for_acks()
-        node.get_logger().info(f'ran {node.core.k} steps in {wall:.3f} s wall '
-                               f'({node.core.k / max(wall, 1e-9):.0f} steps/s); '
-                               + node.mixer.reject_summary())
+        node.get_logger().info(f'{end}: ran {node.core.k} of {node.n_steps} steps in '
+                               f'{wall:.3f} s wall ({node.core.k / max(wall, 1e-9):.0f} '
+                               f'steps/s); ' + node.mixer.reject_summary())
         if node.params.output_file:
-            trace.save(node.params.output_file, node, dict(extra, wall_time=wall))
+            trace.save(node.params.output_file, node.core, node.mixer, node.n_steps,
+                       dict(extra, wall_time=wall, end=end))
 
 
 def main(argv=None) -> int:

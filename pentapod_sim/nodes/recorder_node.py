@@ -29,7 +29,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rclpy.serialization import deserialize_message
 import yaml
 
-from pentapod_sim import interface
+from pentapod_sim import interface, shutdown
 from pentapod_sim.errors import BagError, ConfigError
 from pentapod_sim.nodes.common import declare_table, node_args, run_node
 from pentapod_sim.nodes.parameter_tables import RECORDER
@@ -263,7 +263,7 @@ def _any_best_effort(publishers) -> bool:
 def record(node: RecorderNode, executor) -> None:
     """Spin until a signal or the drained end of the run; the bag is closed on the way out."""
     try:
-        while rclpy.ok() and not node.done():
+        while rclpy.ok() and not node.done() and not shutdown.requested():
             executor.spin_once(timeout_sec=0.05)
     finally:
         node.close()

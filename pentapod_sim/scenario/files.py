@@ -144,3 +144,17 @@ def _check_shared(shared: dict, source: str) -> None:
                               f'{did_you_mean(str(name), known)}')
         for table in knowing:
             table.check({name: value}, f'{source} (for {table.node})')
+
+
+class _QuotingDumper(yaml.SafeDumper):
+    """YAML dumper that quotes every string: rcl reads a bare ``y`` or ``n`` as a boolean."""
+
+
+_QuotingDumper.add_representer(
+    str, lambda dumper, value: dumper.represent_scalar('tag:yaml.org,2002:str', value,
+                                                       style="'"))
+
+
+def dump_params(doc: dict) -> str:
+    """A ROS 2 parameter file's text with every string quoted (safe for rcl's parser)."""
+    return yaml.dump(doc, Dumper=_QuotingDumper, sort_keys=False)

@@ -9,6 +9,11 @@ all (e.g. ``sample_rate``). The executable of a node follows from its name's pre
 waits for the plant to end, stops the others with SIGINT (SIGKILL after a grace period) and
 returns the plant's exit code (nonzero also if another node failed).
 launch/testbed.launch.py uses the same parser.
+
+SIGINT, SIGTERM or SIGHUP to the runner is forwarded to every node; the nodes finish their
+step, write their files and exit with 128 + the signal number, and so does the runner, after
+removing its temporary files. Each node gets SIGTERM from the kernel if the runner itself dies
+(``PR_SET_PDEATHSIG``), so no node outlives it. A node that dies is named with how it ended.
 """
 from __future__ import annotations
 
@@ -22,11 +27,10 @@ import sys
 import tempfile
 import time
 
-import yaml
-
+from pentapod_sim import shutdown
 from pentapod_sim.errors import ConfigError, RunError
 from pentapod_sim.scenario.domain import DOMAIN_VAR, isolated_env, RANGE_VAR
-from pentapod_sim.scenario.files import read_scenario, resolve, Scenario, ScenarioNode
+from pentapod_sim.scenario.files import dump_params, read_scenario, resolve, Scenario, ScenarioNode
 
 LOG = logging.getLogger(__name__)
 
@@ -42,15 +46,16 @@ def node_command(node: ScenarioNode, params_files: list[Path]) -> list[str]:
 
 
 def stop(procs: dict[str, subprocess.Popen], grace: float = 5.0) -> None:
-    """SIGINT every running process, SIGKILL those still alive after ``grace`` seconds."""
+    """SIGINT every running process, SIGKILL (named) those still alive after ``grace`` s."""
     for proc in procs.values():
         if proc.poll() is None:
             proc.send_signal(signal.SIGINT)
     end = time.monotonic() + grace
-    for proc in procs.values():
+    for name, proc in procs.items():
         try:
             proc.wait(timeout=max(0.1, end - time.monotonic()))
         except subprocess.TimeoutExpired:
+            LOG.error('node %s did not stop within %.0f s of SIGINT; killing it', name, grace)
             proc.kill()
             proc.wait()
 
@@ -95,6 +100,32 @@ def run_scenario(path: Path, plant_overrides: dict, timeout: float,
         return _run_nodes(path, plant_overrides, timeout, run_env, log_dir)
 
 
+def describe_exit(code: int | None) -> str:
+    """How a process ended, in words: 'exited with code 1', 'killed by SIGKILL', 'running'."""
+    if code is None:
+        return 'running'
+    if code < 0:
+        try:
+            return f'killed by {signal.Signals(-code).name}'
+        except ValueError:
+            return f'killed by signal {-code}'
+    return f'exited with code {code}'
+
+
+def _plant_grace(scenario: Scenario, plant_overrides: dict) -> float:
+    """Wall time [s] a plant may need to notice a dead source and end by itself."""
+    params = {**scenario.sections[scenario.of_kind('plant')[0].name], **plant_overrides}
+    return (float(params.get('source_timeout', 5.0)) + float(params.get('ack_timeout', 10.0))
+            + EARLY_EXIT_GRACE)
+
+
+def _start(node: ScenarioNode, files: list[Path], env: dict, out) -> subprocess.Popen:
+    """Start one node; it gets SIGTERM if this process dies (no orphans)."""
+    return subprocess.Popen(node_command(node, files), env=env, stdout=out,
+                            stderr=subprocess.STDOUT if out else None,
+                            preexec_fn=shutdown.die_with_parent)
+
+
 def _run_nodes(path: Path, plant_overrides: dict, timeout: float,
                env: dict, log_dir: Path | None) -> int:
     """Body of :func:`run_scenario`, in the environment ``env``."""
@@ -102,13 +133,15 @@ def _run_nodes(path: Path, plant_overrides: dict, timeout: float,
     nodes = scenario.nodes
     procs: dict[str, subprocess.Popen] = {}
     logs: list = []
+    forwarded = False
+    code: int | None = None
     tmp = tempfile.TemporaryDirectory(prefix='pentapod_scenario_')
     try:
         for node in nodes:
             files = [path]
             if node.executable == 'plant' and plant_overrides:
                 files.append(Path(tmp.name) / 'plant_overrides.yaml')
-                files[-1].write_text(yaml.safe_dump(
+                files[-1].write_text(dump_params(
                     {node.name: {'ros__parameters': plant_overrides}}))
             LOG.info('starting %s (%s)', node.name, node.module)
             out = None
@@ -116,38 +149,56 @@ def _run_nodes(path: Path, plant_overrides: dict, timeout: float,
                 Path(log_dir).mkdir(parents=True, exist_ok=True)
                 out = open(Path(log_dir) / f'{node.name}.log', 'w')  # noqa: SIM115
                 logs.append(out)
-            procs[node.name] = subprocess.Popen(node_command(node, files), env=env,
-                                                stdout=out, stderr=subprocess.STDOUT if out
-                                                else None)
+            procs[node.name] = _start(node, files, env, out)
         plant = procs[nodes[-1].name]
         end = time.monotonic() + timeout
         reported: set = set()
         while plant.poll() is None:
+            if shutdown.requested() and not forwarded:
+                # the nodes finish their step, write their files and exit by themselves
+                _forward(procs, shutdown.signal_name())
+                forwarded = True
+                end = min(end, time.monotonic() + _plant_grace(scenario, plant_overrides))
             dead = {n for n, p in procs.items() if p.poll() not in (None, 0)} - reported
-            if dead:
+            for name in sorted(dead):
                 # a dead source stops a lockstep plant with a named error; give it the time
-                LOG.error('node(s) %s exited early with an error', ', '.join(sorted(dead)))
-                reported |= dead
-                end = min(end, time.monotonic() + EARLY_EXIT_GRACE)
+                LOG.error('node %s %s', name, describe_exit(procs[name].poll()))
+                end = min(end, time.monotonic() + _plant_grace(scenario, plant_overrides))
+            reported |= dead
             if time.monotonic() > end:
-                LOG.error('plant did not finish within %.0f s; stopping', timeout)
+                LOG.error('plant did not end in time (timeout %.0f s, or the grace after a '
+                          'node died or a stop signal); stopping it', timeout)
                 break
-            time.sleep(0.2)
+            time.sleep(0.1)
         code = plant.poll()
         if code == 0:
             drain_recorders(scenario, procs)
-        failed = [n for n, p in procs.items() if p.poll() not in (None, 0)]
+        # nodes that failed by themselves; those stopped below exit with 130 (SIGINT)
+        failed = {n: p.poll() for n, p in procs.items() if p.poll() not in (0, None)
+                  and not (forwarded and p.poll() == shutdown.exit_code())}
     finally:
         stop(procs)
         tmp.cleanup()
         for stream in logs:
             stream.close()
+    for name, rc in failed.items():
+        if name not in reported:
+            LOG.error('node %s %s', name, describe_exit(rc))
+    if shutdown.requested():
+        return shutdown.exit_code()
     if code is None:
         return 2
     if code == 0 and failed:
-        LOG.error('node(s) %s failed', ', '.join(failed))
         return 1
     return code
+
+
+def _forward(procs: dict[str, subprocess.Popen], name: str) -> None:
+    """Send the stop signal this process received to every running node."""
+    LOG.warning('%s received: stopping the nodes', name)
+    for proc in procs.values():
+        if proc.poll() is None:
+            proc.send_signal(signal.Signals[name])
 
 
 def main(argv=None) -> int:
@@ -167,6 +218,7 @@ def main(argv=None) -> int:
     parser.add_argument('--list', action='store_true', help='only print the nodes')
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format='%(levelname)s %(message)s')
+    shutdown.install()
     try:
         path = resolve(args.scenario)
         if args.list:

@@ -15,6 +15,7 @@ from __future__ import annotations
 from collections import Counter
 from dataclasses import dataclass
 import logging
+import math
 from typing import Mapping, Sequence
 
 import control
@@ -216,8 +217,9 @@ class ForceMixer:
     Collect per-step force messages from several sources, validate them and sum them.
 
     A message carries port names, efforts [N or N m] and the step it answers. Bad messages
-    (unknown source, unknown or forbidden port, wrong length, NaN/Inf, stale or future step)
-    are rejected and counted per (source, reason); nothing already accepted is lost.
+    (unknown source, unknown or forbidden port, wrong length, NaN/Inf, above max_effort, stale
+    or future step) are rejected and counted per (source, reason); nothing already accepted is
+    lost.
 
     Parameters
     ----------
@@ -225,10 +227,14 @@ class ForceMixer:
         The plant's input ports (order of the summed vector).
     sources : sequence of ForceSource
         Sources expected to answer every step in lockstep.
+    max_effort : float, optional
+        Largest accepted |effort| per port [N or N m]; larger ones are rejected ('limit').
     """
 
-    def __init__(self, input_names: Sequence[str], sources: Sequence[ForceSource]):
+    def __init__(self, input_names: Sequence[str], sources: Sequence[ForceSource],
+                 max_effort: float = math.inf):
         self.input_names = list(input_names)
+        self.max_effort = float(max_effort)
         self._index = {n: i for i, n in enumerate(self.input_names)}
         self.sources: dict[str, ForceSource] = {}
         for src in sources:
@@ -311,6 +317,10 @@ class ForceMixer:
         values = np.asarray(efforts, dtype=float)
         if not np.all(np.isfinite(values)):
             return f'nonfinite: effort {list(values)}'
+        if np.any(np.abs(values) > self.max_effort):
+            worst = int(np.argmax(np.abs(values)))
+            return (f'limit: effort {values[worst]:.6g} on {names[worst]!r} exceeds max_effort '
+                    f'{self.max_effort:.6g}')
         if step > current_step:
             return f'future: step {step} (plant at step {current_step})'
         if step < current_step if exact else step <= self.latest_step[source]:
@@ -318,6 +328,10 @@ class ForceMixer:
         if exact and self.latest_step[source] == step:
             return f'duplicate: second answer for step {step}'
         return None
+
+    def drop(self, source: str) -> None:
+        """Set the held force of ``source`` to zero (a source that left)."""
+        self.latest[source][:] = 0.0
 
     def missing(self, step: int) -> list[str]:
         """Sources that have not answered ``step`` yet."""

@@ -1,0 +1,74 @@
+"""
+Stopping on signals the same way everywhere: nodes, the scenario runner and the study.
+
+SIGINT (Ctrl-C), SIGTERM (``timeout``, supervisors, ``kill``) and SIGHUP (a closed terminal)
+do not interrupt what a process is doing: the handler only records the signal, and the work
+loops ask :func:`requested` between steps. So a plant ends its current step, writes its trace
+and summary, a recorder finalises its bag and a runner stops its nodes and removes its temporary
+files before the process exits with :func:`exit_code` (128 + signal number, the shell's
+convention: 130 for SIGINT, 143 for SIGTERM, 129 for SIGHUP).
+
+A second signal of the same kind while stopping changes nothing; stopping never waits without a
+time limit, so a process cannot hang on a signal.
+"""
+from __future__ import annotations
+
+import ctypes
+import os
+import signal
+
+#: The signals that request a clean stop.
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+_PR_SET_PDEATHSIG = 1
+
+_received: list[int] = []
+
+
+def _handler(signum, frame) -> None:
+    if not _received:
+        _received.append(signum)
+
+
+def install() -> None:
+    """Record SIGINT, SIGTERM and SIGHUP instead of dying on them (main thread only)."""
+    _received.clear()
+    for sig in STOP_SIGNALS:
+        signal.signal(sig, _handler)
+
+
+def requested() -> bool:
+    """True once a stop signal arrived."""
+    return bool(_received)
+
+
+def signal_name() -> str:
+    """Name of the signal that requested the stop ('' if none)."""
+    return signal.Signals(_received[0]).name if _received else ''
+
+
+def exit_code() -> int:
+    """128 + number of the signal that requested the stop (0 if none)."""
+    return 128 + _received[0] if _received else 0
+
+
+def request(signum: int = signal.SIGTERM) -> None:
+    """Request a stop from code, as if ``signum`` had arrived."""
+    _handler(signum, None)
+
+
+def die_with_parent() -> None:
+    """
+    Ask the kernel to send SIGTERM to this process when its parent dies (Linux).
+
+    Meant as ``preexec_fn`` of :class:`subprocess.Popen`: a node started by the runner then
+    stops cleanly even if the runner is killed with SIGKILL, and no orphan keeps answering a
+    later run on the same ROS domain.
+    """
+    parent = os.getppid()
+    try:
+        libc = ctypes.CDLL('libc.so.6', use_errno=True)
+        libc.prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)
+    except OSError:        # not Linux: nothing to ask for
+        return
+    if os.getppid() != parent:      # the parent died before the request took effect
+        os.kill(os.getpid(), signal.SIGTERM)

@@ -1,0 +1,231 @@
+"""
+Stopping and failing the way a ROS user meets it: signals, dead, duplicate and absurd sources.
+
+Every test runs real processes on the session's isolated domain (conftest.py). The signals are
+sent while the plant is mid-run (its log says so); a run long enough that it cannot end first.
+"""
+import os
+from pathlib import Path
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+
+import numpy as np
+import pytest
+import yaml
+
+from fixtures.demo_model import demo_model
+from pentapod_sim.analysis.bag_reader import open_bag
+from pentapod_sim.scenario.files import dump_params
+from pentapod_sim.sim.stepping import ForceMixer, ForceSource
+
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
+
+RATE = 2000.0
+LONG = 2_000_000          # steps: never reached within a test
+
+
+def scenario(tmp_path: Path, steps: int = LONG, record: bool = True, timing='lockstep',
+             rate: float = RATE, **plant) -> Path:
+    """A scenario file: plant + exciter + damper (+ recorder), model of a few modes."""
+    model_file = demo_model(6, seed=4).save(tmp_path / 'model.npz')
+    doc = {
+        '/**': {'ros__parameters': {'sample_rate': rate}},
+        'exciter': {'ros__parameters': {'kind': 'sine', 'amplitude': 20.0, 'frequency': 7.0,
+                                        'duration': 1.0e6}},
+        'damper': {'ros__parameters': {'tcp_directions': ['x', 'y'], 'tcp_gain': 2000.0}},
+        'plant': {'ros__parameters': {
+            'model_file': str(model_file), 'steps': steps, 'timing': timing,
+            'sources': ['exciter', 'damper'], 'output_file': str(tmp_path / 'trace.npz'),
+            'source_timeout': 2.0, 'ack_timeout': 3.0, 'startup_timeout': 60.0, **plant}},
+    }
+    if record:
+        doc['recorder'] = {'ros__parameters': {'output_dir': str(tmp_path / 'bags'),
+                                               'bag_name': 'run'}}
+        doc['plant']['ros__parameters']['wait_for_subscribers'] = ['recorder']
+    path = tmp_path / 'scenario.yaml'
+    path.write_text(dump_params(doc))
+    return path
+
+
+class Runner:
+    """The scenario runner as a user starts it: its own process group, output to a file."""
+
+    def __init__(self, path: Path, tmp_path: Path, *args: str):
+        self.tmp = Path(tempfile.mkdtemp(prefix='tmpdir_', dir=tmp_path))
+        self.log = self.tmp.parent / f'{self.tmp.name}.log'
+        env = dict(os.environ, TMPDIR=str(self.tmp), RCUTILS_LOGGING_BUFFERED_STREAM='0',
+                   PYTHONUNBUFFERED='1')
+        self.proc = subprocess.Popen(
+            [sys.executable, '-m', 'pentapod_sim.scenario.runner', str(path), *args],
+            stdout=open(self.log, 'w'), stderr=subprocess.STDOUT, env=env,
+            start_new_session=True)
+
+    def text(self) -> str:
+        return self.log.read_text()
+
+    def wait_for(self, needle: str, timeout: float = 90.0) -> None:
+        end = time.monotonic() + timeout
+        while needle not in self.text():
+            assert self.proc.poll() is None, self.text()
+            assert time.monotonic() < end, f'{needle!r} not seen:\n{self.text()}'
+            time.sleep(0.1)
+
+    def children(self) -> dict[int, str]:
+        """PIDs and command lines of the runner's node processes."""
+        pid = self.proc.pid
+        kids = Path(f'/proc/{pid}/task/{pid}/children').read_text().split()
+        return {int(k): Path(f'/proc/{k}/cmdline').read_bytes().decode().replace('\0', ' ')
+                for k in kids}
+
+    def kill_all(self) -> None:
+        if self.proc.poll() is None:
+            os.killpg(self.proc.pid, signal.SIGKILL)
+        self.proc.wait()
+
+
+@pytest.fixture
+def runner_of(tmp_path):
+    made = []
+
+    def start(path, *args):
+        made.append(Runner(path, tmp_path, *args))
+        return made[-1]
+    yield start
+    for r in made:
+        r.kill_all()
+
+
+def alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    status = Path(f'/proc/{pid}/status')
+    return status.exists() and 'State:\tZ' not in status.read_text()
+
+
+def metadata_counts(bag: Path) -> dict[str, int]:
+    meta = yaml.safe_load((bag / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
+    return {e['topic_metadata']['name']: int(e['message_count'])
+            for e in meta['topics_with_message_count']}
+
+
+@pytest.mark.parametrize('sig,target', [
+    (signal.SIGINT, 'runner'), (signal.SIGTERM, 'runner'), (signal.SIGHUP, 'runner'),
+    (signal.SIGINT, 'group'), (signal.SIGTERM, 'plant')],
+    ids=['SIGINT-runner', 'SIGTERM-runner', 'SIGHUP-runner', 'SIGINT-group', 'SIGTERM-plant'])
+def test_a_stop_signal_ends_every_process_cleanly(tmp_path, runner_of, sig, target):
+    """Same outcome for SIGINT/SIGTERM/SIGHUP to the runner, its group or the plant."""
+    run = runner_of(scenario(tmp_path))
+    run.wait_for('lockstep run of')
+    time.sleep(1.0)
+    kids = run.children()
+    assert len(kids) == 4, kids
+    if target == 'runner':
+        run.proc.send_signal(sig)
+    elif target == 'group':
+        os.killpg(run.proc.pid, sig)
+    else:
+        os.kill(next(p for p, cmd in kids.items() if 'plant_node' in cmd), sig)
+    code = run.proc.wait(timeout=60)
+    out = run.text()
+    assert code == 128 + sig, out
+    assert 'Traceback' not in out and 'FATAL' not in out, out
+    name = signal.Signals(sig).name
+    assert f'stopped by {name}: ran ' in out, out
+    trace = np.load(tmp_path / 'trace.npz')
+    n = int(trace['steps_run'])
+    assert 0 < n < LONG and trace['y'].shape[0] == trace['u'].shape[0] == n
+    assert str(trace['end']) == f'stopped by {name}'
+    assert f'ran {n} of {LONG} steps' in out
+    assert not [pid for pid in kids if alive(pid)], 'node processes outlived the runner'
+    assert list(run.tmp.glob('pentapod_scenario_*')) == []
+    bag = tmp_path / 'bags' / 'run'
+    counts = metadata_counts(bag)
+    read = open_bag(bag)
+    assert counts and {t: read.topic(t).count for t in counts} == counts
+    assert counts['/pentapod/tcp_state'] >= n - 1
+
+
+def test_nodes_die_with_a_killed_runner(tmp_path, runner_of):
+    """SIGKILL to the runner alone: its nodes get SIGTERM from the kernel and stop."""
+    run = runner_of(scenario(tmp_path, record=False))
+    run.wait_for('lockstep run of')
+    kids = run.children()
+    run.proc.kill()
+    run.proc.wait()
+    end = time.monotonic() + 30
+    while [pid for pid in kids if alive(pid)] and time.monotonic() < end:
+        time.sleep(0.2)
+    assert not [pid for pid in kids if alive(pid)]
+
+
+def test_a_killed_source_is_named(tmp_path, runner_of):
+    """Kill -9 of the damper: the plant stops naming it, the runner says how it died."""
+    run = runner_of(scenario(tmp_path, record=False))
+    run.wait_for('lockstep run of')
+    time.sleep(0.5)
+    damper = next(p for p, cmd in run.children().items() if 'damper_node' in cmd)
+    t0 = time.monotonic()
+    os.kill(damper, signal.SIGKILL)
+    code = run.proc.wait(timeout=60)
+    out = run.text()
+    assert code == 1, out
+    assert time.monotonic() - t0 < 2.0 + 3.0 + 10.0 + 5.0
+    assert 'node damper killed by SIGKILL' in out, out
+    assert 'force source(s) damper' in out, out
+    assert 'Traceback' not in out
+    trace = np.load(tmp_path / 'trace.npz')
+    assert 0 < int(trace['steps_run']) < LONG and str(trace['end']).startswith('error: ')
+
+
+def test_a_second_publisher_on_a_force_topic_is_refused(tmp_path, runner_of):
+    """Two nodes answering as 'damper': the plant refuses to start, naming both."""
+    path = scenario(tmp_path, record=False)
+    doc = yaml.safe_load(path.read_text())
+    doc['damper2'] = {'ros__parameters': {'tcp_directions': ['z'], 'tcp_gain': 10.0,
+                                          'source_name': 'damper'}}
+    path.write_text(dump_params(doc))
+    run = runner_of(path)
+    code = run.proc.wait(timeout=90)
+    out = run.text()
+    assert code == 1, out
+    assert 'force topic /pentapod/forces/damper has 2 publishers (/damper, /damper2)' in out
+
+
+def test_absurd_forces_are_rejected_and_counted():
+    """An effort above max_effort is refused like NaN; nothing accepted before is lost."""
+    mixer = ForceMixer(['a', 'b'], [ForceSource('s')], max_effort=1e6)
+    assert mixer.submit('s', ['a', 'b'], [1.0, 2.0], 0, 0) is None
+    reason = mixer.submit('s', ['a', 'b'], [1.0, 1e30], 1, 1)
+    assert reason.startswith('limit:') and "'b'" in reason
+    assert mixer.rejected[('s', 'limit')] == 1
+    assert np.array_equal(mixer.total(), [1.0, 2.0])
+
+
+def _trace(tmp_path, timing, runner_of, rate):
+    folder = tmp_path / timing
+    folder.mkdir()
+    run = runner_of(scenario(folder, steps=400, record=False, timing=timing, rate=rate))
+    assert run.proc.wait(timeout=120) == 0, run.text()
+    return np.load(folder / 'trace.npz')
+
+
+def test_realtime_without_misses_equals_lockstep(tmp_path, runner_of):
+    """
+    u_k answers y_k in real time as in lockstep: equal traces, bit for bit, up to a miss.
+
+    On a loaded machine a 20 ms deadline can still be missed; the steps before the first miss
+    must then be equal, and the miss must be counted at its step.
+    """
+    lock = _trace(tmp_path, 'lockstep', runner_of, 50.0)
+    real = _trace(tmp_path, 'realtime', runner_of, 50.0)
+    missed = np.flatnonzero(real['missed_per_step'])
+    assert int(real['missed_steps']) == missed.size
+    first = int(missed[0]) if missed.size else lock['y'].shape[0]
+    assert first > 50, f'missed deadlines at steps {missed[:10]}'
+    assert np.array_equal(lock['y'][:first + 1], real['y'][:first + 1])
+    assert np.array_equal(lock['u'][:first], real['u'][:first])
