@@ -37,6 +37,16 @@ PARAMETER_TABLES = {
     'example_controller': 'pentapod_damper.node_parameters:EXAMPLE_CONTROLLER',
 }
 
+#: node executable -> ``module:Class`` of its node, for composed runs (one process)
+COMPONENTS = {
+    'plant': 'pentapod_sim.nodes.plant_node:PlantNode',
+    'exciter': 'pentapod_sim.nodes.exciter_node:ExciterNode',
+    'recorder': 'pentapod_sim.nodes.recorder_node:RecorderNode',
+    'damper': 'pentapod_damper.nodes.damper_node:DamperNode',
+    'pma': 'pentapod_damper.nodes.pma_node:PmaNode',
+    'example_controller': 'pentapod_damper.nodes.example_controller:ExampleController',
+}
+
 
 def module_of(executable: str) -> str:
     """Python module of an executable (for ``python -m``)."""

@@ -229,3 +229,27 @@ def test_realtime_without_misses_equals_lockstep(tmp_path, runner_of):
     assert first > 50, f'missed deadlines at steps {missed[:10]}'
     assert np.array_equal(lock['y'][:first + 1], real['y'][:first + 1])
     assert np.array_equal(lock['u'][:first], real['u'][:first])
+
+
+def test_composed_run_equals_separate_processes(tmp_path, runner_of):
+    """One process, one executor: the same trace, bit for bit, and a recorded bag."""
+    folders = {}
+    for mode in ('separate', 'composed'):
+        folder = folders[mode] = tmp_path / mode
+        folder.mkdir()
+        path = scenario(folder, steps=600)
+        doc = yaml.safe_load(path.read_text())
+        doc['exciter']['ros__parameters'].update(kind='random', seed=3, duration=0.2,
+                                                 f_start=5.0, f_end=300.0)
+        doc['pma'] = {'ros__parameters': {'directions': ['x'], 'proof_mass': 2.0,
+                                          'gain': 1000.0}}
+        doc['plant']['ros__parameters']['sources'] = ['exciter', 'damper', 'pma']
+        path.write_text(dump_params(doc))
+        run = runner_of(path, *(['--composed'] if mode == 'composed' else []))
+        assert run.proc.wait(timeout=180) == 0, run.text()
+        if mode == 'composed':
+            assert len([line for line in run.text().splitlines() if 'starting ' in line]) == 1
+    one, many = (np.load(folders[m] / 'trace.npz') for m in ('composed', 'separate'))
+    assert int(one['steps_run']) == 600
+    assert np.array_equal(one['y'], many['y']) and np.array_equal(one['u'], many['u'])
+    assert metadata_counts(folders['composed'] / 'bags' / 'run')['/pentapod/tcp_state'] == 600

@@ -27,6 +27,8 @@ import sys
 import tempfile
 import time
 
+import yaml
+
 from pentapod_sim import shutdown
 from pentapod_sim.errors import ConfigError, RunError
 from pentapod_sim.scenario.domain import DOMAIN_VAR, isolated_env, RANGE_VAR
@@ -39,6 +41,8 @@ EARLY_EXIT_GRACE = 10.0
 
 def node_command(node: ScenarioNode, params_files: list[Path]) -> list[str]:
     """Command line of one node process (``python -m module --ros-args ...``)."""
+    if node.name == 'composition':              # all nodes in one process
+        return [sys.executable, '-m', node.module, str(params_files[0])]
     cmd = [sys.executable, '-m', node.module, '--ros-args', '-r', f'__node:={node.name}']
     for path in params_files:       # a later file wins (a -p rule would lose to the file)
         cmd += ['--params-file', str(path)]
@@ -84,7 +88,8 @@ def drain_recorders(scenario: Scenario, procs: dict[str, subprocess.Popen],
 
 
 def run_scenario(path: Path, plant_overrides: dict, timeout: float,
-                 env: dict | None = None, log_dir: Path | None = None) -> int:
+                 env: dict | None = None, log_dir: Path | None = None,
+                 composed: bool = False) -> int:
     """
     Start the nodes of a scenario, wait for the plant, stop the rest; return exit code.
 
@@ -92,12 +97,13 @@ def run_scenario(path: Path, plant_overrides: dict, timeout: float,
     discovery and on a free ROS domain reserved until they have been stopped, unless ``env``
     (default ``os.environ``) sets ``ROS_AUTOMATIC_DISCOVERY_RANGE`` or ``ROS_DOMAIN_ID``.
     With ``log_dir`` each node's stdout and stderr go to ``log_dir/<node>.log`` instead of
-    this process's terminal.
+    this process's terminal. ``composed`` runs every node in one process on one executor
+    (:mod:`pentapod_sim.nodes.composed`).
     """
     with isolated_env(env) as run_env:
         LOG.info('%s=%s, %s=%s', DOMAIN_VAR, run_env.get(DOMAIN_VAR),
                  RANGE_VAR, run_env.get(RANGE_VAR, '(unset)'))
-        return _run_nodes(path, plant_overrides, timeout, run_env, log_dir)
+        return _run_nodes(path, plant_overrides, timeout, run_env, log_dir, composed)
 
 
 def describe_exit(code: int | None) -> str:
@@ -127,7 +133,7 @@ def _start(node: ScenarioNode, files: list[Path], env: dict, out) -> subprocess.
 
 
 def _run_nodes(path: Path, plant_overrides: dict, timeout: float,
-               env: dict, log_dir: Path | None) -> int:
+               env: dict, log_dir: Path | None, composed: bool = False) -> int:
     """Body of :func:`run_scenario`, in the environment ``env``."""
     scenario = read_scenario(path)
     nodes = scenario.nodes
@@ -137,6 +143,9 @@ def _run_nodes(path: Path, plant_overrides: dict, timeout: float,
     code: int | None = None
     tmp = tempfile.TemporaryDirectory(prefix='pentapod_scenario_')
     try:
+        if composed:
+            path, nodes = _composition(path, scenario, plant_overrides, Path(tmp.name))
+            plant_overrides = {}
         for node in nodes:
             files = [path]
             if node.executable == 'plant' and plant_overrides:
@@ -171,7 +180,7 @@ def _run_nodes(path: Path, plant_overrides: dict, timeout: float,
                 break
             time.sleep(0.1)
         code = plant.poll()
-        if code == 0:
+        if code == 0 and not composed:       # a composition drains its recorder itself
             drain_recorders(scenario, procs)
         # nodes that failed by themselves; those stopped below exit with 130 (SIGINT)
         failed = {n: p.poll() for n, p in procs.items() if p.poll() not in (0, None)
@@ -191,6 +200,17 @@ def _run_nodes(path: Path, plant_overrides: dict, timeout: float,
     if code == 0 and failed:
         return 1
     return code
+
+
+def _composition(path: Path, scenario: Scenario, plant_overrides: dict,
+                 folder: Path) -> tuple[Path, list[ScenarioNode]]:
+    """The scenario with the plant overrides merged in, run as one composed process."""
+    doc = yaml.safe_load(Path(path).read_text(encoding='utf-8'))
+    plant = scenario.of_kind('plant')[0].name
+    doc[plant]['ros__parameters'].update(plant_overrides)
+    merged = folder / 'composed.yaml'
+    merged.write_text(dump_params(doc))
+    return merged, [ScenarioNode('composition', 'pentapod_sim.nodes.composed', 'plant')]
 
 
 def _forward(procs: dict[str, subprocess.Popen], name: str) -> None:
@@ -216,6 +236,8 @@ def main(argv=None) -> int:
     parser.add_argument('--timeout', type=float, default=3600.0,
                         help='wall-time limit of the run [s]')
     parser.add_argument('--list', action='store_true', help='only print the nodes')
+    parser.add_argument('--composed', action='store_true',
+                        help='run every node in one process on one executor')
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format='%(levelname)s %(message)s')
     shutdown.install()
@@ -232,7 +254,7 @@ def main(argv=None) -> int:
         env = dict(os.environ)
         if args.domain_id is not None:
             env[DOMAIN_VAR] = str(args.domain_id)
-        return run_scenario(path, overrides, args.timeout, env)
+        return run_scenario(path, overrides, args.timeout, env, composed=args.composed)
     except (ConfigError, RunError) as err:
         print(f'error: {err}', file=sys.stderr)
         return 1

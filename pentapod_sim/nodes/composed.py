@@ -1,0 +1,113 @@
+"""
+A composed run: every node of a scenario in one process, on one executor.
+
+rclpy has no component container, so this module is one: it builds the same node classes that
+run as separate processes (:data:`pentapod_sim.executables.COMPONENTS`, plus a user's
+controller given as ``--component NAME=module:Class``), each with the scenario file as its
+parameter file and its section's name, adds them all to one executor and runs the plant's
+loop. The sources answer inside the plant's ``spin_once`` calls, so no process boundary and no
+second executor is crossed per step; the arithmetic is the same, so the traces equal those of
+the separate-process run bit for bit. Stop signals, exit codes and errors behave as for a
+single node (:func:`pentapod_sim.nodes.common.run_node`)::
+
+    python -m pentapod_sim.nodes.composed SCENARIO [--component NAME=module:Class ...]
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+import rclpy
+from rclpy.signals import SignalHandlerOptions
+
+from pentapod_sim import shutdown
+from pentapod_sim.errors import ConfigError, RunError
+from pentapod_sim.executables import COMPONENTS
+from pentapod_sim.nodes import plant_node
+from pentapod_sim.nodes.common import make_executor, spin_until
+from pentapod_sim.scenario.files import read_scenario, resolve
+
+
+def load_class(target: str):
+    """The class of a ``module:Class`` string (ConfigError names a bad one)."""
+    module, _, name = target.partition(':')
+    try:
+        return getattr(importlib.import_module(module), name)
+    except (ImportError, AttributeError, ValueError) as err:
+        raise ConfigError(f'component {target!r}: {err}') from None
+
+
+class Composition:
+    """The nodes of one scenario in this process; the plant is the one that runs the loop."""
+
+    def __init__(self, path, extra: dict[str, str]):
+        scenario = read_scenario(path)
+        self.nodes = []
+        self.plant = None
+        for node in scenario.nodes:
+            cls = load_class(extra.get(node.name, COMPONENTS[node.executable]))
+            args = ['--ros-args', '-r', f'__node:={node.name}', '--params-file', str(path)]
+            made = cls(cli_args=args)
+            self.nodes.append(made)
+            if node.executable == 'plant':
+                self.plant = made
+        for name, target in extra.items():
+            if name not in {n.name for n in scenario.nodes}:
+                self.nodes.append(load_class(target)(cli_args=['--ros-args', '-r',
+                                                               f'__node:={name}']))
+
+    def destroy_node(self) -> None:
+        """Close what needs closing (a recorder's bag), then destroy every node."""
+        for node in self.nodes:
+            if hasattr(node, 'close'):
+                node.close()
+            node.destroy_node()
+
+
+def run(composition: Composition, executor) -> None:
+    """Add every node to the executor, run the plant's loop, let the others drain."""
+    for node in composition.nodes:
+        executor.add_node(node)
+    plant_node.run(composition.plant, executor)
+    if not shutdown.requested():
+        spin_until(executor, lambda: False, 0.5)      # deliveries still queued in-process
+
+
+def main(argv=None) -> int:
+    """
+    Entry point: ``python -m pentapod_sim.nodes.composed SCENARIO``.
+
+    Exit codes as :func:`pentapod_sim.nodes.common.run_node`: 0 finished, 1 error (one
+    line), 128 + signal number after a clean stop.
+    """
+    argv = list(sys.argv if argv is None else argv)
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser.add_argument('scenario', help='scenario name (config/scenarios) or YAML file')
+    parser.add_argument('--component', action='append', default=[], metavar='NAME=MOD:CLASS',
+                        help="a node class of yours for the node NAME (replaces the scenario's "
+                        'executable for that name, or adds a node)')
+    args = parser.parse_args(argv[1:])
+    shutdown.install()
+    code, composition = 0, None
+    try:
+        path = resolve(args.scenario)
+        extra = dict(item.split('=', 1) for item in args.component)
+        rclpy.init(args=argv[:1], signal_handler_options=SignalHandlerOptions.NO)
+        composition = Composition(path, extra)
+        run(composition, make_executor())
+    except (ConfigError, RunError, ValueError, KeyError) as err:
+        print(f'error: {err}', file=sys.stderr)
+        code = 1
+    finally:
+        if composition is not None:
+            composition.destroy_node()
+        rclpy.try_shutdown()
+    if code == 0 and shutdown.requested():
+        print(f'stopped by {shutdown.signal_name()}', file=sys.stderr)
+        code = shutdown.exit_code()
+    return code
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
