@@ -1,0 +1,225 @@
+"""
+Lossless recording: a stalled recorder loses nothing and stops at the announced end of the run.
+
+A real lockstep plant with an exciter and a recorder, each its own process on the session's
+ROS domain (conftest.py). The recorder is frozen with SIGSTOP/SIGCONT while the plant runs; the
+bag is then counted with the mcap library (independent of our writer's counters) and compared
+with the number of steps the plant ran (its log) and the depths of pentapod_sim.interface.
+"""
+import os
+from pathlib import Path
+import re
+import signal
+import subprocess
+import sys
+import time
+
+from mcap.reader import make_reader
+import pytest
+import yaml
+
+from pentapod_sim import interface
+from pentapod_sim.errors import BagError
+from pentapod_sim.recording.run_end import RunStatus, shortfalls, StepLedger
+
+ROOT = Path(__file__).resolve().parents[1]
+OLD_FORCE_DEPTH = 100   # force history before this change: a 1.5 s stall lost messages
+#: Exits when the plant announces the end of the run (transient local: also if already sent).
+END_WATCHER = r"""
+import rclpy
+from rclpy.qos import DurabilityPolicy, QoSProfile
+from diagnostic_msgs.msg import DiagnosticStatus
+rclpy.init()
+node = rclpy.create_node('end_watcher')
+ended = []
+node.create_subscription(DiagnosticStatus, '/pentapod/run_status',
+                         lambda m: ended.append(m.message in ('finished', 'stopped')),
+                         QoSProfile(depth=4, durability=DurabilityPolicy.TRANSIENT_LOCAL))
+while not any(ended):
+    rclpy.spin_once(node, timeout_sec=0.1)
+"""
+SCENARIO = """
+/**:
+  ros__parameters:
+    sample_rate: 5000.0
+plant:
+  ros__parameters:
+    position: P2
+    timing: lockstep
+    steps: {steps}
+    sources: [exciter]
+    wait_for_subscribers: [recorder]
+exciter:
+  ros__parameters:
+    kind: random
+    amplitude: 10.0
+    duration: 4.0
+recorder:
+  ros__parameters:
+    output_dir: {out}
+    bag_name: bag
+    flush_period: 0.2
+    drain_timeout: 60.0
+"""
+
+
+# --- ROS-free -----------------------------------------------------------------------------
+
+def test_history_covers_a_five_second_stall_at_every_shipped_rate():
+    rates = [yaml.safe_load(p.read_text())['/**']['ros__parameters']['sample_rate']
+             for p in sorted((ROOT / 'config' / 'scenarios').glob('*.yaml'))]
+    rates.append(yaml.safe_load((ROOT / 'config' / 'study.yaml').read_text())['sample_rate'])
+    assert max(rates) <= interface.MAX_SHIPPED_RATE
+    for kind in ('state', 'force', 'info'):
+        assert interface.QOS[kind].depth >= 5.0 * max(rates) + 3.0 * max(rates)
+    assert interface.QOS['status'].durability == 'transient_local'
+
+
+def test_run_status_parsing_and_ledger():
+    values = {'state': 'finished', 'steps': '3', 'dt': '0.001', 'last_stamp_ns': '2000000',
+              'step_topics': '/clock,/pentapod/tcp_state,/pentapod/forces/a'}
+    end = RunStatus.from_values(values)
+    assert end.ended and end.steps == 3 and end.step_topics[-1] == '/pentapod/forces/a'
+    ledger = StepLedger(lambda t: t != '/pentapod/tcp_state')
+    topics = ledger.expected_topics(end, ['/pentapod/excitation', '/pentapod/run_status'])
+    assert topics == ['/clock', '/pentapod/forces/a', '/pentapod/excitation']
+    for k in range(3):
+        ledger.note('/clock', k * 1_000_000)
+        ledger.note('/pentapod/forces/a', k * 1_000_000)
+    assert not ledger.drained(end, topics)          # no excitation yet
+    ledger.note('/pentapod/excitation', 2_000_000)  # the last step (earlier ones lost)
+    assert ledger.drained(end, topics)
+    report = ledger.report(end, topics, {'/clock': 3, '/pentapod/forces/a': 3,
+                                         '/pentapod/excitation': 1})
+    assert shortfalls(report) == {'/pentapod/excitation': 2}
+    for bad, match in (({**values, 'steps': 'x'}, 'bad number'),
+                       ({**values, 'state': 'done'}, "'done'"),
+                       ({k: v for k, v in values.items() if k != 'dt'}, "'dt'")):
+        with pytest.raises(BagError, match=match):
+            RunStatus.from_values(bad)
+
+
+# --- real nodes ----------------------------------------------------------------------------
+
+def start(module: str, name: str, params: Path, log: Path) -> subprocess.Popen:
+    cmd = [sys.executable, '-m', module, '--ros-args', '-r', f'__node:={name}',
+           '--params-file', str(params)]
+    env = dict(os.environ, PYTHONPATH=str(ROOT), PYTHONUNBUFFERED='1')
+    return subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=open(log, 'w'),  # noqa: SIM115
+                            stderr=subprocess.STDOUT)
+
+
+def run_with_stalls(tmp_path: Path, steps: int, stalls, after_end: float = 0.0) -> tuple:
+    """
+    Run plant + exciter + recorder; freeze the recorder per ``stalls``.
+
+    ``stalls`` is a list of (run time, pause) [s] after the first messages are on disk; with
+    ``after_end`` the last pause lasts until the plant announced the end of the run and
+    ``after_end`` s more. Returns (plant log, recorder log, bag folder, plant still running at
+    each SIGSTOP).
+    """
+    params = tmp_path / 'scenario.yaml'
+    params.write_text(SCENARIO.format(steps=steps, out=tmp_path))
+    procs: dict = {}
+    running = []
+    try:
+        for name, module in (('exciter', 'pentapod_sim.nodes.exciter_node'),
+                             ('recorder', 'pentapod_sim.nodes.recorder_node'),
+                             ('plant', 'pentapod_sim.nodes.plant_node')):
+            procs[name] = start(module, name, params, tmp_path / f'{name}.log')
+        meta = tmp_path / 'bag' / 'metadata.yaml'
+        end = time.monotonic() + 120
+        while not (meta.exists() and yaml.safe_load(meta.read_text())
+                   ['rosbag2_bagfile_information']['message_count'] > 10):
+            assert time.monotonic() < end and procs['plant'].poll() is None, 'no messages'
+            time.sleep(0.05)
+        for run, pause in stalls:
+            time.sleep(run)
+            procs['recorder'].send_signal(signal.SIGSTOP)
+            running.append(procs['plant'].poll() is None)
+            time.sleep(pause)
+            if after_end and (run, pause) == stalls[-1]:
+                subprocess.run([sys.executable, '-c', END_WATCHER], timeout=120, check=True)
+                running.append(procs['plant'].poll() is None)   # waits for the recorder's acks
+                time.sleep(after_end)
+            procs['recorder'].send_signal(signal.SIGCONT)
+        assert procs['plant'].wait(timeout=180) == 0
+        assert procs['recorder'].wait(timeout=90) == 0   # stops by itself at the end
+    finally:
+        for proc in procs.values():
+            if proc.poll() is None:
+                proc.send_signal(signal.SIGCONT)
+                proc.send_signal(signal.SIGINT)
+                proc.wait(timeout=30)
+    logs = [(tmp_path / f'{n}.log').read_text() for n in ('plant', 'recorder')]
+    return logs[0], logs[1], tmp_path / 'bag', running
+
+
+def mcap_counts(bag: Path) -> dict:
+    """Messages per topic, counted by the mcap library."""
+    counts: dict = {}
+    with open(next(bag.glob('*.mcap')), 'rb') as stream:
+        for _, channel, _ in make_reader(stream).iter_messages():
+            counts[channel.topic] = counts.get(channel.topic, 0) + 1
+    return counts
+
+
+def check_bag(bag: Path, steps: int) -> dict:
+    """Every per-step topic holds every step; metadata.yaml agrees with the MCAP."""
+    counts = mcap_counts(bag)
+    per_step = {t: c for t, c in counts.items() if interface.is_step_topic(t)}
+    assert set(per_step) >= {interface.CLOCK, interface.TCP_STATE, interface.EXCITATION,
+                             interface.force_topic('exciter')}
+    assert per_step == dict.fromkeys(per_step, steps)
+    assert counts[interface.RUN_STATUS] == 2      # running, finished
+    info = yaml.safe_load((bag / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
+    topics = {t['topic_metadata']['name']: t for t in info['topics_with_message_count']}
+    assert {t: v['message_count'] for t, v in topics.items()} == counts
+    assert info['message_count'] == sum(counts.values())
+    custom = info['custom_data']
+    assert yaml.safe_load(custom['pentapod_recording.recorded']) == per_step
+    assert yaml.safe_load(custom['pentapod_recording.expected']) == dict.fromkeys(per_step, steps)
+    assert custom['pentapod_recording.steps'] == str(steps)
+    for topic, entry in topics.items():    # the publishers' QoS, not the recorder's
+        (offered,) = entry['topic_metadata']['offered_qos_profiles']
+        spec = interface.QOS[interface.qos_class(topic)]
+        assert (offered['depth'], offered['reliability'], offered['durability']) == (
+            spec.depth, spec.reliability, spec.durability), topic
+    return per_step
+
+
+def ran(plant_log: str) -> tuple[int, float]:
+    """Steps and wall time [s] from the plant's summary line."""
+    match = re.search(r'ran (\d+) (?:of \d+ )?steps in ([\d.]+) s wall', plant_log)
+    assert match, plant_log
+    return int(match.group(1)), float(match.group(2))
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_recorder_paused_three_times_keeps_every_step(tmp_path):
+    steps = 12000
+    plant_log, recorder_log, bag, running = run_with_stalls(
+        tmp_path, steps, [(0.5, 1.5), (1.0, 1.5), (1.0, 1.5)])
+    n, wall = ran(plant_log)
+    assert n == steps
+    # the race happened: the plant ran during the pauses, faster than the old force history
+    assert running == [True, True, True], plant_log
+    assert 1.5 * n / wall > OLD_FORCE_DEPTH, wall
+    per_step = check_bag(bag, steps)
+    assert 'none missing' in recorder_log
+    for topic in per_step:
+        assert f'{topic} {steps}/{steps}' in recorder_log
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_recorder_stalled_past_the_last_message_does_not_close_early(tmp_path):
+    """The recorder stays frozen until 2.5 s after the plant's end; it still drains all."""
+    steps = 1500
+    plant_log, recorder_log, bag, running = run_with_stalls(
+        tmp_path, steps, [(0.0, 0.0)], after_end=2.5)
+    n, _ = ran(plant_log)
+    assert running == [True, True] and n == steps
+    check_bag(bag, steps)
+    assert 'none missing' in recorder_log
