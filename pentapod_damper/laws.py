@@ -41,6 +41,9 @@ def _positive(name: str, value: float, allow_zero: bool = False) -> float:
 
 #: Filter orders of :class:`Dynamics`: 0 = none, 1 = first-order, 2 = second-order low-pass.
 FILTER_ORDERS = (0, 1, 2)
+#: Input assumptions of the exact discretisation: first-order hold (the sensor signal varies
+#: linearly between samples) or zero-order hold (held over each step).
+HOLDS = ('foh', 'zoh')
 
 
 @dataclass(frozen=True)
@@ -49,10 +52,13 @@ class Dynamics:
     Actuator/sensor dynamics of a law: a low-pass on each channel, then a delay of n samples.
 
     The low-pass is ``w / (s + w)`` (order 1) or ``w^2 / (s^2 + 2 zeta w s + w^2)`` (order 2)
-    with ``w = 2 pi bandwidth_hz``, discretised exactly for a sampled input held over each step
-    (zero-order hold; its discrete poles are ``exp(s_i dt)``). Its output at step k depends on
-    the samples before k only. ``delay_steps`` = n shifts the filtered signal by n samples:
-    0 = plain sampled feedback (u_k answers y_k), 1 = one-sample computational delay.
+    with ``w = 2 pi bandwidth_hz``, discretised exactly (:func:`scipy.signal.cont2discrete`;
+    discrete poles ``exp(s_i dt)``) for a continuous sensor signal that varies linearly between
+    samples (``hold`` 'foh', default: the filter's output at step k answers the samples up to
+    and including k) or that is held over each step ('zoh': the output at step k answers the
+    samples before k only, one more sample of lag). ``delay_steps`` = n shifts the filtered
+    signal by n samples: 0 = plain sampled feedback (u_k answers y_k), 1 = one-sample
+    computational delay.
 
     Attributes
     ----------
@@ -64,12 +70,15 @@ class Dynamics:
         Damping ratio zeta [-] of the second-order low-pass (> 0).
     delay_steps : int
         Pure delay [samples], >= 0.
+    hold : str
+        'foh' or 'zoh' (input assumption of the discretisation).
     """
 
     order: int = 0
     bandwidth_hz: float = 0.0
     damping: float = 0.7071067811865476
     delay_steps: int = 0
+    hold: str = 'foh'
 
     def __post_init__(self) -> None:
         """Check the values (ConfigError names the bad one)."""
@@ -78,6 +87,8 @@ class Dynamics:
         if self.order:
             _positive('filter bandwidth [Hz]', self.bandwidth_hz)
             _positive('filter damping ratio [-]', self.damping)
+        if self.hold not in HOLDS:
+            raise ConfigError(f'filter hold must be one of {HOLDS}, got {self.hold!r}')
         if int(self.delay_steps) != self.delay_steps or self.delay_steps < 0:
             raise ConfigError(f'delay_steps must be an integer >= 0, got {self.delay_steps!r}')
 
@@ -106,7 +117,7 @@ class Dynamics:
                     [[1.0, 0.0]], [[0.0]])
         if self.order:
             a, b, c, d, _ = scipy.signal.cont2discrete(tuple(np.array(m, dtype=float)
-                                                             for m in cont), dt, method='zoh')
+                                                             for m in cont), dt, method=self.hold)
         else:
             a, b, c, d = np.zeros((0, 0)), np.zeros((0, 1)), np.zeros((1, 0)), np.ones((1, 1))
         n = int(self.delay_steps)

@@ -30,11 +30,14 @@ MAX_GAIN = 1.0e9
 #: Parameters of the actuator/sensor dynamics of a law (:class:`pentapod_damper.laws.Dynamics`).
 DYNAMICS_PARAMS = (
     Param('filter_order', 'int', 0, 'low-pass between velocity sensor and actuator force: 0 = '
-          'none, 1 = first order, 2 = second order (zero-order-hold discretisation)', '', 0, 2),
+          'none, 1 = first order, 2 = second order', '', 0, 2),
     Param('bandwidth_hz', 'float', 0.0, 'corner frequency of the low-pass (below Nyquist)',
           'Hz', 0.0, 1.0e6),
     Param('filter_damping', 'float', 0.7071067811865476, 'damping ratio of the second-order '
           'low-pass', '', 1.0e-3, 10.0),
+    Param('filter_hold', 'str', 'foh', "input assumption of the filter's exact discretisation: "
+          'foh = sensor signal linear between samples, zoh = held over each step (one more '
+          'sample of lag)', choices=('foh', 'zoh')),
     Param('delay_steps', 'int', 0, 'pure delay of the force in samples: 0 = sampled feedback '
           'with zero-order hold (u_k answers y_k), 1 = one-sample computational delay',
           'samples', 0, 1000),
@@ -93,7 +96,8 @@ def dynamics(params: Mapping[str, Any] | Values, source: str = '') -> Dynamics:
     """The actuator/sensor dynamics of a damper node's parameters (:data:`DYNAMICS_PARAMS`)."""
     v = _values(DAMPER, params, source)
     try:
-        return Dynamics(v.filter_order, v.bandwidth_hz, v.filter_damping, v.delay_steps)
+        return Dynamics(v.filter_order, v.bandwidth_hz, v.filter_damping, v.delay_steps,
+                        v.filter_hold)
     except ConfigError as err:
         raise ConfigError(f'{source}: {err}' if source else str(err)) from None
 

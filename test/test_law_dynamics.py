@@ -21,20 +21,25 @@ def plant():
                       inputs=['tcp_force_x', 'tcp_force_y', 'strut1_axial_force'])
 
 
-def test_first_order_lowpass_pole_is_exp_minus_w_dt():
+@pytest.mark.parametrize('hold', ['foh', 'zoh'])
+def test_first_order_lowpass_pole_is_exp_minus_w_dt(hold):
     fc = 150.0
-    a, b, c, d = Dynamics(1, fc).siso(DT)
+    a, b, c, d = Dynamics(1, fc, hold=hold).siso(DT)
     pole = np.exp(-2 * np.pi * fc * DT)
     assert a.shape == (1, 1) and a[0, 0] == pytest.approx(pole, rel=1e-14)
-    # unit dc gain and a zero-order-hold step response that equals the continuous one
-    assert (c @ np.linalg.solve(np.eye(1) - a, b) + d)[0, 0] == pytest.approx(1.0)
-    assert b[0, 0] == pytest.approx(1.0 - pole) and d[0, 0] == 0.0
+    assert (c @ np.linalg.solve(np.eye(1) - a, b) + d)[0, 0] == pytest.approx(1.0)   # dc gain
+    if hold == 'zoh':       # held input: x_{k+1} = p x_k + (1 - p) y_k, output x_k
+        assert b[0, 0] * c[0, 0] == pytest.approx(1.0 - pole) and d[0, 0] == 0.0
+    else:                   # input linear between samples: the step y_k enters at once
+        ramp = 1.0 - (1.0 - pole) / (2 * np.pi * fc * DT)      # response to a unit ramp
+        assert d[0, 0] == pytest.approx(ramp, rel=1e-12)
 
 
 def test_second_order_lowpass_poles_are_exp_s_dt():
     fc, zeta = 200.0, 0.3
     w = 2 * np.pi * fc
-    a, *_ = Dynamics(2, fc, zeta).siso(DT)
+    a, *_ = Dynamics(2, fc, zeta, hold='zoh').siso(DT)
+    np.testing.assert_allclose(Dynamics(2, fc, zeta).siso(DT)[0], a)      # same poles with foh
     s = np.roots([1.0, 2 * zeta * w, w * w])
     np.testing.assert_allclose(np.sort_complex(np.linalg.eigvals(a)),
                                np.sort_complex(np.exp(s * DT)), rtol=1e-12)
@@ -63,6 +68,7 @@ def _dlsim(plant, laws, excitation):
 
 
 @pytest.mark.parametrize('dyn', [Dynamics(1, 120.0), Dynamics(2, 250.0, 0.4, 1),
+                                 Dynamics(1, 300.0, hold='zoh'),
                                  Dynamics(0, 0.0, delay_steps=2)], ids=str)
 def test_stepped_loop_equals_the_analytic_state_space(plant, dyn):
     laws = [tcp_damper(['x', 'y'], 2500.0, dyn, DT), strut_axial_damper([1], 4.0e4)]

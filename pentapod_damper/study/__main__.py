@@ -15,16 +15,16 @@ import time
 
 import numpy as np
 
-from pentapod_damper.study import pipeline, plots
+from pentapod_damper.study import bending, pipeline, plots
 from pentapod_damper.study.analytic import continuous_frf
 from pentapod_damper.study.config import load_study_config, StudyConfig
 from pentapod_damper.study.report import struts12_share, StudyResults, summary_rows, write_report
 from pentapod_damper.study.runs import run_on_testbed
 from pentapod_sim.errors import BagError, ConfigError, RunError
-from pentapod_sim.plant.frf_peaks import exact_peak, plant_pair_frf
 
 LOG = logging.getLogger('pentapod_damper.study')
-SWEEP_GAINS = np.logspace(1, 4.3, 12)
+#: Gain-sweep figure of each bending damper model (the rotational one keeps its old name).
+FIGURE_FILES = {'rotational': 'bending_gain_sweep.png', 'chord': 'chord_gain_sweep.png'}
 
 
 def _say(msg: str) -> None:
@@ -52,8 +52,19 @@ def _analytic(res: StudyResults, cfg: StudyConfig) -> None:
             model = res.models[cfg.step_position]
             res.pma[scn] = pipeline.pma_curves(model, ana, cfg, res.freq)
             res.pma_designs[scn] = pipeline.pma_designs(model, ana, cfg)
-    bending = res.analytic[(cfg.positions[0], 'strut_damping_all')].dampers
-    res.bending_gain = float(next(iter(bending.values()), float('nan')))
+    for model_name, scn in (('rotational', 'strut_damping_all'),
+                            ('chord', 'strut_chord_damping_all')):
+        if (cfg.positions[0], scn) in res.analytic:
+            gains = res.analytic[(cfg.positions[0], scn)].dampers
+            res.scenario_gains[model_name] = float(next(iter(gains.values()), float('nan')))
+    band = (float(cfg.band[0]), float(cfg.f_max))
+    for pos, model in res.models.items():
+        t0 = time.perf_counter()
+        rows, curves = bending.compare(model.plant, pos, cfg.direction, band, res.freq)
+        res.bending_models += rows
+        res.bending_curves.update(curves)
+        _say(f'{pos}: both bending damper models, gain sweeps and optimal gains in '
+             f'{time.perf_counter() - t0:.1f} s')
 
 
 def _testbed(res: StudyResults, cfg: StudyConfig) -> dict:
@@ -91,6 +102,8 @@ def _figures(res: StudyResults, cfg: StudyConfig, steps: dict) -> None:
             freq, curves, model.plant.frequencies_hz, f'TCP compliance at {pos} (no added '
             'damping)', fig_dir / f'baseline_frf_{pos}.png')
         groups = {'strut bending damping': ('baseline', 'strut_damping_all', 'strut_damping_12'),
+                  'strut chord damping': ('baseline', 'strut_chord_damping_all',
+                                          'strut_chord_damping_12'),
                   'axial and TCP damping': ('baseline', 'axial_damping', 'tcp_damping'),
                   'proof-mass actuators': ('baseline', 'tcp_damping', 'pma_5kg', 'pma_1kg')}
         for title, names in groups.items():
@@ -124,22 +137,18 @@ def _figures(res: StudyResults, cfg: StudyConfig, steps: dict) -> None:
 
 
 def _sweep_figure(res: StudyResults, cfg: StudyConfig) -> None:
-    """Exact peak reduction over the bending damper gain, all struts and struts 1-2."""
-    d, lo, hi = cfg.direction, float(cfg.band[0]), float(cfg.f_max)
-    ratios = {}
-    for pos, model in res.models.items():
-        base = res.analytic[(pos, 'baseline')].peak.value
-        for label, struts in (('all struts', range(1, 6)), ('struts 1, 2', (1, 2))):
-            r = []
-            for g in SWEEP_GAINS:
-                dampers = {f'strut{i}_bending_moment_{k}': g for i in struts for k in (2, 3)}
-                frf = plant_pair_frf(model.plant, f'tcp_displacement_{d}', f'tcp_force_{d}',
-                                     dampers)
-                r.append(base / exact_peak(frf, lo, hi, res.freq).value)
-            ratios[f'{pos}, {label}'] = np.array(r)
-    res.figures['Bending damper gain sweep'] = plots.gain_sweep_plot(
-        SWEEP_GAINS, ratios, res.bending_gain, f'Strut bending damping: TCP {d}{d} peak '
-        'reduction over the gain', res.out_dir / 'figures' / 'bending_gain_sweep.png')
+    """Exact peak reduction over the gain of both bending damper models (all, struts 1-2)."""
+    d = cfg.direction
+    for model, (_, unit, gains) in bending.MODELS.items():
+        ratios = {k.replace(f', {model}', ''): v for k, v in res.bending_curves.items()
+                  if f', {model}, ' in k}
+        marks = {f'optimum {r["position"]}: {r["optimal_gain"]:.3g}': r['optimal_gain']
+                 for r in res.bending_models if r['model'] == model}
+        marks[f'paper b = {bending.PAPER_GAIN:g}'] = bending.PAPER_GAIN
+        res.figures[f'Strut damper gain sweep, {model} model'] = plots.gain_sweep_plot(
+            gains, ratios, res.scenario_gains.get(model, float('nan')),
+            f'Strut damping, {model} model: TCP {d}{d} exact peak reduction over the gain',
+            res.out_dir / 'figures' / FIGURE_FILES[model], unit, marks)
 
 
 def _print_summary(res: StudyResults, report: Path) -> None:
@@ -153,6 +162,12 @@ def _print_summary(res: StudyResults, report: Path) -> None:
     for r in struts12_share(res):
         print(f'struts 1-2 achieve {r["peak_share"]:.0%} (peak) / {r["rms_share"]:.0%} (RMS) '
               f'of the all-struts improvement at {r["position"]}')
+    for r in res.bending_models:
+        print(f'{r["position"]} {r["model"]:10} optimum {r["optimal_gain"]:9.4g} '
+              f'{r["gain_unit"]}: {r["reduction_all_opt"]:.2f}x, struts 1-2 '
+              f'{r["peak_share_12_opt"]:.0%} / {r["rms_share_12_opt"]:.0%}; at b = '
+              f'{bending.PAPER_GAIN:g}: {r["reduction_all_paper"]:.2f}x, struts 1-2 '
+              f'{r["peak_share_12_paper"]:.0%} / {r["rms_share_12_paper"]:.0%}')
     print(f'report: {report}')
 
 

@@ -117,6 +117,40 @@ def discrete_frf(plant: PlantModel, laws: Sequence, dt: float, freq_hz: npt.Arra
                        float(np.max(np.abs(lam))))
 
 
+class SampledPairFrf:
+    """
+    One FRF ``output / input_`` of the sampled closed loop in pole-residue form, exact at any f.
+
+    ``H(z) = sum_i r_i / (z - l_i) + z^-1 (sum_i q_i / (z - l_i) + d_ij)`` at
+    ``z = exp(j w dt)`` (the second sum: the plant's feed-through acting on ``u_{k-1}``). The
+    laws may carry dynamics (:func:`pentapod_sim.sim.closed_loop.closed_loop_system`).
+    ``poles`` are the continuous equivalents ``ln(l_i) / dt`` [rad/s], for
+    :func:`pentapod_sim.plant.frf_peaks.maximise_near_poles`.
+    """
+
+    def __init__(self, plant: PlantModel, laws: Sequence, dt: float, output: str,
+                 input_: str) -> None:
+        core = DiscretePlant(plant.discretize(dt))
+        a, b, c_y, c_u, augmented = closed_loop_system(core, laws)
+        j, o = core.input_names.index(input_), core.output_names.index(output)
+        lam, vec = np.linalg.eig(a)
+        right = np.linalg.solve(vec, b[:, j].astype(complex))
+        self.dt, self.lam = dt, lam
+        self.r = (c_y[o] @ vec) * right
+        late = (not augmented) and core.has_feedthrough
+        self.q = (core.d[o] @ c_u @ vec) * right if late else np.zeros_like(self.r)
+        self.d_late = float(core.d[o, j]) if late else 0.0
+        self.poles = np.log(lam.astype(complex)) / dt
+        self.spectral_radius = float(np.abs(lam).max())
+
+    def __call__(self, freq_hz: npt.ArrayLike) -> np.ndarray:
+        """Complex FRF at the frequencies [Hz] (below Nyquist)."""
+        z = np.exp(2j * np.pi * np.asarray(freq_hz, dtype=float) * self.dt).reshape(-1)
+        inv = 1.0 / (z[:, None] - self.lam[None, :])
+        h = inv @ self.r + (inv @ self.q + self.d_late) / z
+        return h.reshape(np.shape(freq_hz))
+
+
 def pma_requirements(mount_velocity: npt.ArrayLike, freq_hz: npt.ArrayLike, mass: float,
                      gain: float, force_amplitude: float,
                      filter_response: npt.ArrayLike | None = None

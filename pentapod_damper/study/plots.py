@@ -136,13 +136,16 @@ def step_response_plot(runs: Mapping[str, tuple], amplitude: float, path: Path) 
 
 
 def gain_sweep_plot(gains: Sequence[float], ratios: Mapping[str, np.ndarray], chosen: float,
-                    title: str, path: Path) -> Path:
-    """Peak reduction factor of the TCP FRF over the bending damper gain [N m s/rad]."""
+                    title: str, path: Path, unit: str = 'N m s/rad',
+                    marks: Mapping[str, float] | None = None) -> Path:
+    """Peak reduction factor of the TCP FRF over a strut damper gain [``unit``]."""
     fig, ax = plt.subplots(figsize=(8, 4.5))
     for label, r in ratios.items():
         ax.semilogx(gains, r, marker='o', ms=3, label=label)
-    ax.axvline(chosen, color='grey', ls='--', label=f'study gain {chosen:g} N m s/rad')
-    ax.set_xlabel('bending damper gain b [N m s/rad]')
+    ax.axvline(chosen, color='grey', ls='--', label=f'scenario gain {chosen:g} {unit}')
+    for (label, value), style in zip((marks or {}).items(), (':', '-.', (0, (1, 3)), '--')):
+        ax.axvline(value, color='k', ls=style, lw=0.8, label=label)
+    ax.set_xlabel(f'damper gain b [{unit}]')
     ax.set_ylabel('peak |H| baseline / damped [-]')
     ax.set_title(title)
     ax.grid(True, which='both', alpha=0.3)

@@ -28,7 +28,9 @@ class StudyResults:
     figures: dict = field(default_factory=dict)      # caption -> path
     models: dict = field(default_factory=dict)      # pos -> PositionModel
     timings: dict = field(default_factory=dict)     # stage -> seconds
-    bending_gain: float = float('nan')
+    scenario_gains: dict = field(default_factory=dict)   # bending model -> scenario gain
+    bending_models: list = field(default_factory=list)   # rows of study.bending.compare
+    bending_curves: dict = field(default_factory=dict)   # label -> peak reduction over gain
     out_dir: Path = Path('out/study')
 
 
@@ -206,6 +208,19 @@ def _stability_text(res: StudyResults) -> str:
         'mode (0.1 % modal damping) sets them.')
 
 
+def _bending_text() -> str:
+    return (
+        "The paper's strut damper read two ways (continuous loop, ideal viscous dampers on "
+        'both lateral axes of each strut): *rotational* = moment pair from the rotation of '
+        'the WP end relative to the rear end (N m s/rad; the port spans the overhang behind '
+        'the BP joint); *chord* = lateral force at mid-span against the chord between the '
+        'joints (N s/m). optimal_gain minimises the all-struts exact peak (gain sweep, then '
+        'a bounded search); reduction_*: exact peak reduction with all struts / struts 1+2; '
+        'peak/rms_share_12: share of the all-struts improvement that struts 1+2 achieve, '
+        'by exact peak and by RMS of |H| over the band; *_opt at the optimal gain, *_paper '
+        "at the paper's b = 20,000 applied to each port as written.")
+
+
 def _pma_text(res: StudyResults) -> str:
     cfg = res.cfg
     freqs = ', '.join(f'{f:g}' for f in cfg.pma_frequencies)
@@ -225,6 +240,7 @@ def write_report(res: StudyResults, out_dir: Path) -> Path:
     cfg = res.cfg
     tables = {'summary': summary_rows(res), 'stability': stability_rows(res),
               'peaks': peak_rows(res), 'struts12_share': struts12_share(res),
+              'bending_models': res.bending_models,
               'pma': pma_rows(res), 'pma_highpass': pma_highpass_rows(res)}
     for name, rows in tables.items():
         write_csv(rows, out_dir / f'{name}.csv')
@@ -270,6 +286,8 @@ def write_report(res: StudyResults, out_dir: Path) -> Path:
         'achieves (1 = all of it), by exact peak, by RMS of |H| over the band, and by the '
         'grid peak (for comparison).', '',
         markdown_table(tables['struts12_share']), '',
+        '## Two strut bending damper models', '', _bending_text(), '',
+        markdown_table(tables['bending_models']), '',
         '## Proof-mass actuators', '', _pma_text(res), '', markdown_table(tables['pma']), '',
         f'High-pass variant (2nd-order Butterworth at {cfg.pma_highpass_hz:g} Hz on the mount '
         'velocity): any_freq_max_stroke is its largest stroke at any frequency up to '

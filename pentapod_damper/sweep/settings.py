@@ -46,7 +46,8 @@ class SweepSettings:
     band : tuple of float
         Band [Hz] of the peak and RMS of |H|.
     sample_rate : float
-        Plant sample rate [Hz] of the sampled-loop stability column (one-sample delay).
+        Plant sample rate [Hz] of the sampled-loop stability column (zero-order hold, u_k
+        answers y_k).
     pma_force_amplitude : float
         Harmonic TCP force [N] of the PMA stroke and force columns.
     mode_f_max : float
