@@ -7,11 +7,20 @@ prefix exactly as in :mod:`pentapod_sim.scenario.runner` (same parser and table)
 node gets the whole file as its parameter file (so ``/**`` entries reach all nodes). The
 launch ends when the plant ends.
 
+Recording (docs/recording.md): a shipped scenario's recorder writes the run to
+``out/bags/<scenario>-<UTC time>/`` and stops by itself once it holds every step; the launch
+ends after the plant and every recorder have ended. ``record:=false`` leaves the recorders out
+(and takes them from the nodes' ``wait_for_subscribers``); ``bag:=PATH`` records to the folder
+PATH; ``record:=true`` adds a recorder to a scenario that has none.
+
 Like the runner, the launch isolates its nodes (:mod:`pentapod_sim.scenario.domain`): unless
 set in the environment (or by ``domain_id:=``), ``ROS_AUTOMATIC_DISCOVERY_RANGE`` is
 LOCALHOST and ``ROS_DOMAIN_ID`` a free domain, reserved while ``ros2 launch`` runs.
 """
+import atexit
 import os
+from pathlib import Path
+import tempfile
 
 from launch.actions import (
     DeclareLaunchArgument,
@@ -25,8 +34,10 @@ from launch.event_handlers import OnProcessExit
 from launch.events import Shutdown
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
+import yaml
 
 from launch import LaunchDescription
+from pentapod_sim.errors import ConfigError
 from pentapod_sim.scenario.domain import DOMAIN_VAR, isolation, RANGE_VAR
 from pentapod_sim.scenario.files import read_scenario, resolve
 
@@ -46,36 +57,90 @@ def _isolation(context):
                     f'{RANGE_VAR}={merged.get(RANGE_VAR, "(unset)")}')]
 
 
+def _flag(context, name: str) -> bool:
+    """A true/false launch argument (ConfigError names a bad value)."""
+    value = LaunchConfiguration(name).perform(context).strip().lower()
+    if value not in ('true', 'false'):
+        raise ConfigError(f"launch argument {name}:={value!r}: use 'true' or 'false'")
+    return value == 'true'
+
+
+def _without_recorders(scenario) -> Path:
+    """A parameter file of the scenario's other nodes, their waits for recorders removed."""
+    recorders = {n.name for n in scenario.of_kind('recorder')}
+    doc = {}
+    for node in scenario.nodes:
+        if node.name in recorders:
+            continue
+        params = dict(scenario.sections[node.name])
+        wait = [n for n in params.pop('wait_for_subscribers', []) if n not in recorders]
+        if wait:            # an empty list would reach rcl as an untyped parameter
+            params['wait_for_subscribers'] = wait
+        doc[node.name] = {'ros__parameters': params}
+    fd, name = tempfile.mkstemp(prefix='pentapod_launch_', suffix='.yaml')
+    with os.fdopen(fd, 'w') as stream:
+        yaml.safe_dump(doc, stream)
+    atexit.register(os.unlink, name)
+    return Path(name)
+
+
 def _nodes(context):
-    """Nodes of the chosen scenario; shut the launch down when the plant exits."""
+    """Nodes of the chosen scenario; shut the launch down when the plant and recorders end."""
     path = resolve(LaunchConfiguration('scenario').perform(context))
     overrides = {}
     for key in ('steps', 'duration'):
         value = LaunchConfiguration(key).perform(context)
         if value:
             overrides[key] = int(value) if key == 'steps' else float(value)
-    actions = []
-    for node in read_scenario(path).nodes:
-        params = [str(path)] + ([overrides] if node.executable == 'plant' and overrides
-                                else [])
-        action = Node(package='pentapod_testbed', executable=node.executable, name=node.name,
-                      parameters=params, output='screen')
+    record, bag = _flag(context, 'record'), LaunchConfiguration('bag').perform(context)
+    scenario = read_scenario(path)
+    nodes = [(n.name, n.executable) for n in scenario.nodes]
+    if not record:
+        path = _without_recorders(scenario)
+        nodes = [(name, kind) for name, kind in nodes if kind != 'recorder']
+    elif not scenario.of_kind('recorder'):
+        nodes.insert(0, ('recorder', 'recorder'))
+    recorder = {'bag_name': f'{Path(scenario.path).stem}-{{utc}}'}
+    if bag:
+        recorder = {'output_dir': str(Path(bag).parent), 'bag_name': Path(bag).name}
+    actions, awaited = [], []
+    for name, kind in nodes:
+        extra = overrides if kind == 'plant' else {}
+        if kind == 'recorder' and (bag or not scenario.of_kind('recorder')):
+            extra = recorder
+        action = Node(package='pentapod_testbed', executable=kind, name=name,
+                      parameters=[str(path)] + ([extra] if extra else []), output='screen')
         actions.append(action)
-        if node.executable == 'plant':
-            actions.append(RegisterEventHandler(OnProcessExit(
-                target_action=action, on_exit=[EmitEvent(event=Shutdown(
-                    reason='plant finished'))])))
+        if kind in ('plant', 'recorder'):
+            awaited.append(action)
+    ended = set()
+
+    def on_exit(event, _context, action_name):
+        ended.add(action_name)
+        if len(ended) == len(awaited):
+            return [EmitEvent(event=Shutdown(reason='plant and recorders finished'))]
+        return []
+    for action in awaited:       # sources live until the recorders hold every step
+        actions.append(RegisterEventHandler(OnProcessExit(
+            target_action=action,
+            on_exit=lambda event, ctx, name=id(action): on_exit(event, ctx, name))))
     return actions
 
 
 def generate_launch_description():
-    """Arguments: scenario (name or file), steps and duration (plant overrides), domain_id."""
+    """Arguments: scenario, steps and duration (plant overrides), record, bag, domain_id."""
     return LaunchDescription([
         DeclareLaunchArgument('scenario', default_value='baseline',
                               description='scenario name (config/scenarios) or YAML path'),
         DeclareLaunchArgument('steps', default_value='', description='plant steps override'),
         DeclareLaunchArgument('duration', default_value='',
                               description='plant duration override [s]'),
+        DeclareLaunchArgument('record', default_value='true',
+                              description='true: record the run (docs/recording.md); false: '
+                              "leave the scenario's recorders out"),
+        DeclareLaunchArgument('bag', default_value='',
+                              description='bag folder of the recording (default: the '
+                              "scenario's, out/bags/<scenario>-<UTC time>)"),
         DeclareLaunchArgument('domain_id', default_value='',
                               description='ROS_DOMAIN_ID of the nodes (default: the '
                               "environment's, else a free domain reserved for the launch)"),
