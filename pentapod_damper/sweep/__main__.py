@@ -120,7 +120,7 @@ def main(argv: list[str] | None = None) -> int:
                       'same command again to resume', file=sys.stderr)
                 return INTERRUPTED
         if not args.no_plots:
-            _plots(store.open(), store.out_dir)
+            _plots(store, store.out_dir)        # --plot-only: whatever the folder holds
     except ValueError as err:          # ConfigError and bad numbers on the command line
         print(f'sweep: {err}', file=sys.stderr)
         return 1

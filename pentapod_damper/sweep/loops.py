@@ -27,7 +27,8 @@ from pentapod_damper.study.analytic import (
 from pentapod_sim.plant.frf import damper_feedback
 from pentapod_sim.plant.model import PlantModel
 from pentapod_sim.plant.ports import collocated_output
-from pentapod_sim.sim.stability import controller_of, DiscreteController, plant_radius
+from pentapod_sim.sim.controllers import controller_of, DiscreteController
+from pentapod_sim.sim.stability import plant_radius
 
 #: TCP directions; the compliance of direction d is displacement d / force d.
 DIRECTIONS = ('x', 'y', 'z')
@@ -55,10 +56,11 @@ class Loop:
         self.dampers = {p: g * factor for p, g in continuous_dampers(laws).items()}
         self.pmas = [law for law in laws if isinstance(law, ProofMassActuator)]
         self.controllers = []
-        for law in laws:
+        for law in laws:        # u = factor * (c xc + d y): the law's effort scaled
             ctrl = controller_of(law)
-            self.controllers.append(DiscreteController.static(
-                ctrl.sensor_ports, ctrl.actuator_ports, ctrl.d * factor))
+            self.controllers.append(DiscreteController(
+                ctrl.sensor_ports, ctrl.actuator_ports, ctrl.a, ctrl.b, ctrl.c * factor,
+                ctrl.d * factor))
 
 
 def ports_needed(loops: list[Loop]) -> tuple[list[str], list[str]]:
