@@ -76,9 +76,9 @@ def rows(positions, scenarios, candidate: Dynamics | None = None) -> list[dict]:
             laws = [law for law in scenario_laws(read_scenario(scn).sections, dt)
                     if isinstance(law, ViscousDamper)]
             shipped = laws if candidate is None else _with(laws, candidate, dt)
-            dyn = shipped[0].dynamics
             for variant, variant_laws in (('with dynamics', shipped),
                                           ('no dynamics', _without_dynamics(laws))):
+                dyn = variant_laws[0].dynamics
                 row = evaluate(plant, check, variant_laws, dt, d, band, base)
                 out.append({'position': pos, 'scenario': scn, 'variant': variant,
                             'filter_order': dyn.order, 'bandwidth_hz': dyn.bandwidth_hz,
