@@ -20,7 +20,6 @@ from __future__ import annotations
 import argparse
 import os
 from pathlib import Path
-import random
 import subprocess
 import sys
 import tempfile
@@ -37,6 +36,7 @@ import scipy.signal  # noqa: E402
 
 from fixtures.demo_model import demo_model  # noqa: E402
 from pentapod_damper.laws import strut_bending_damper, tcp_damper  # noqa: E402
+from pentapod_sim.scenario.domain import isolation  # noqa: E402
 from pentapod_sim.sim.closed_loop import (  # noqa: E402
     closed_loop_matrices,
     excitation_matrix,
@@ -171,8 +171,9 @@ class Session:
 
     def __init__(self, folder: Path):
         self.folder = folder
-        self.env = dict(os.environ, ROS_DOMAIN_ID=str(random.randint(101, 200)),
-                        ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
+        # a free domain reserved for the session, LOCALHOST discovery (unless already set)
+        changes, self.lease = isolation(os.environ)
+        self.env = dict(os.environ, **changes)
         self.procs = []
 
     def start(self, args: list[str], log: str) -> subprocess.Popen:
@@ -198,6 +199,8 @@ class Session:
             except subprocess.TimeoutExpired:
                 proc.kill()
                 proc.wait()
+        if self.lease is not None:
+            self.lease.release()
 
 
 def _vm_hwm(pid: int) -> float:
@@ -248,7 +251,38 @@ def plant_run(folder: Path, model_file: Path, n_controllers: int, steps: int,
     finally:
         session.close()
     with np.load(trace) as data:
-        return dict({k: float(data[k]) for k in data.files if data[k].shape == ()}, rss=rss)
+        return dict({k: float(data[k]) for k in data.files
+                     if data[k].shape == () and data[k].dtype.kind in 'fiub'}, rss=rss)
+
+
+def composed_run(folder: Path, model_file: Path, n_controllers: int, steps: int,
+                 recorder: bool = False) -> dict:
+    """Plant + n damper nodes (+ a recorder) in one process on one executor; trace figures."""
+    from pentapod_sim.scenario.files import dump_params
+    trace = folder / f'trace_composed_{n_controllers}_{int(recorder)}.npz'
+    names = [f'damper{i}' for i in range(n_controllers)]
+    doc = {name: {'ros__parameters': {'bending_struts': [i + 1], 'bending_gain': 100.0}}
+           for i, name in enumerate(names)}
+    doc['plant'] = {'ros__parameters': {
+        'model_file': str(model_file), 'steps': steps, 'sample_rate': RATE, 'sources': names,
+        'output_file': str(trace), 'startup_timeout': 60.0}}
+    if recorder:
+        doc['recorder'] = {'ros__parameters': {'output_dir': str(folder / 'bags'),
+                                               'bag_name': f'composed_{n_controllers}'}}
+        doc['plant']['ros__parameters']['wait_for_subscribers'] = ['recorder']
+    path = folder / f'composed_{n_controllers}_{int(recorder)}.yaml'
+    path.write_text(dump_params(doc))
+    session = Session(folder)
+    try:
+        proc = session.start(['-m', 'pentapod_sim.nodes.composed', str(path)], 'composed.log')
+        code, rss = wait_rss(proc, 300)
+        if code != 0:
+            raise RuntimeError((folder / 'composed.log').read_text())
+    finally:
+        session.close()
+    with np.load(trace) as data:
+        return dict({k: float(data[k]) for k in data.files
+                     if data[k].shape == () and data[k].dtype.kind in 'fiub'}, rss=rss)
 
 
 def pingpong(folder: Path, n: int) -> tuple[float, float]:
@@ -287,6 +321,14 @@ def ros_rows(quick: bool) -> list[dict]:
                              'rclpy ping-pong, 2 processes, default executor', base,
                              note=f'{steps} steps, 200 states; each step: strut_states out '
                                   f'(the only subscribed topic), {n_ctrl} answer(s) in'))
+        for n_ctrl, rec in ((1, False), (3, True)):
+            res = composed_run(folder, model_file, n_ctrl, steps, rec)
+            label = (f'lockstep composed, plant + {n_ctrl} controller'
+                     + (' + recorder' if rec else ''))
+            rows.append(_row(label, steps / res['wall_time'], 'steps/s',
+                             'rclpy ping-pong, 2 processes, default executor', base,
+                             note=f'{steps} steps, 200 states; every node in one process on '
+                                  'one EventsExecutor (scenario --composed)'))
         seconds = 1.0 if quick else 5.0
         for rate in (1000.0, 5000.0, 10000.0):
             res = plant_run(folder, model_file, 1, int(seconds * rate), 'realtime', rate)
@@ -295,7 +337,8 @@ def ros_rows(quick: bool) -> list[dict]:
                              note=f'lateness p50 {res["lateness_p50"] * 1e6:.0f} us, '
                                   f'p99 {res["lateness_p99"] * 1e6:.0f} us, max '
                                   f'{res["lateness_max"] * 1e6:.0f} us, '
-                                  f'{int(res["overruns"])} overruns of '
+                                  f'{int(res["overruns"])} overruns, '
+                                  f'{int(res.get("missed_steps", 0))} missed deadlines of '
                                   f'{int(seconds * rate)} steps (plant + 1 damper)'))
     return rows
 

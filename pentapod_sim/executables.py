@@ -12,6 +12,7 @@ EXECUTABLES = {
     'plant': 'pentapod_sim.nodes.plant_node:main',
     'exciter': 'pentapod_sim.nodes.exciter_node:main',
     'recorder': 'pentapod_sim.nodes.recorder_node:main',
+    'live_view': 'pentapod_sim.nodes.live_view_node:main',
     'damper': 'pentapod_damper.nodes.damper_node:main',
     'pma': 'pentapod_damper.nodes.pma_node:main',
     'example_controller': 'pentapod_damper.nodes.example_controller:main',
@@ -20,11 +21,13 @@ EXECUTABLES = {
     'statespace': 'pentapod_sim.cli.statespace:main',
     'analyze': 'pentapod_sim.cli.analyze:main',
     'study': 'pentapod_damper.study.__main__:main',
+    'sweep': 'pentapod_damper.sweep.__main__:main',
 }
 
 #: Node executables a scenario file may use; a node section named ``<kind>...`` runs the
 #: executable ``<kind>`` (the longest matching prefix wins).
-NODE_KINDS = ('plant', 'exciter', 'recorder', 'damper', 'pma', 'example_controller')
+NODE_KINDS = ('plant', 'exciter', 'recorder', 'live_view', 'damper', 'pma',
+              'example_controller')
 
 #: node executable -> ``module:attribute`` of its parameter table
 #: (a :class:`pentapod_sim.parameters.ParameterTable` in a ROS-free module)
@@ -32,6 +35,7 @@ PARAMETER_TABLES = {
     'plant': 'pentapod_sim.nodes.parameter_tables:PLANT',
     'exciter': 'pentapod_sim.nodes.parameter_tables:EXCITER',
     'recorder': 'pentapod_sim.nodes.parameter_tables:RECORDER',
+    'live_view': 'pentapod_sim.live.params:LIVE_VIEW',
     'damper': 'pentapod_damper.node_parameters:DAMPER',
     'pma': 'pentapod_damper.node_parameters:PMA',
     'example_controller': 'pentapod_damper.node_parameters:EXAMPLE_CONTROLLER',
@@ -42,6 +46,7 @@ COMPONENTS = {
     'plant': 'pentapod_sim.nodes.plant_node:PlantNode',
     'exciter': 'pentapod_sim.nodes.exciter_node:ExciterNode',
     'recorder': 'pentapod_sim.nodes.recorder_node:RecorderNode',
+    'live_view': 'pentapod_sim.nodes.live_view_node:LiveViewNode',
     'damper': 'pentapod_damper.nodes.damper_node:DamperNode',
     'pma': 'pentapod_damper.nodes.pma_node:PmaNode',
     'example_controller': 'pentapod_damper.nodes.example_controller:ExampleController',
