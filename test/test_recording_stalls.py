@@ -21,6 +21,7 @@ import yaml
 from pentapod_sim import interface
 from pentapod_sim.errors import BagError
 from pentapod_sim.recording.run_end import RunStatus, shortfalls, StepLedger
+from pentapod_sim.scenario.files import read_scenario
 
 ROOT = Path(__file__).resolve().parents[1]
 OLD_FORCE_DEPTH = 100   # force history before this change: a 1.5 s stall lost messages
@@ -73,6 +74,18 @@ def test_history_covers_a_five_second_stall_at_every_shipped_rate():
     for kind in ('state', 'force', 'info'):
         assert interface.QOS[kind].depth >= 5.0 * max(rates) + 3.0 * max(rates)
     assert interface.QOS['status'].durability == 'transient_local'
+
+
+@pytest.mark.parametrize('path', sorted((ROOT / 'config' / 'scenarios').glob('*.yaml')),
+                         ids=lambda p: p.stem)
+def test_every_shipped_scenario_records_every_step(path):
+    scenario = read_scenario(path)
+    (recorder,) = scenario.of_kind('recorder')
+    params = scenario.sections[recorder.name]
+    assert (params['output_dir'], params['bag_name']) == ('out/bags', f'{path.stem}-{{utc}}')
+    assert params.get('stop_at_run_end', True)
+    (plant,) = scenario.of_kind('plant')
+    assert recorder.name in scenario.sections[plant.name]['wait_for_subscribers']
 
 
 def test_run_status_parsing_and_ledger():
