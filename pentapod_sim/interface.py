@@ -9,7 +9,8 @@ messages (docs/architecture.md, docs/nodes.md):
 * ``/pentapod/tcp_state``: joints ``tcp_{x,y,z}``, position = ``tcp_displacement_*`` [m],
   velocity = ``tcp_velocity_*`` [m/s];
 * ``/pentapod/strut_states``: ``strut{i}_bending_{2,3}`` (position [rad] = bending, velocity
-  [rad/s] = bending rate) and ``strut{i}_axial`` (position [m], velocity [m/s]);
+  [rad/s] = bending rate), ``strut{i}_axial`` (position [m], velocity [m/s]) and
+  ``strut{i}_chord_{2,3}`` (position [m] = chord displacement, velocity [m/s]);
 * ``/pentapod/pma_mount_state``: ``pma_mount_{x,y,z}``, velocity = ``pma_mount_velocity_*``
   [m/s] (position NaN: the plant has no displacement output there).
 
@@ -154,6 +155,10 @@ def _table() -> dict[str, tuple[str, str, str]]:
                                                    'velocity')
         table[f'strut{i}_axial_displacement'] = (STRUT_STATES, f'strut{i}_axial', 'position')
         table[f'strut{i}_axial_velocity'] = (STRUT_STATES, f'strut{i}_axial', 'velocity')
+        for k in (2, 3):
+            table[f'strut{i}_chord_{k}'] = (STRUT_STATES, f'strut{i}_chord_{k}', 'position')
+            table[f'strut{i}_chord_velocity_{k}'] = (STRUT_STATES, f'strut{i}_chord_{k}',
+                                                     'velocity')
     return table
 
 
