@@ -6,8 +6,12 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 
 from pentapod_sim.errors import ModalError
+from pentapod_sim.modal import slicing
 from pentapod_sim.modal.solver import DENSE_LIMIT, solve_modes
-from pentapod_sim.modal.sturm import factorize_shifted, inertia_count, sturm_count
+from pentapod_sim.modal.sturm import factor_at, factorize_shifted, inertia_count, sturm_count
+from pentapod_sim.modal.windows import METHODS
+
+slicing_next_shift = slicing._next_shift
 
 
 def fixed_free_chain(n: int, k: float = 2.0e6, m: float = 3.0):
@@ -54,6 +58,115 @@ class TestSturmCount:
         w = 2 * np.pi * chain_frequencies(1000)
         lu = factorize_shifted(K, M, 0.5 * (w[9] ** 2 + w[10] ** 2))
         assert inertia_count(lu) == 10
+
+
+class TestSharedFactorisation:
+    def test_one_factorisation_solves_and_counts(self):
+        K, M = random_structure(400, seed=5)
+        lam = sla.eigh(K.toarray(), M.toarray(), eigvals_only=True)
+        shift = 0.5 * (lam[57] + lam[58])
+        factor = factor_at(K, M, shift)
+        assert factor.count == 58 == sturm_count(K, M, shift)
+        b = np.random.default_rng(0).standard_normal(400)
+        x = factor.lu.solve(b)
+        assert_allclose((K - shift * M) @ x, b, rtol=0, atol=1e-9 * np.abs(b).max())
+
+    def test_slicing_factorises_once_per_window_and_counts_right(self):
+        n = 3000
+        K, M = fixed_free_chain(n)
+        exact = chain_frequencies(n)
+        res = solve_modes(K, M, n_modes=120, modes_per_window=25)
+        # one factorisation per window (solves and Sturm count) plus the count at the end;
+        # counting at separate edges took 2 per window
+        assert res.stats['windows'] >= 4
+        assert res.stats['factorisations'] <= res.stats['windows'] + 1 + res.stats['retries']
+        assert_allclose(res.frequencies, exact[:120], rtol=1e-9)
+        f_max = 0.5 * (exact[99] + exact[100])
+        res = solve_modes(K, M, f_max=f_max, modes_per_window=25)
+        assert res.sturm_count == res.n_modes == 100
+        assert res.stats['factorisations'] <= res.stats['windows'] + 2 + res.stats['retries']
+
+    def test_shift_on_an_eigenvalue_still_gives_every_mode_once(self, monkeypatch):
+        # every window shift put on an eigenvalue (closed form, exact to rounding): K - s M is
+        # singular to rounding and its inertia may count that eigenvalue on either side
+        n = 2000
+        K, M = fixed_free_chain(n)
+        exact = chain_frequencies(n)
+        lam_exact = (2 * np.pi * exact) ** 2
+        hits = []
+
+        def on_an_eigenvalue(lam, a, target):
+            j = int(np.argmin(np.abs(lam_exact - slicing_next_shift(lam, a, target))))
+            hits.append(j)
+            return float(lam_exact[j])
+
+        monkeypatch.setattr(slicing, '_next_shift', on_an_eigenvalue)
+        res = solve_modes(K, M, n_modes=80, modes_per_window=20)
+        assert len(hits) >= 3
+        assert_allclose(res.frequencies, exact[:80], rtol=1e-9)
+        G = res.shapes.T @ (M @ res.shapes)
+        assert_allclose(G, np.eye(80), atol=1e-8)
+
+        # now make the race happen: the eigenvalue at the shift comes back on the other side
+        # of the shift than the inertia counted it; the slicer must move that shift
+        solve = slicing.window_eigs
+
+        def other_side(K, M, factor, k, method, tol):
+            lam, phi = solve(K, M, factor, k, method, tol)
+            j = np.flatnonzero(lam_exact == factor.sigma)
+            if j.size:
+                i = int(np.argmin(np.abs(lam - factor.sigma)))
+                lam[i] = factor.sigma * (1 - 1e-13 if factor.count == j[0] else 1 + 1e-13)
+            return lam, phi
+
+        monkeypatch.setattr(slicing, 'window_eigs', other_side)
+        res = solve_modes(K, M, n_modes=80, modes_per_window=20)
+        assert res.stats['retries'] >= 1
+        assert_allclose(res.frequencies, exact[:80], rtol=1e-9)
+
+
+def _primme_missing_is_named(K, M, **kwargs) -> bool:
+    """True (after checking the error) where the optional package primme is not installed."""
+    try:
+        import primme  # noqa: F401
+    except ImportError:
+        with pytest.raises(ModalError, match='pip install primme'):
+            solve_modes(K, M, method='primme', **kwargs)
+        return True
+    return False
+
+
+@pytest.mark.parametrize('method', sorted(METHODS))
+def test_window_solvers_match_dense_eigh(method):
+    """
+    ARPACK and PRIMME windows: the frequencies and shapes of dense LAPACK eigh.
+
+    PRIMME is optional (not in requirements.txt): without it the error must name the package.
+    """
+    n = 900
+    K, M = random_structure(n, seed=3)
+    if method == 'primme' and _primme_missing_is_named(K, M, n_modes=70):
+        return
+    lam, phi = sla.eigh(K.toarray(), M.toarray())
+    res = solve_modes(K, M, n_modes=70, modes_per_window=12, method=method)
+    assert res.stats['method'].startswith(METHODS[method])
+    assert_allclose(res.omega ** 2, lam[:70], rtol=1e-8)
+    mac = (phi[:, :70].T @ (M @ res.shapes)).diagonal() ** 2
+    assert_allclose(mac, 1.0, atol=1e-6)
+    assert res.stats['max_residual'] < 1e-6
+
+
+@pytest.mark.parametrize('method', sorted(METHODS))
+def test_window_solvers_match_chain_closed_form_with_f_max(method):
+    n = 2500
+    K, M = fixed_free_chain(n)
+    exact = chain_frequencies(n)
+    f_max = 0.5 * (exact[136] + exact[137])
+    if method == 'primme' and _primme_missing_is_named(K, M, f_max=f_max):
+        return
+    res = solve_modes(K, M, f_max=f_max, modes_per_window=30, method=method)
+    assert res.sturm_count == res.n_modes == 137
+    assert_allclose(res.frequencies, exact[:137], rtol=1e-9)
 
 
 class TestSolveModes:
@@ -150,6 +263,11 @@ class TestBadInput:
         K, M = fixed_free_chain(500)
         with pytest.raises(ValueError, match=match):
             solve_modes(K, M, **kwargs)
+
+    def test_unknown_method_is_named(self):
+        K, M = fixed_free_chain(500)
+        with pytest.raises(ValueError, match="'lobpcg'"):
+            solve_modes(K, M, n_modes=3, method='lobpcg')
 
     def test_size_mismatch(self):
         K, _ = fixed_free_chain(500)

@@ -1,11 +1,13 @@
 """
 Undamped modal analysis of large sparse structures: K phi = omega^2 M phi.
 
-The solver is shift-invert Lanczos (ARPACK through ``scipy.sparse.linalg.eigsh``) with a
-SuperLU factorisation of ``K - sigma M`` passed as ``OPinv``. For hundreds of modes the
-spectrum is cut into slices (windows in omega^2), each solved around a shift in its middle;
-Sturm counts (the inertia of ``K - s M``) at the window edges tell how many eigenvalues each
-window holds, so no mode is missed or found twice. The Lanczos re-orthogonalisation costs
+The spectrum is cut into slices (windows in omega^2), each solved around a shift with a
+SuperLU factorisation of ``K - sigma M`` (shift-invert Lanczos, ARPACK through
+``scipy.sparse.linalg.eigsh``, or block Davidson, PRIMME: :mod:`pentapod_sim.modal.windows`).
+The inertia of that same factorisation is the Sturm count at the shift, so one factorisation
+per window gives both the solves and the count: the modes between two consecutive shifts come
+from the two windows (split at a cut between two eigenvalues) and must number the difference
+of the two counts, so no mode is missed or found twice. The Lanczos re-orthogonalisation costs
 O(n ncv^2) per restart, so a few windows of tens of modes are much cheaper than one run with
 ``ncv ~ 2 * n_modes``.
 
@@ -17,32 +19,22 @@ from dataclasses import dataclass, field
 import logging
 import math
 import time
-from typing import Any, Callable
+from typing import Any
 import warnings
 
 import numpy as np
 import numpy.typing as npt
 import scipy.linalg as sla
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
-from pentapod_sim.errors import ModalError
-from pentapod_sim.modal.sturm import factorize_shifted, sturm_count
+from pentapod_sim.modal.slicing import Progress, slice_spectrum, Slicer
+from pentapod_sim.modal.windows import DEFAULT_METHOD, METHODS
 
 _LOG = logging.getLogger(__name__)
 
 #: Problems up to this size are solved densely with ``scipy.linalg.eigh`` (exact, all modes).
 DENSE_LIMIT = 400
 
-#: ARPACK convergence tolerance (relative, on the shift-inverted Ritz values); results are
-#: checked afterwards by their residual ||K phi - omega^2 M phi|| / ||K phi||.
-LANCZOS_TOL = 1e-8
-
-#: Modes asked for per window, relative to the modes it should deliver (overlap margin).
-WINDOW_PAD = 1.3
-
-#: Progress callback: (modes found so far, modes wanted or None, message).
-Progress = Callable[[int, 'int | None', str], None]
 
 
 @dataclass(frozen=True)
@@ -133,115 +125,6 @@ def _solve_dense(K, M, n_modes, f_max) -> tuple[np.ndarray, np.ndarray, int | No
     return lam, phi, below
 
 
-def _window_solve(K, M, sigma, k, lu_timer) -> tuple[np.ndarray, np.ndarray]:
-    """The k eigenpairs nearest to ``sigma`` (shift-invert Lanczos, our own factorisation)."""
-    t0 = time.perf_counter()
-    lu = factorize_shifted(K, M, sigma)
-    lu_timer.append(time.perf_counter() - t0)
-    n = K.shape[0]
-    opinv = spla.LinearOperator((n, n), matvec=lu.solve, dtype=float)
-    k = min(k, n - 2)
-    v0 = np.random.default_rng(n).standard_normal(n)   # same start whatever ran before
-    lam, phi = spla.eigsh(K, k=k, M=M, sigma=sigma, OPinv=opinv, which='LM', v0=v0,
-                          ncv=min(n - 1, max(2 * k + 1, 20)), tol=LANCZOS_TOL)
-    order = np.argsort(lam)
-    return lam[order], phi[:, order]
-
-
-def _edge_between(lam: np.ndarray, hi_index: int) -> float:
-    """A window edge between ``lam[hi_index - 1]`` and ``lam[hi_index]``, moved off clusters."""
-    i = hi_index
-    while i > 1 and lam[i] - lam[i - 1] < 1e-6 * abs(lam[i]):
-        i -= 1   # never cut a (nearly) repeated eigenvalue
-    return 0.5 * (lam[i - 1] + lam[i])
-
-
-def _next_shift(lam: np.ndarray, a: float, target: int) -> float:
-    """
-    Shift of the next window above edge ``a`` [rad^2/s^2] that should hold ``target`` modes.
-
-    The mode count of these structures grows about linearly in frequency, so the density per
-    unit omega of the last window is extrapolated; the shift sits in the middle (in omega^2)
-    of the predicted window, and asking for ``WINDOW_PAD * target`` modes makes the returned
-    set reach a little below ``a``.
-    """
-    w = np.sqrt(np.clip(lam, 0.0, None))
-    density = (w.size - 1) / max(w[-1] - w[0], 1e-300)   # modes per rad/s
-    w_a = math.sqrt(max(a, 0.0))
-    w_b = w_a + target / density
-    return 0.5 * (w_a ** 2 + w_b ** 2)
-
-
-@dataclass
-class _Slicer:
-    """State of one spectrum-slicing run (kept small so each step stays readable)."""
-
-    K: sp.spmatrix
-    M: sp.spmatrix
-    per_window: int
-    progress: Progress | None
-    lam: list = field(default_factory=list)
-    phi: list = field(default_factory=list)
-    lu_times: list = field(default_factory=list)
-    windows: int = 0
-    retries: int = 0
-
-    def report(self, found: int, wanted: int | None, msg: str) -> None:
-        _LOG.info(msg)
-        if self.progress is not None:
-            self.progress(found, wanted, msg)
-
-    def count(self, omega2: float) -> int:
-        t0 = time.perf_counter()
-        c = sturm_count(self.K, self.M, omega2)
-        self.lu_times.append(time.perf_counter() - t0)
-        return c
-
-    def first_window(self, k: int) -> tuple[float, int, np.ndarray, np.ndarray]:
-        """Lowest modes by a shift below the spectrum; returns edge, its count and modes."""
-        scale = abs(self.K.diagonal()).max() / abs(self.M.diagonal()).max()
-        sigma = -1e-9 * scale   # K may be only semi-definite: stay just below zero
-        lam, phi = _window_solve(self.K, self.M, sigma, k + 1, self.lu_times)
-        return sigma, 0, lam, phi
-
-
-def _slice(sl: _Slicer, wanted: int | None, lam_max: float | None) -> None:
-    """Collect all eigenpairs below lam_max (if given) and at least ``wanted`` of them."""
-    a, c_a, lam, phi = sl.first_window(sl.per_window)
-    target = sl.per_window
-    while True:
-        sl.windows += 1
-        done_by_limit = lam_max is not None and lam[-1] >= lam_max
-        b = lam_max if lam_max is not None and done_by_limit else _edge_between(lam,
-                                                                                lam.size - 1)
-        c_b = sl.count(b)
-        inside = (lam >= a) & (lam < b)
-        if b <= a or c_b - c_a != np.count_nonzero(inside):
-            sl.retries += 1
-            if sl.retries > 20:
-                raise ModalError(f'spectrum slicing could not fill window [{a:.6g}, {b:.6g}) '
-                                 f'rad^2/s^2: Sturm count {c_b - c_a}, found '
-                                 f'{np.count_nonzero(inside)}')
-            # shift lower and ask for more: the returned set did not reach the lower edge
-            target = int(target * 1.5) + 5
-            sigma = a + 0.3 * (lam[-1] - a)
-            lam, phi = _window_solve(sl.K, sl.M, sigma, target, sl.lu_times)
-            continue
-        sl.lam.append(lam[inside])
-        sl.phi.append(phi[:, inside])
-        sl.report(c_b, wanted, f'window {sl.windows}: {c_b - c_a} modes '
-                  f'{math.sqrt(max(a, 0)) / 2 / math.pi:.4g}-{math.sqrt(b) / 2 / math.pi:.4g} Hz, '
-                  f'{c_b} below upper edge (Sturm)')
-        a, c_a = b, c_b
-        if done_by_limit or (wanted is not None and c_b >= wanted):
-            return
-        target = sl.per_window
-        if wanted is not None:   # the last window asks only for what is still missing
-            target = max(4, min(target, wanted - c_a + 2))
-        sigma = _next_shift(lam, a, target)
-        lam, phi = _window_solve(sl.K, sl.M, sigma, int(WINDOW_PAD * target), sl.lu_times)
-
-
 def _assemble_blocks(lam_blocks: list, phi_blocks: list, n_keep: int | None):
     """Stack the windows' modes into one array, freeing each window as it is copied."""
     total = sum(x.size for x in lam_blocks)
@@ -287,7 +170,8 @@ def _normalise_and_check(K, M, lam, phi, blocks, chunk: int = 16,
 
 def solve_modes(K: sp.spmatrix, M: sp.spmatrix, *, n_modes: int | None = None,
                 f_max: float | None = None, modes_per_window: int = 30,
-                progress: Progress | None = None, tol_check: float = 1e-6) -> ModalResult:
+                progress: Progress | None = None, tol_check: float = 1e-6,
+                method: str = DEFAULT_METHOD) -> ModalResult:
     """
     Compute the lowest undamped modes of ``K phi = omega^2 M phi``.
 
@@ -302,12 +186,16 @@ def solve_modes(K: sp.spmatrix, M: sp.spmatrix, *, n_modes: int | None = None,
     f_max : float, optional
         Return every mode below this frequency [Hz]; the count is verified by a Sturm count.
     modes_per_window : int
-        Modes per spectrum slice; each slice costs one factorisation plus a Lanczos run with
-        ``ncv ~ 2.5 * modes_per_window``.
+        Modes per spectrum slice; each slice costs one factorisation (shared by its solves and
+        the Sturm count at its shift) plus an eigensolver run for ``1.3 * modes_per_window``
+        modes.
     progress : callable, optional
         Called after each slice as ``progress(found, wanted, message)``.
     tol_check : float
         Relative residual / M-orthogonality error above which a warning is issued.
+    method : {'arpack', 'primme'}
+        Eigensolver per window (:data:`pentapod_sim.modal.windows.METHODS`): shift-invert
+        Lanczos (ARPACK through scipy) or block Davidson (PRIMME, an optional package).
 
     Returns
     -------
@@ -317,11 +205,13 @@ def solve_modes(K: sp.spmatrix, M: sp.spmatrix, *, n_modes: int | None = None,
     Raises
     ------
     ValueError
-        For inconsistent sizes or requests.
+        For inconsistent sizes or requests, or an unknown method.
     ModalError
         If the slices cannot be made consistent with the Sturm counts.
     """
     n = _check_inputs(K, M, n_modes, f_max)
+    if method not in METHODS:
+        raise ValueError(f'method={method!r} is not one of {", ".join(METHODS)}')
     K, M = sp.csr_matrix(K), sp.csr_matrix(M)
     lam_max = None if f_max is None else (2.0 * np.pi * f_max) ** 2
     t0 = time.perf_counter()
@@ -332,14 +222,18 @@ def solve_modes(K: sp.spmatrix, M: sp.spmatrix, *, n_modes: int | None = None,
         blocks, stats = [(0, lam.size)], {'method': 'dense eigh', 'windows': 1}
     else:
         per_window = modes_per_window if n_modes is None else min(modes_per_window, n_modes)
-        sl = _Slicer(K, M, max(per_window, 4), progress)
-        _slice(sl, n_modes, lam_max)
+        sl = Slicer(K, M, max(per_window, 4), method, progress,
+                     math.inf if lam_max is None else lam_max)
+        slice_spectrum(sl, n_modes, lam_max)
         lam, phi, blocks = _assemble_blocks(sl.lam, sl.phi, n_modes)
         if lam_max is not None:
-            sturm = sl.count(lam_max)
-        stats = {'method': 'shift-invert Lanczos, spectrum slicing', 'windows': sl.windows,
-                 'retries': sl.retries, 'factorisations': len(sl.lu_times),
-                 'factorisation_time_s': float(sum(sl.lu_times))}
+            final = sl.final if sl.final is not None and sl.final.sigma == lam_max \
+                else sl.factor(lam_max)
+            sturm = final.count
+        stats = {'method': f'{METHODS[method]}, spectrum slicing', 'windows': sl.windows,
+                 'retries': sl.retries, 'factorisations': len(sl.factors),
+                 'factorisation_time_s': float(sum(sl.factors)),
+                 'eigensolver_time_s': float(sum(sl.solve_times))}
     if lam.size and lam[0] < -tol_check * abs(lam).max():
         warnings.warn(f'negative eigenvalue {lam[0]:.3g} rad^2/s^2: K is not positive '
                       'semi-definite', RuntimeWarning, stacklevel=2)

@@ -3,8 +3,13 @@ Sturm counts: how many eigenvalues of ``K phi = omega^2 M phi`` lie below a shif
 
 The inertia of ``K - s M`` (its number of negative pivots, Sylvester's law) is that count; the
 modal solver uses it to cut the spectrum into windows without missing or repeating a mode.
+:func:`factor_at` gives both from one factorisation: the solves of a shift-invert window and
+the count at its shift.
 """
 from __future__ import annotations
+
+from dataclasses import dataclass
+import time
 
 import numpy as np
 import scipy.sparse as sp
@@ -69,3 +74,34 @@ def sturm_count(K: sp.spmatrix, M: sp.spmatrix, omega2: float) -> int:
         Shift [rad^2/s^2].
     """
     return inertia_count(factorize_shifted(K, M, omega2))
+
+
+@dataclass(frozen=True)
+class ShiftedFactor:
+    """
+    One factorisation of ``K - sigma M``, used for shift-invert solves and as a Sturm count.
+
+    Attributes
+    ----------
+    sigma : float
+        Shift [rad^2/s^2].
+    lu : scipy.sparse.linalg.SuperLU
+        Symmetric-mode factorisation (:func:`factorize_shifted`); ``lu.solve(b)`` applies
+        ``(K - sigma M)^-1``.
+    count : int
+        Number of eigenvalues below ``sigma`` (:func:`inertia_count`).
+    seconds : float
+        Wall time of the factorisation [s].
+    """
+
+    sigma: float
+    lu: spla.SuperLU
+    count: int
+    seconds: float
+
+
+def factor_at(K: sp.spmatrix, M: sp.spmatrix, sigma: float) -> ShiftedFactor:
+    """Factorise ``K - sigma M`` once and read its Sturm count from the same factors."""
+    t0 = time.perf_counter()
+    lu = factorize_shifted(K, M, sigma)
+    return ShiftedFactor(float(sigma), lu, inertia_count(lu), time.perf_counter() - t0)
