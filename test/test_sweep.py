@@ -116,7 +116,7 @@ def test_interrupted_sweep_resumes_without_recomputing(settings, serial, tmp_pat
                             text=True)
     results = tmp_path / 'results'
     deadline = time.monotonic() + 240
-    while len(list(results.glob('*.parquet'))) < 2 and proc.poll() is None:
+    while not list(results.glob('*.parquet')) and proc.poll() is None:   # first task done
         assert time.monotonic() < deadline, 'no task finished in time'
         time.sleep(0.05)
     proc.send_signal(signal.SIGINT)
@@ -124,7 +124,7 @@ def test_interrupted_sweep_resumes_without_recomputing(settings, serial, tmp_pat
     assert proc.returncode == 130, output
     assert 'run the same command again to resume' in output
     before = {p.name: p.stat().st_mtime_ns for p in results.glob('*.parquet')}
-    assert 2 <= len(before) < 6, 'the sweep was not interrupted midway'
+    assert 1 <= len(before) < 6, 'the sweep was not interrupted midway'
     done_keys = set(_rows(tmp_path, settings))
     computed = []
     report = run_sweep(POSES, settings, tmp_path, serial=True, progress=False,
