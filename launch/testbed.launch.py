@@ -113,6 +113,10 @@ def _nodes(context):
         actions.append(action)
         if kind in ('plant', 'recorder'):
             awaited.append(action)
+    if _flag(context, 'live') and not scenario.of_kind('live_view'):
+        port = LaunchConfiguration('live_port').perform(context)
+        actions.append(Node(package='pentapod_testbed', executable='live_view', name='live_view',
+                            parameters=[{'port': int(port)}], output='screen'))
     ended = set()
 
     def on_exit(event, _context, action_name):
@@ -128,7 +132,7 @@ def _nodes(context):
 
 
 def generate_launch_description():
-    """Arguments: scenario, steps and duration (plant overrides), record, bag, domain_id."""
+    """Arguments: scenario, steps, duration (plant overrides), record, bag, live, domain_id."""
     return LaunchDescription([
         DeclareLaunchArgument('scenario', default_value='baseline',
                               description='scenario name (config/scenarios) or YAML path'),
@@ -141,6 +145,11 @@ def generate_launch_description():
         DeclareLaunchArgument('bag', default_value='',
                               description='bag folder of the recording (default: the '
                               "scenario's, out/bags/<scenario>-<UTC time>)"),
+        DeclareLaunchArgument('live', default_value='false',
+                              description='true: serve the run to Foxglove over WebSocket '
+                              '(live_view node, docs/live_view.md)'),
+        DeclareLaunchArgument('live_port', default_value='8765',
+                              description='WebSocket port of the live view (127.0.0.1)'),
         DeclareLaunchArgument('domain_id', default_value='',
                               description='ROS_DOMAIN_ID of the nodes (default: the '
                               "environment's, else a free domain reserved for the launch)"),

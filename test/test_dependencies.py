@@ -19,6 +19,7 @@ IMPORT_KEYS = {
     'dask': 'python3-dask-pip',
     'distributed': 'python3-distributed-pip',
     'foxglove': 'python3-foxglove-sdk-pip',
+    'primme': 'python3-primme-pip',
     'diagnostic_msgs': 'diagnostic_msgs',
     'geometry_msgs': 'geometry_msgs',
     'lz4': 'python3-lz4-pip',
