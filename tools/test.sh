@@ -9,4 +9,7 @@ source "$ROOT/tools/env.sh"
 cd "$ROOT"
 # conftest.py reserves a free ROS domain for the pytest session (unless ROS_DOMAIN_ID is set)
 # and keeps discovery on this host: concurrent runs on this host never share a domain
+# the ecosystem's lint rules (ruff.toml: ament's flake8/pep257 settings) and the core's types
+ruff check --no-cache -q .
+mypy --no-incremental --cache-dir=/dev/null
 exec python -m pytest -q -p no:cacheprovider "$@"
