@@ -22,7 +22,7 @@ from pentapod_damper.study.config import StudyConfig
 from pentapod_sim import __version__
 from pentapod_sim.errors import RunError
 from pentapod_sim.interface import EXCITATION, PMA_STATE, TCP_STATE
-from pentapod_sim.scenario.files import read_scenario
+from pentapod_sim.scenario.files import dump_params, read_scenario
 from pentapod_sim.scenario.runner import run_scenario
 
 LOG = logging.getLogger(__name__)
@@ -31,20 +31,6 @@ LOG = logging.getLogger(__name__)
 #: the lockstep loop time, and the study's analysis does not need them).
 RECORDED_TOPICS = [TCP_STATE, EXCITATION, PMA_STATE]
 DIRECTIONS = {'x': [1.0, 0.0, 0.0], 'y': [0.0, 1.0, 0.0], 'z': [0.0, 0.0, 1.0]}
-
-
-class _QuotingDumper(yaml.SafeDumper):
-    """YAML dumper that quotes every string: rcl reads a bare ``y`` or ``n`` as a boolean."""
-
-
-_QuotingDumper.add_representer(
-    str, lambda dumper, value: dumper.represent_scalar('tag:yaml.org,2002:str', value,
-                                                       style="'"))
-
-
-def dump_params(doc: dict) -> str:
-    """A ROS 2 parameter file's text with every string quoted."""
-    return yaml.dump(doc, Dumper=_QuotingDumper, sort_keys=False)
 
 
 @dataclass

@@ -249,7 +249,10 @@ def run_node(factory: Callable[..., object], argv=None, run: Callable | None = N
     try:
         node = factory()
         spinner = executor()
-        spinner.add_node(node)
+        if hasattr(node, 'add_to'):          # several nodes (a composed run)
+            node.add_to(spinner)
+        else:
+            spinner.add_node(node)
         if run is not None:
             run(node, spinner)
         else:

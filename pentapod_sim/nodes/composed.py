@@ -18,14 +18,11 @@ import argparse
 import importlib
 import sys
 
-import rclpy
-from rclpy.signals import SignalHandlerOptions
-
 from pentapod_sim import shutdown
-from pentapod_sim.errors import ConfigError, RunError
+from pentapod_sim.errors import ConfigError
 from pentapod_sim.executables import COMPONENTS
 from pentapod_sim.nodes import plant_node
-from pentapod_sim.nodes.common import make_executor, spin_until
+from pentapod_sim.nodes.common import run_node, spin_until
 from pentapod_sim.scenario.files import read_scenario, resolve
 
 
@@ -57,6 +54,11 @@ class Composition:
                 self.nodes.append(load_class(target)(cli_args=['--ros-args', '-r',
                                                                f'__node:={name}']))
 
+    def add_to(self, executor) -> None:
+        """Add every node of the composition to ``executor``."""
+        for node in self.nodes:
+            executor.add_node(node)
+
     def destroy_node(self) -> None:
         """Close what needs closing (a recorder's bag), then destroy every node."""
         for node in self.nodes:
@@ -66,9 +68,7 @@ class Composition:
 
 
 def run(composition: Composition, executor) -> None:
-    """Add every node to the executor, run the plant's loop, let the others drain."""
-    for node in composition.nodes:
-        executor.add_node(node)
+    """Run the plant's loop on the executor holding every node, then let the others drain."""
     plant_node.run(composition.plant, executor)
     if not shutdown.requested():
         spin_until(executor, lambda: False, 0.5)      # deliveries still queued in-process
@@ -88,25 +88,13 @@ def main(argv=None) -> int:
                         help="a node class of yours for the node NAME (replaces the scenario's "
                         'executable for that name, or adds a node)')
     args = parser.parse_args(argv[1:])
-    shutdown.install()
-    code, composition = 0, None
     try:
         path = resolve(args.scenario)
         extra = dict(item.split('=', 1) for item in args.component)
-        rclpy.init(args=argv[:1], signal_handler_options=SignalHandlerOptions.NO)
-        composition = Composition(path, extra)
-        run(composition, make_executor())
-    except (ConfigError, RunError, ValueError, KeyError) as err:
+    except (ConfigError, ValueError) as err:
         print(f'error: {err}', file=sys.stderr)
-        code = 1
-    finally:
-        if composition is not None:
-            composition.destroy_node()
-        rclpy.try_shutdown()
-    if code == 0 and shutdown.requested():
-        print(f'stopped by {shutdown.signal_name()}', file=sys.stderr)
-        code = shutdown.exit_code()
-    return code
+        return 1
+    return run_node(lambda: Composition(path, extra), argv[:1], run)
 
 
 if __name__ == '__main__':
