@@ -323,9 +323,9 @@ def ros_rows(quick: bool) -> list[dict]:
                                   f'(the only subscribed topic), {n_ctrl} answer(s) in'))
         for n_ctrl, rec in ((1, False), (3, True)):
             res = composed_run(folder, model_file, n_ctrl, steps, rec)
-            label = (f'lockstep composed, plant + {n_ctrl} controller'
-                     + (' + recorder' if rec else ''))
-            rows.append(_row(label, steps / res['wall_time'], 'steps/s',
+            extra = ' + recorder' if rec else ''
+            rows.append(_row(f'lockstep composed, plant + {n_ctrl} controller{extra}',
+                             steps / res['wall_time'], 'steps/s',
                              'rclpy ping-pong, 2 processes, default executor', base,
                              note=f'{steps} steps, 200 states; every node in one process on '
                                   'one EventsExecutor (scenario --composed)'))
