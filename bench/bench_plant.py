@@ -230,6 +230,13 @@ def wait_rss(proc: subprocess.Popen, timeout: float) -> tuple[int, float]:
     return proc.returncode, peak
 
 
+def _trace_figures(trace: Path, rss: float) -> dict:
+    """The numeric scalars of a plant trace file (timing figures), and the peak RSS."""
+    with np.load(trace) as data:
+        return dict({k: float(data[k]) for k in data.files
+                     if data[k].shape == () and data[k].dtype.kind in 'fiub'}, rss=rss)
+
+
 def plant_run(folder: Path, model_file: Path, n_controllers: int, steps: int,
               timing: str = 'lockstep', rate: float = RATE) -> dict:
     """Run the plant node with n damper nodes; return the figures of its trace file."""
@@ -250,9 +257,7 @@ def plant_run(folder: Path, model_file: Path, n_controllers: int, steps: int,
             raise RuntimeError((folder / 'plant.log').read_text())
     finally:
         session.close()
-    with np.load(trace) as data:
-        return dict({k: float(data[k]) for k in data.files
-                     if data[k].shape == () and data[k].dtype.kind in 'fiub'}, rss=rss)
+    return _trace_figures(trace, rss)
 
 
 def composed_run(folder: Path, model_file: Path, n_controllers: int, steps: int,
@@ -280,9 +285,7 @@ def composed_run(folder: Path, model_file: Path, n_controllers: int, steps: int,
             raise RuntimeError((folder / 'composed.log').read_text())
     finally:
         session.close()
-    with np.load(trace) as data:
-        return dict({k: float(data[k]) for k in data.files
-                     if data[k].shape == () and data[k].dtype.kind in 'fiub'}, rss=rss)
+    return _trace_figures(trace, rss)
 
 
 def pingpong(folder: Path, n: int) -> tuple[float, float]:
