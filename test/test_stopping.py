@@ -198,6 +198,28 @@ def test_a_second_publisher_on_a_force_topic_is_refused(tmp_path, runner_of):
     assert 'publishers (/damper' in line, line
 
 
+def test_a_second_publisher_joining_mid_run_is_refused(tmp_path, runner_of):
+    """A second 'damper' started while the run goes on (the late case): the run still ends."""
+    run = runner_of(scenario(tmp_path, record=False))
+    run.wait_for('lockstep run of')
+    time.sleep(0.5)
+    late = subprocess.Popen(
+        [sys.executable, '-m', 'pentapod_damper.nodes.damper_node', '--ros-args',
+         '-r', '__node:=damper_late', '-p', 'source_name:=damper', '-p', 'tcp_directions:=[z]',
+         '-p', 'tcp_gain:=10.0', '-p', f'sample_rate:={RATE}'],
+        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    try:
+        code = run.proc.wait(timeout=60)
+    finally:
+        late.kill()
+        late.wait()
+    out = run.text()
+    assert code == 1, out
+    assert 'force topic /pentapod/forces/damper has 2 publishers' in out, out
+    trace = np.load(tmp_path / 'trace.npz')
+    assert 0 < int(trace['steps_run']) < LONG and str(trace['end']).startswith('error: ')
+
+
 def test_absurd_forces_are_rejected_and_counted():
     """An effort above max_effort is refused like NaN; nothing accepted before is lost."""
     mixer = ForceMixer(['a', 'b'], [ForceSource('s')], max_effort=1e6)

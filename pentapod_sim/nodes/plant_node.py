@@ -41,6 +41,8 @@ from pentapod_sim.plant.build import load_or_build_model
 from pentapod_sim.sim.stepping import DiscretePlant, ForceMixer, parse_sources
 from pentapod_sim.sim.trace import Trace
 
+GRAPH_CHECK_PERIOD = 0.25   # s of wall time between checks of the force topics' publishers
+
 
 class PlantNode(Node):
     """Discrete modal plant as a ROS 2 node (parameters: docs/parameters.md)."""
@@ -238,15 +240,24 @@ class PlantNode(Node):
                     return
 
     def run_lockstep(self, executor, trace, n_steps: int | None = None) -> None:
-        """Each step: publish y_k, wait for every source's u_k, advance."""
+        """
+        Each step: publish y_k, wait for every source's u_k, advance.
+
+        The graph is checked every ``GRAPH_CHECK_PERIOD`` seconds of wall time as well: a
+        second publisher on a force topic discovered after the start still ends the run.
+        """
         core, mixer = self.core, self.mixer
         resend, timeout = self.params.resend_period, self.params.source_timeout
+        next_check = time.monotonic() + GRAPH_CHECK_PERIOD
         for k in range(self.n_steps if n_steps is None else n_steps):
             if shutdown.requested():
                 return
             y = core.outputs()
             self.publish_outputs(y)
             start = last_sent = time.monotonic()
+            if start > next_check:
+                self.check_sources()
+                next_check = start + GRAPH_CHECK_PERIOD
             limit = self.params.startup_timeout if k == 0 else timeout
             while mixer.missing(k):
                 executor.spin_once(timeout_sec=resend / 4)
@@ -286,7 +297,7 @@ class PlantNode(Node):
         self.run_lockstep(executor, trace, n_steps=1)
         t0 = time.monotonic() - dt
         next_report = t0 + self.params.report_period
-        next_check = t0 + 0.25
+        next_check = t0 + GRAPH_CHECK_PERIOD
         for k in range(1, self.n_steps):
             if shutdown.requested():
                 break
@@ -311,7 +322,7 @@ class PlantNode(Node):
             core.advance(u)
             if now > next_check:
                 self._watch_lost_sources()
-                next_check = now + 0.25
+                next_check = now + GRAPH_CHECK_PERIOD
             if now > next_report:
                 self.get_logger().info('realtime: ' + stats.summary(k + 1, now - t0))
                 next_report = now + self.params.report_period
