@@ -80,11 +80,11 @@ def _table(rows: list[list[str]], columns: tuple[str, ...] = COLUMNS) -> str:
 
 
 def _template(node: ast.expr) -> str | None:
-    """Regular expression of a literal row name; f-string fields match any text."""
+    """Regular expression of a literal row name; f-string fields match any text, also none."""
     if isinstance(node, ast.Constant) and isinstance(node.value, str):
         return re.escape(node.value)
     if isinstance(node, ast.JoinedStr):
-        return ''.join(re.escape(part.value) if isinstance(part, ast.Constant) else '.+'
+        return ''.join(re.escape(part.value) if isinstance(part, ast.Constant) else '.*'
                        for part in node.values)
     return None                       # a variable: its callers hold the literal
 
