@@ -3,10 +3,13 @@ Offline closed loop: the plant core plus damper/PMA laws in-process.
 
 :func:`simulate` steps :class:`pentapod_sim.sim.stepping.DiscretePlant` exactly as the lockstep ROS
 run does (y_k, then every law and the excitation answer u_k, then x_{k+1}); it is the reference
-a ROS run must reproduce, bit for bit (test/test_plant_core.py). :func:`closed_loop_system`
-forms the closed-loop discrete system of linear laws -- memoryless ones as static gains, laws
-with actuator/sensor dynamics or delays with their controller states -- for the analytic checks
-(:func:`closed_loop_matrices` is its static-gain special case).
+a ROS run must reproduce, bit for bit (test/test_plant_core.py). A multi-rate plant
+(:class:`pentapod_sim.sim.multirate.MultiRatePlant`, N substeps per exchange) steps the same
+way at the exchange rate; ``full_rate=True`` also keeps its N outputs per exchange.
+:func:`closed_loop_system` forms the closed-loop discrete system of linear laws --
+memoryless ones as static gains, laws with actuator/sensor dynamics or delays with their
+controller states -- for the analytic checks (:func:`closed_loop_matrices` is its static-gain
+special case); for a multi-rate plant it is the loop at the exchange rate.
 
 Units: as the plant ports (N, N m in; m, m/s, rad, rad/s out); time in steps of dt [s].
 """
@@ -54,6 +57,9 @@ class Response:
         Sample time [s].
     output_names, input_names : list of str
         Port names of the columns.
+    y_full : (n_steps * N, n_out) ndarray or None
+        Full-rate outputs of a multi-rate plant (N substeps per exchange), row ``k N + j`` at
+        ``t_k + j dt / N``; None unless asked for.
     """
 
     y: npt.NDArray[np.float64]
@@ -61,6 +67,7 @@ class Response:
     dt: float
     output_names: list[str]
     input_names: list[str]
+    y_full: npt.NDArray[np.float64] | None = None
 
     def output(self, name: str) -> npt.NDArray[np.float64]:
         """Column of an output port."""
@@ -99,7 +106,8 @@ def excitation_matrix(plant: DiscretePlant, ports: Sequence[str],
 
 
 def simulate(plant: DiscretePlant, laws: Sequence[Law], excitation: npt.NDArray[np.float64],
-             progress: Callable[[int, int], None] | None = None) -> Response:
+             progress: Callable[[int, int], None] | None = None,
+             full_rate: bool = False) -> Response:
     """
     Step plant + laws from the plant's current state, as the lockstep ROS run does.
 
@@ -113,6 +121,8 @@ def simulate(plant: DiscretePlant, laws: Sequence[Law], excitation: npt.NDArray[
         External forces per step [N, N m] (:func:`excitation_matrix`).
     progress : callable, optional
         Called as ``progress(k, n_steps)`` every 10 % of the run.
+    full_rate : bool, optional
+        Keep the full-rate outputs of a multi-rate plant (``Response.y_full``).
 
     Returns
     -------
@@ -130,15 +140,24 @@ def simulate(plant: DiscretePlant, laws: Sequence[Law], excitation: npt.NDArray[
     us = excitation.copy()           # u_k is built in place from e_k
     every = max(1, n_steps // 10)
     outputs, advance = plant.outputs, plant.advance
+    fine_outputs = getattr(plant, 'fine_outputs', None) if full_rate else None
+    substeps = getattr(plant, 'substeps', 1)
+    fine = np.empty((n_steps if fine_outputs else 0, substeps, len(plant.output_names)))
     for k in range(n_steps):
         y = outputs(ys[k])
         u = us[k]
         for sensors, actuators, step in bound:
             u[actuators] += step(y[sensors])
+        if fine_outputs is not None:
+            fine_outputs(u, y, fine[k])
         advance(u)
         if progress is not None and (k + 1) % every == 0:
             progress(k + 1, n_steps)
-    return Response(ys, us, plant.dt, list(plant.output_names), list(plant.input_names))
+    y_full = None
+    if full_rate:
+        y_full = fine.reshape(-1, ys.shape[1]) if fine_outputs is not None else ys.copy()
+    return Response(ys, us, plant.dt, list(plant.output_names), list(plant.input_names),
+                    y_full)
 
 
 def feedback_gain(plant: DiscretePlant, laws: Sequence[Law]) -> npt.NDArray[np.float64]:
