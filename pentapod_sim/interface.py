@@ -38,11 +38,23 @@ STATE_TOPICS = (TCP_STATE, STRUT_STATES, PMA_MOUNT_STATE)
 EXCITATION = '/pentapod/excitation'
 PMA_STATE = '/pentapod/pma/state'
 #: Run status of the plant (diagnostic_msgs/DiagnosticStatus, reliable, transient local):
-#: ``running`` at the start, ``finished`` or ``stopped`` with the steps run at the end; see
-#: :data:`RUN_STATUS_KEYS` and docs/recording.md.
+#: ``running`` at the start and every ``status_period`` s of wall time during the run,
+#: ``finished`` or ``stopped`` with the steps run at the end; see :data:`RUN_STATUS_KEYS`,
+#: :data:`RUN_PROGRESS_KEYS` and docs/recording.md.
 RUN_STATUS = '/pentapod/run_status'
 #: A force source ``<name>`` publishes on ``FORCE_PREFIX + <name>``.
 FORCE_PREFIX = '/pentapod/forces/'
+#: A force source ``<name>`` publishes the linear model of its law once, on
+#: ``CONTROLLER_MODEL_PREFIX + <name>`` (std_msgs/String, reliable, transient local, depth 1, so a
+#: plant started later still gets it): the JSON text of
+#: :meth:`pentapod_sim.sim.controllers.DiscreteController.to_json`, :data:`NO_FEEDBACK` for an
+#: open-loop source, or :data:`NO_LINEAR_MODEL` and the reason. The plant's truncation check at
+#: start-up closes the sampled loop with these models (:mod:`pentapod_sim.nodes.loop_check`).
+CONTROLLER_MODEL_PREFIX = '/pentapod/controller_models/'
+#: Model text of a source that reads no plant output (an exciter): it closes no loop.
+NO_FEEDBACK = 'no feedback'
+#: Start of the model text of a source whose law has no linear model (limits, ...).
+NO_LINEAR_MODEL = 'no linear model'
 #: Channels only the live view serves (Foxglove WebSocket, not ROS topics): its derived data.
 LIVE_PREFIX = '/pentapod/live/'
 #: Run status (sensor_msgs/JointState, one joint per figure: pentapod_sim.live.status).
@@ -56,6 +68,7 @@ WRENCH_STAMPED = 'geometry_msgs/msg/WrenchStamped'
 CLOCK_TYPE = 'rosgraph_msgs/msg/Clock'
 FLOAT64_MULTI_ARRAY = 'std_msgs/msg/Float64MultiArray'
 DIAGNOSTIC_STATUS = 'diagnostic_msgs/msg/DiagnosticStatus'
+STRING = 'std_msgs/msg/String'
 #: Message type of every fixed data topic (force topics are JOINT_STATE; RUN_STATUS is
 #: DIAGNOSTIC_STATUS).
 TOPIC_TYPES = {CLOCK: CLOCK_TYPE, TCP_STATE: JOINT_STATE, STRUT_STATES: JOINT_STATE,
@@ -71,11 +84,22 @@ RUN_RUNNING, RUN_FINISHED, RUN_STOPPED = 'running', 'finished', 'stopped'
 #: -1 for none) and ``step_topics`` (comma-separated topics the plant published or awaited
 #: every step: /clock, its state topics with subscribers, its sources' force topics).
 RUN_STATUS_KEYS = ('state', 'steps', 'dt', 'last_stamp_ns', 'step_topics')
+#: Further keys of every run-status message (readers must not require them: older bags lack
+#: them): ``step_rate`` (steps per second of wall time since the previous status message; 0 in
+#: the first), ``deadline_misses`` (realtime: answers of a source that missed the end of their
+#: period so far, summed over the sources; 0 in lockstep) and ``rejected_messages`` (force
+#: messages the plant rejected so far, every source and reason).
+RUN_PROGRESS_KEYS = ('step_rate', 'deadline_misses', 'rejected_messages')
 
 
 def force_topic(source: str) -> str:
     """Topic of the force source ``source``."""
     return FORCE_PREFIX + source
+
+
+def controller_model_topic(source: str) -> str:
+    """Topic of the linear model of the force source ``source``."""
+    return CONTROLLER_MODEL_PREFIX + source
 
 
 def is_step_topic(topic: str) -> bool:
@@ -125,9 +149,11 @@ REPAIR_TIME = 3.0
 STREAM_DEPTH = int(math.ceil((RECORDER_STALL + REPAIR_TIME) * MAX_SHIPPED_RATE))
 #: QoS per class of topic: plant outputs and /clock ('state'), forces from the sources
 #: ('force'; one message per step), diagnostics such as PMA state and excitation ('info'), the
-#: run status ('status': the last one kept for a late reader).
+#: run status ('status': the last one kept for a late reader) and the sources' controller models
+#: ('model': published once, kept for a late reader).
 QOS = {'state': QosSpec(STREAM_DEPTH), 'force': QosSpec(STREAM_DEPTH),
-       'info': QosSpec(STREAM_DEPTH), 'status': QosSpec(4, durability='transient_local')}
+       'info': QosSpec(STREAM_DEPTH), 'status': QosSpec(4, durability='transient_local'),
+       'model': QosSpec(1, durability='transient_local')}
 
 
 def qos_class(topic: str) -> str | None:
@@ -138,6 +164,8 @@ def qos_class(topic: str) -> str | None:
         return 'force'
     if topic in (EXCITATION, PMA_STATE):
         return 'info'
+    if topic.startswith(CONTROLLER_MODEL_PREFIX):
+        return 'model'
     return 'status' if topic == RUN_STATUS else None
 
 

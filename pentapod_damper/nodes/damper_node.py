@@ -8,7 +8,9 @@ velocity, b [N s/m]) and TCP dampers against ground (force from the TCP velocity
 all optionally through the same low-pass and delay (``filter_order``, ``bandwidth_hz``,
 ``filter_damping``, ``delay_steps``; controller states reset with every new plant run). It answers
 every plant step on /pentapod/forces/<source_name> (lockstep contract, docs/nodes.md). The
-gains may be changed at run time (``ros2 param set``); everything else is read-only.
+gains may be changed at run time (``ros2 param set``); everything else is read-only. The node
+publishes the linear model of its laws on /pentapod/controller_models/<source_name> for the
+plant's truncation check, again after a gain changed.
 """
 from __future__ import annotations
 
@@ -19,6 +21,8 @@ from pentapod_damper.node_parameters import DAMPER, damper_laws
 from pentapod_sim.errors import ConfigError
 from pentapod_sim.nodes.common import run_node
 from pentapod_sim.nodes.lockstep_source import LockstepSource
+from pentapod_sim.nodes.loop_check import parallel
+from pentapod_sim.sim.controllers import controller_of, DiscreteController
 
 
 class DamperNode(LockstepSource):
@@ -39,6 +43,7 @@ class DamperNode(LockstepSource):
             self._slices.append((slice(start, start + len(law.sensor_ports)), law))
             start += len(law.sensor_ports)
         self.add_on_set_parameters_callback(self._on_set)
+        self.add_post_set_parameters_callback(lambda params: self.publish_model())
         self.get_logger().info(f'dampers on {self.actuator_ports}')
 
     def _on_set(self, params) -> SetParametersResult:
@@ -48,6 +53,10 @@ class DamperNode(LockstepSource):
                 law = self.laws[p.name]
                 law.gains = np.full(len(law.actuator_ports), float(p.value))
         return SetParametersResult(successful=True)
+
+    def linear_model(self) -> DiscreteController:
+        """Every damper of the node side by side (their ports in the node's order)."""
+        return parallel([controller_of(law) for law in self.laws.values()])
 
     def reset(self) -> None:
         """Filter and delay states of every law back to zero (a new plant run started)."""

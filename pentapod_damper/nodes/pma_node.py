@@ -9,7 +9,9 @@ the reaction -m_a g v, i.e. viscous damping b = m_a g [N s/m]. Stroke and force 
 optional. Answers each step on /pentapod/forces/<source_name> and publishes
 /pentapod/pma/state (sensor_msgs/JointState, joints pma_{x,y,z}: position = stroke of the
 proof mass relative to the mount [m] after the step, velocity = proof-mass velocity [m/s],
-effort = force on the structure over the step [N]).
+effort = force on the structure over the step [N]). The ideal law's linear model (damping
+m_a g) goes to the plant's truncation check; with a high-pass or limits it has none and the
+plant names the PMA as unchecked.
 """
 from __future__ import annotations
 
@@ -19,6 +21,7 @@ from pentapod_damper.node_parameters import PMA, pma_law
 from pentapod_sim.interface import PMA_STATE
 from pentapod_sim.nodes.common import INFO_QOS, run_node
 from pentapod_sim.nodes.lockstep_source import LockstepSource
+from pentapod_sim.sim.controllers import controller_of, DiscreteController
 
 
 class PmaNode(LockstepSource):
@@ -38,6 +41,10 @@ class PmaNode(LockstepSource):
     def compute(self, ns, sensors):
         """Advance the proof mass one step and return the force on the structure [N]."""
         return self.law.step(sensors)
+
+    def linear_model(self) -> DiscreteController:
+        """The ideal PMA's damping ``-m_a g`` (ConfigError with a high-pass or limits)."""
+        return controller_of(self.law)
 
     def reset(self) -> None:
         """Proof mass back to rest for a new plant run."""

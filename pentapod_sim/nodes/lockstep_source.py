@@ -4,9 +4,11 @@ Base class of force-source nodes that answer every plant step (lockstep contract
 A source subscribes to the state topics that carry its sensor ports (or to /clock if it has
 none), waits until it holds every needed message of one stamp t_k, computes u_k with
 :meth:`LockstepSource.compute` and publishes it on /pentapod/forces/<source_name> with the
-same stamp. A re-published step (same stamp again) gets the cached answer, so stateful laws
-advance exactly once per step. Messages with NaN/Inf or a missing joint are rejected,
-counted and warned about.
+same stamp. It publishes the linear model of its law once on
+/pentapod/controller_models/<source_name> for the plant's truncation check
+(:meth:`LockstepSource.linear_model`, :mod:`pentapod_sim.nodes.loop_check`). A re-published
+step (same stamp again) gets the cached answer, so stateful laws advance exactly once per step.
+Messages with NaN/Inf or a missing joint are rejected, counted and warned about.
 """
 from __future__ import annotations
 
@@ -17,7 +19,9 @@ import numpy as np
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
+from std_msgs.msg import String
 
+from pentapod_sim.errors import ConfigError
 from pentapod_sim.interface import CLOCK, force_topic, port_location
 from pentapod_sim.nodes.common import (
     declare_table,
@@ -28,6 +32,7 @@ from pentapod_sim.nodes.common import (
     STATE_QOS,
     subscribers_of,
 )
+from pentapod_sim.nodes.loop_check import model_text, publish_model
 from pentapod_sim.parameters import ParameterTable
 
 
@@ -69,6 +74,26 @@ class LockstepSource(Node):
         self.subs = [self.create_subscription(
             Clock if t == CLOCK else JointState, t,
             lambda msg, t=t: self._on_state(t, msg), STATE_QOS) for t in topics]
+        self.model_pub = publish_model(self, self.source_name, self.model_text())
+
+    def linear_model(self):
+        """
+        The law as a DiscreteController on its ports, for the plant's truncation check.
+
+        Raises
+        ------
+        ConfigError
+            Saying why the law has none (the plant then names the source as unchecked).
+        """
+        raise ConfigError(f'{type(self).__name__} offers no linear model')
+
+    def model_text(self) -> str:
+        """Text of the model message (``no feedback`` for a source without sensors)."""
+        return model_text(self.linear_model, feedback=bool(self.sensor_ports))
+
+    def publish_model(self) -> None:
+        """Publish the current model again (e.g. after a gain changed)."""
+        self.model_pub.publish(String(data=self.model_text()))
 
     def compute(self, stamp_ns: int, sensors: np.ndarray) -> np.ndarray:
         """Return efforts for ``actuator_ports`` at this step (N or N m)."""

@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 
 from pentapod_sim.parameters import Param, ParameterTable, Values
+from pentapod_sim.plant.check_model import DEFAULT_CHECK_F_MIN
 from pentapod_sim.sim.excitation import ExcitationSpec, KINDS
 from pentapod_sim.sim.stepping import DEFAULT_MAX_STATE_NORM
 
@@ -69,6 +70,16 @@ PLANT = ParameterTable('plant', [
     Param('lost_source_policy', 'str', 'zero', 'realtime: force of a source whose publisher '
           'left the graph (zero, or hold its last force); lockstep stops the run',
           choices=('zero', 'hold')),
+    Param('loop_check', 'str', 'warn', 'truncation check before step 0 with the linear models '
+          'the sources publish: refuse = end with an error, warn = log a loud warning, when '
+          'the sampled loop is unstable on the plant or stable only thanks to truncation (the '
+          "check model of the model's position: FE modes below max(loop_check_f_min, 2 x "
+          'sample_rate)); off = no check', choices=('refuse', 'warn', 'off')),
+    Param('loop_check_f_min', 'float', DEFAULT_CHECK_F_MIN, 'lowest cut-off of the check '
+          "model's modes (cached in model_cache_dir)", 'Hz', 1.0, 1.0e7),
+    Param('status_period', 'float', 0.5, 'wall time between run-status messages during a run '
+          '(/pentapod/run_status: steps, step_rate, deadline_misses, rejected_messages)', 's',
+          0.01, 3600.0),
 ], summary='integrates the modal plant; publishes /clock and the state topics, applies the '
            'forces of its sources.')
 

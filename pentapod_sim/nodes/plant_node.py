@@ -6,13 +6,14 @@ forces of its sources (/pentapod/forces/<source>) as u_k and steps x_{k+1} = A_d
 (:class:`pentapod_sim.sim.stepping.DiscretePlant`). Timing ``lockstep`` waits for every source's
 answer to step k (deterministic; a silent source stops the run naming it); ``realtime`` paces
 steps by the wall clock, holds the newest force of each source and reports the achieved rate,
-lateness percentiles and overruns. See docs/nodes.md.
+lateness percentiles and overruns. Before step 0 it checks the sampled loop with its sources'
+linear models (``loop_check``, :mod:`pentapod_sim.nodes.loop_check`); during the run it
+publishes its run status every ``status_period`` s (:mod:`.run_status`). See docs/nodes.md.
 """
 from __future__ import annotations
 
 import time
 
-from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 import numpy as np
 from rclpy.duration import Duration
 from rclpy.node import Node
@@ -22,12 +23,12 @@ from sensor_msgs.msg import JointState
 from pentapod_sim import interface, shutdown
 from pentapod_sim.errors import ConfigError, RunError
 from pentapod_sim.interface import CLOCK, force_topic, stamp_ns, state_layouts, step_of
+from pentapod_sim.nodes import loop_check
 from pentapod_sim.nodes.common import (
     declare_param,
     declare_table,
     FORCE_QOS,
     node_args,
-    qos,
     run_node,
     spin_until,
     stamp_msg,
@@ -37,6 +38,7 @@ from pentapod_sim.nodes.common import (
 )
 from pentapod_sim.nodes.parameter_tables import PLANT
 from pentapod_sim.nodes.realtime_stats import LatenessStats
+from pentapod_sim.nodes.run_status import RunStatusPublisher
 from pentapod_sim.plant.build import load_or_build_model
 from pentapod_sim.sim.stepping import DiscretePlant, ForceMixer, parse_sources
 from pentapod_sim.sim.trace import Trace
@@ -73,8 +75,8 @@ class PlantNode(Node):
             JointState, force_topic(name),
             lambda msg, name=name: self._on_force(name, msg), FORCE_QOS)
             for name in self.mixer.sources]
-        self.status_pub = self.create_publisher(DiagnosticStatus, interface.RUN_STATUS,
-                                                qos('status'))
+        self.status = RunStatusPublisher(self, self.params.status_period)
+        self.loop_models = loop_check.ModelCollector(self, self.mixer.sources)
         self._last_warn = {}
         self._next_refresh = 0.0
 
@@ -136,23 +138,16 @@ class PlantNode(Node):
                 self.get_logger().warning(f'rejected message from source {source!r}: {reason} '
                                           f'({self.mixer.rejected[(source, kind)]} so far)')
 
-    def announce(self, state: str) -> None:
+    def announce(self, state: str, periodic: bool = False) -> None:
         """Publish the run status (docs/recording.md): state, steps run, per-step topics."""
         if not self.context.ok():
             return    # after a signal nothing can be published any more
-        if state == interface.RUN_RUNNING:
+        if state == interface.RUN_RUNNING and not periodic:
             self.refresh_subscribers()
-        steps = self.core.k
         topics = ([self.clock_pub.topic_name] if self._clock_active else []) + [
             pub.topic_name for pub, _ in self._active] + [force_topic(s)
                                                           for s in self.mixer.sources]
-        values = {'state': state, 'steps': steps, 'dt': repr(self.dt),
-                  'last_stamp_ns': stamp_ns(steps - 1, self.dt) if steps else -1,
-                  'step_topics': ','.join(topics)}
-        level = DiagnosticStatus.WARN if state == interface.RUN_STOPPED else DiagnosticStatus.OK
-        self.status_pub.publish(DiagnosticStatus(
-            level=level, name=self.get_fully_qualified_name(), message=state,
-            values=[KeyValue(key=k, value=str(v)) for k, v in values.items()]))
+        self.status.publish(state, topics)
 
     # -- runs ------------------------------------------------------------------------------
     def wait_for_sources(self, executor) -> None:
@@ -352,6 +347,7 @@ def run(node: PlantNode, executor) -> None:
     """
     trace = Trace(node.n_steps, node.core, bool(node.params.output_file))
     node.wait_for_sources(executor)
+    loop_check.check_at_start(node, executor)
     node.wait_for_subscribers(executor)
     node.get_logger().info(f'{node.params.timing} run of {node.n_steps} steps with sources '
                            f'{list(node.mixer.sources) or "none"}')
@@ -359,6 +355,7 @@ def run(node: PlantNode, executor) -> None:
     end = 'finished'
     wall = time.monotonic()
     node.announce(interface.RUN_RUNNING)
+    node.status.start()
     try:
         if node.params.timing == 'lockstep':
             node.run_lockstep(executor, trace)
@@ -373,6 +370,7 @@ def run(node: PlantNode, executor) -> None:
         raise
     finally:
         wall = time.monotonic() - wall
+        node.status.stop()
         if shutdown.requested():
             end = f'stopped by {shutdown.signal_name()}'
         node.announce(interface.RUN_FINISHED if node.core.k == node.n_steps

@@ -1,0 +1,67 @@
+"""
+The plant's run status on /pentapod/run_status: at the start, periodically, at the end.
+
+Each message (diagnostic_msgs/DiagnosticStatus, reliable, transient local) carries the keys
+:data:`pentapod_sim.interface.RUN_STATUS_KEYS` and :data:`pentapod_sim.interface.RUN_PROGRESS_KEYS`
+as text values; ``message`` is the state. During a run a timer on the steady clock publishes a
+``running`` message every ``status_period`` s of wall time; it fires inside the plant's
+``spin_once`` calls, so it never interrupts a step. See docs/recording.md.
+"""
+from __future__ import annotations
+
+import time
+
+from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+from rclpy.clock import Clock, ClockType
+
+from pentapod_sim import interface
+from pentapod_sim.interface import stamp_ns
+from pentapod_sim.nodes.common import qos
+
+
+def status_values(state: str, steps: int, dt: float, step_topics: list[str],
+                  step_rate: float, deadline_misses: int, rejected: int) -> dict[str, str]:
+    """Key/value pairs of one run-status message (units: dt [s], step_rate [steps/s])."""
+    values = {'state': state, 'steps': steps, 'dt': repr(dt),
+              'last_stamp_ns': stamp_ns(steps - 1, dt) if steps else -1,
+              'step_topics': ','.join(step_topics), 'step_rate': f'{step_rate:.6g}',
+              'deadline_misses': deadline_misses, 'rejected_messages': rejected}
+    return {k: str(v) for k, v in values.items()}
+
+
+class RunStatusPublisher:
+    """The run-status publisher of a plant node and its periodic timer."""
+
+    def __init__(self, node, period: float):
+        self.node = node
+        self.pub = node.create_publisher(DiagnosticStatus, interface.RUN_STATUS, qos('status'))
+        self.timer = node.create_timer(period, self._tick,
+                                       clock=Clock(clock_type=ClockType.STEADY_TIME))
+        self.timer.cancel()                # started by start()
+        self._last = (time.monotonic(), 0)
+
+    def start(self) -> None:
+        """Publish ``running`` every period from now on."""
+        self._last = (time.monotonic(), self.node.core.k)
+        self.timer.reset()
+
+    def stop(self) -> None:
+        """No more periodic messages."""
+        self.timer.cancel()
+
+    def _tick(self) -> None:
+        self.node.announce(interface.RUN_RUNNING, periodic=True)
+
+    def publish(self, state: str, step_topics: list[str]) -> None:
+        """Publish one status message of the node's current step count."""
+        node, now = self.node, time.monotonic()
+        steps = node.core.k
+        last_time, last_steps = self._last
+        rate = (steps - last_steps) / (now - last_time) if now > last_time else 0.0
+        self._last = (now, steps)
+        values = status_values(state, steps, node.dt, step_topics, rate,
+                               sum(node.misses.values()), sum(node.mixer.rejected.values()))
+        level = DiagnosticStatus.WARN if state == interface.RUN_STOPPED else DiagnosticStatus.OK
+        self.pub.publish(DiagnosticStatus(
+            level=level, name=node.get_fully_qualified_name(), message=state,
+            values=[KeyValue(key=k, value=v) for k, v in values.items()]))
