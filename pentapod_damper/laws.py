@@ -97,6 +97,18 @@ class Dynamics:
         """True without filter and delay (the law stays memoryless)."""
         return self.order == 0 and self.delay_steps == 0
 
+    def continuous(self) -> tuple[np.ndarray, ...]:
+        """Continuous state space (a, b, c, d) of the low-pass of one channel (no delay)."""
+        w = 2 * np.pi * self.bandwidth_hz
+        if self.order == 1:
+            cont = ([[-w]], [[w]], [[1.0]], [[0.0]])
+        elif self.order == 2:
+            cont = ([[0.0, 1.0], [-w * w, -2 * self.damping * w]], [[0.0], [w * w]],
+                    [[1.0, 0.0]], [[0.0]])
+        else:
+            cont = (np.zeros((0, 0)), np.zeros((0, 1)), np.zeros((1, 0)), [[1.0]])
+        return tuple(np.array(m, dtype=float) for m in cont)
+
     def siso(self, dt: float) -> tuple[np.ndarray, ...]:
         """
         Discrete state space (a, b, c, d) of one channel at sample time ``dt`` [s].
@@ -109,17 +121,9 @@ class Dynamics:
         if self.order and self.bandwidth_hz >= 0.5 / dt:
             raise ConfigError(f'filter bandwidth {self.bandwidth_hz} Hz must be below Nyquist '
                               f'{0.5 / dt:g} Hz')
-        w = 2 * np.pi * self.bandwidth_hz
-        if self.order == 1:
-            cont = ([[-w]], [[w]], [[1.0]], [[0.0]])
-        elif self.order == 2:
-            cont = ([[0.0, 1.0], [-w * w, -2 * self.damping * w]], [[0.0], [w * w]],
-                    [[1.0, 0.0]], [[0.0]])
+        a, b, c, d = self.continuous()
         if self.order:
-            a, b, c, d, _ = scipy.signal.cont2discrete(tuple(np.array(m, dtype=float)
-                                                             for m in cont), dt, method=self.hold)
-        else:
-            a, b, c, d = np.zeros((0, 0)), np.zeros((0, 1)), np.zeros((1, 0)), np.ones((1, 1))
+            a, b, c, d, _ = scipy.signal.cont2discrete((a, b, c, d), dt, method=self.hold)
         n = int(self.delay_steps)
         if n == 0:
             return a, b, c, d
@@ -208,6 +212,19 @@ class ViscousDamper:
                                              self.linear_gain())
         a, b, c, d = self._siso
         g = -np.diag(self.gains)
+        return DiscreteController(self.sensor_ports, self.actuator_ports, np.kron(eye, a),
+                                  np.kron(eye, b), g @ np.kron(eye, c), g * d[0, 0])
+
+
+    def continuous_model(self) -> DiscreteController:
+        """
+        The law's continuous state space (the low-pass, no delay) on its ports.
+
+        Same container as :meth:`discrete_model`, with continuous matrices (``dxc/dt``), for
+        :func:`pentapod_sim.sim.loop_poles.continuous_loop_poles`.
+        """
+        a, b, c, d = self.dynamics.continuous()
+        eye, g = np.eye(len(self.actuator_ports)), -np.diag(self.gains)
         return DiscreteController(self.sensor_ports, self.actuator_ports, np.kron(eye, a),
                                   np.kron(eye, b), g @ np.kron(eye, c), g * d[0, 0])
 

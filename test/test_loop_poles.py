@@ -158,3 +158,33 @@ def test_peak_terms_of_the_open_loop_are_the_modal_peaks():
                                rtol=1e-10)
     sampled = closed_loop_poles(plant, [], 1 / 5000)
     np.testing.assert_allclose(sampled.peaks(0, 0), peaks, rtol=0.02)
+
+
+@pytest.mark.slow
+def test_statespace_closed_loop_poles_agree_with_python_control(tmp_path, capsys):
+    from pentapod_sim.cli.statespace import main
+    from pentapod_sim.plant.build import load_or_build_model
+    rate, gain = 2000.0, 2e4
+    assert main(['closed-loop', '--position', 'P1', '--out', str(tmp_path), '--damper',
+                 f'tcp_force_x={gain}', '--poles', '--sample-rate', str(rate),
+                 '--check-f-min', '1500']) == 0
+    assert 'controller poles' in capsys.readouterr().out
+    table = np.genfromtxt(tmp_path / 'loop_poles_P1.csv', delimiter=',', names=True)
+    plant, _ = load_or_build_model(position='P1', cache_dir=tmp_path / 'models')
+    assert table['mode'].size == np.count_nonzero(plant.frequencies_hz <= 400.0)
+    np.testing.assert_allclose(table['open_zeta'], plant.zeta[:table.size])
+    sub = plant.select(['tcp_force_x'], ['tcp_velocity_x'])
+    cont = control.poles(control.feedback(sub.to_statespace(), gain))
+    samp_z = control.poles(control.feedback(sub.discretize(1 / rate), gain))
+    samp = np.log(samp_z.astype(complex)) * rate
+    for kind, ref in (('continuous', cont), ('sampled', samp)):
+        ref = ref[ref.imag > 0]
+        freq, zeta = table[f'{kind}_freq_hz'], table[f'{kind}_zeta']
+        for f, z in zip(freq, zeta):
+            near = ref[np.argmin(np.abs(np.abs(ref) - 2 * np.pi * f))]
+            assert abs(near) / (2 * np.pi) == pytest.approx(f, rel=1e-9)
+            assert -near.real / abs(near) == pytest.approx(z, rel=1e-6, abs=1e-9)
+    untouched = np.isclose(table['continuous_zeta'], table['open_zeta'], rtol=1e-9)
+    assert untouched.any() and np.allclose(table['continuous_mac'][untouched], 1.0)
+    assert np.all((table['sampled_mac'] > 0) & (table['sampled_mac'] <= 1 + 1e-12))
+    assert table['sampled_zeta'][0] < table['continuous_zeta'][0]     # sampling costs damping

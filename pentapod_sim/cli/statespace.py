@@ -8,6 +8,7 @@ All subcommands read config/reduction.yaml (``--config``) and write to ``--out``
     statespace frf --position P1,P2        # TCP FRF PNG + CSV
     statespace dcgain                      # dc gain per mode with the relevance limit
     statespace closed-loop --damper strut1_bending_moment_2=20000 ...  # + truncation check
+    statespace closed-loop --damper tcp_force_x=20000 --poles   # + poles per mode (MAC)
     statespace build --position P1         # out/statespace/plant_P1.npz
     statespace build --modal-data modes.csv --strut-frames frames.yaml
 """
@@ -15,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import copy
+import csv
 from dataclasses import replace
 import json
 import logging
@@ -30,6 +32,7 @@ from pentapod_sim.plant.build import (
     from_modal_data,
     keep_by_relevance,
     load_reduction_config,
+    modal_damping,
     plant_from_fe,
     reduce_plant,
 )
@@ -198,20 +201,61 @@ def _dampers(specs: list[str]) -> dict[str, float]:
     return dampers
 
 
-def _sampled_loop_check(args, position: str, plant, dampers: dict[str, float]):
+def _laws(dampers: dict[str, float]) -> list:
+    """The dampers as memoryless velocity feedback (the same in discrete and continuous time)."""
+    from pentapod_sim.plant.ports import collocated_output
+    from pentapod_sim.sim.controllers import DiscreteController
+    return [DiscreteController.static([collocated_output(port, 'velocity')], [port], [[-g]])
+            for port, g in dampers.items()]
+
+
+def _sampled_loop_check(args, position: str, plant, laws: list):
     """Truncation check of the dampers as sampled feedback (plant vs check model)."""
     from pentapod_sim.plant.check_model import check_f_max, check_model_from_fe
-    from pentapod_sim.plant.ports import collocated_output
-    from pentapod_sim.sim.stability import check_loop, DiscreteController
+    from pentapod_sim.sim.stability import check_loop
     rate = args.sample_rate or args.cfg.sample_rate
     f_max = check_f_max(rate, args.check_f_min)
     check = check_model_from_fe(args.fe_model, args.cfg, f_max,
                                 lambda msg: LOGGER.info('check model: %s', msg))
-    laws = [DiscreteController.static([collocated_output(port, 'velocity')], [port], [[-g]])
-            for port, g in dampers.items()]
     result = check_loop(plant, check, laws, 1.0 / rate, args.on_unstable, label=position)
     print(result.summary())
     return result
+
+
+POLE_COLUMNS = ('mode', 'open_freq_hz', 'open_zeta', 'sampled_freq_hz', 'sampled_zeta',
+                'sampled_mac', 'continuous_freq_hz', 'continuous_zeta', 'continuous_mac')
+
+
+def _loop_poles(args, position: str, plant, laws: list) -> Path:
+    """Poles per mode (below the FRF band's top) of the sampled and continuous loop: CSV."""
+    from pentapod_sim.sim.loop_poles import closed_loop_poles, continuous_loop_poles
+    rate = args.sample_rate or args.cfg.sample_rate
+    sampled = closed_loop_poles(plant, laws, 1.0 / rate)
+    cont = continuous_loop_poles(plant, laws)
+    rows = []
+    for i in np.flatnonzero(plant.frequencies_hz <= args.cfg.frequency.f_max):
+        row = [i + 1, plant.frequencies_hz[i], plant.zeta[i]]
+        for poles in (sampled, cont):
+            j = poles.of_mode(i)
+            row += ([poles.freq_hz[j], poles.zeta[j], poles.mac[j]] if j >= 0
+                    else [np.nan] * 3)
+        rows.append(row)
+    print(f'{position}: poles per mode, sampled loop at {rate:g} Hz and continuous loop '
+          f'(frequency [Hz], damping ratio, MAC with the open-loop mode)')
+    print(f'{"mode":>4} {"f open":>9} {"ζ open":>8} {"f sampled":>9} {"ζ sampled":>10} '
+          f'{"MAC":>5} {"f cont.":>9} {"ζ cont.":>9} {"MAC":>5}')
+    for r in rows:
+        print(f'{r[0]:4d} {r[1]:9.3f} {r[2]:8.5f} {r[3]:9.3f} {r[4]:10.5f} {r[5]:5.3f} '
+              f'{r[6]:9.3f} {r[7]:9.5f} {r[8]:5.3f}')
+    print(f'{position}: {int((~sampled.structural).sum())} controller poles in the sampled '
+          f'loop, {int((~cont.structural).sum())} in the continuous loop (not structural)')
+    path = args.out / f'loop_poles_{position}.csv'
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, 'w', newline='') as stream:
+        writer = csv.writer(stream)
+        writer.writerow(POLE_COLUMNS)
+        writer.writerows(rows)
+    return path
 
 
 def cmd_closed_loop(args) -> int:
@@ -222,7 +266,9 @@ def cmd_closed_loop(args) -> int:
     freq = args.cfg.frequency.grid()
     for position, plant_all, keep in _plants(args):
         plant = reduce_plant(plant_all, keep, args.cfg.static_correction)
-        _sampled_loop_check(args, position, plant, dampers)
+        _sampled_loop_check(args, position, plant, _laws(dampers))
+        if args.poles:
+            print(f'wrote {_loop_poles(args, position, plant, _laws(dampers))}')
         open_ = frf.modal_frf(plant, freq, label=f'{position} open loop')
         closed = frf.closed_loop_frf(plant, dampers, freq, label=f'{position} damped')
         stem = f'closed_loop_{out}_{inp}_{position}'
@@ -243,7 +289,8 @@ def cmd_build(args) -> int:
     if args.modal_data:
         from pentapod_sim.plant.modal_data import load_modal_data
         data = load_modal_data(args.modal_data, args.strut_frames)
-        zeta = data.zeta if data.zeta is not None else args.cfg.damping_ratio
+        zeta = data.zeta if data.zeta is not None else modal_damping(
+            data.frequencies_hz, args.cfg.damping_ratio, args.cfg.damping_groups)
         plant = from_modal_data(data.frequencies_hz, data.point_shapes, data.strut_frames,
                                 list(args.cfg.inputs), list(args.cfg.outputs), zeta,
                                 meta={'source': data.source})
@@ -291,6 +338,10 @@ def _parser() -> argparse.ArgumentParser:
             p.add_argument('--on-unstable', choices=('warn', 'refuse'), default='warn',
                            help='a sampled loop unstable on the plant or stable only thanks '
                                 'to truncation: warn loudly (default) or refuse (error exit)')
+            p.add_argument('--poles', action='store_true',
+                           help='also print and write (loop_poles_<position>.csv) frequency, '
+                                'damping ratio and MAC per mode of the sampled and the '
+                                'continuous loop')
         if name == 'build':
             p.add_argument('--modal-data', default=None, help='external modal data .npz/.csv')
             p.add_argument('--strut-frames', default=None, help='YAML with strut_frames')

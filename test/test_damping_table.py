@@ -1,0 +1,122 @@
+"""The study's damping-per-mode rows (study/damping.py) and the damping_groups option."""
+from pathlib import Path
+
+import control
+import numpy as np
+import pytest
+
+from pentapod_damper.laws import Dynamics, tcp_damper
+from pentapod_damper.study.damping import damping_rows, main
+from pentapod_sim.errors import ConfigError
+from pentapod_sim.plant.build import modal_damping
+from pentapod_sim.plant.config import default_path, load_reduction_config
+from pentapod_sim.plant.model import PlantModel
+
+AXES = 'xyz'
+#: Modes: frequency [Hz] and TCP motion (x, y, z) per unit modal coordinate [m / (sqrt(kg) m)].
+FREQ = np.array([20.0, 35.0, 50.0, 80.0, 300.0, 120.0])
+SHAPE = np.array([[0.8, 0, 0], [0, 0.6, 0], [0, 0, 0.5], [0.3, 0, 0], [2.0, 0, 0],
+                  [0, 0, 0.4]])
+
+
+def tcp_plant(zeta) -> PlantModel:
+    """Modes with TCP motion only: force inputs, displacement and velocity outputs."""
+    m = FREQ.size
+    outs = [f'tcp_displacement_{a}' for a in AXES] + [f'tcp_velocity_{a}' for a in AXES]
+    c_disp = np.vstack([SHAPE.T, np.zeros((3, m))])
+    c_vel = np.vstack([np.zeros((3, m)), SHAPE.T])
+    return PlantModel(2 * np.pi * FREQ, zeta, SHAPE, c_disp, c_vel, np.zeros((6, 3)),
+                      [f'tcp_force_{a}' for a in AXES], outs, ['N'] * 3, ['m'] * 3 + ['m/s'] * 3,
+                      [''] * 3, [''] * 6)
+
+
+def test_open_loop_rows_rank_modes_by_their_peak_compliance_in_the_band():
+    zeta = np.array([0.001, 0.002, 0.001, 0.0005, 0.001, 0.003])
+    rows = damping_rows(tcp_plant(zeta), [], 1 / 3000, band=(2.0, 200.0), count=3)
+    w = 2 * np.pi * FREQ
+    peak = SHAPE ** 2 / (2 * zeta * w ** 2 * np.sqrt(1 - zeta ** 2))[:, None]   # m/N
+    for k, a in enumerate(AXES):
+        mine = [r for r in rows if r['direction'] == a + a]
+        inside = [i for i in np.argsort(-peak[:, k]) if peak[i, k] > 0 and FREQ[i] <= 200]
+        assert [r['mode'] - 1 for r in mine] == inside[:3]      # the 300 Hz mode is left out
+        for r in mine:
+            i = r['mode'] - 1
+            assert r['open_freq_hz'] == pytest.approx(FREQ[i], rel=1e-12)
+            assert r['open_zeta'] == zeta[i]
+            assert r['continuous_zeta'] == pytest.approx(zeta[i], rel=1e-9)
+            assert r['sampled_zeta'] == pytest.approx(zeta[i], rel=1e-6)   # ZOH: exp(s dt)
+            # the zero-order hold changes the peak by O((w dt)^2) (0.26 % at 120 Hz, 3 kHz)
+            assert r['peak_um_per_N'] == pytest.approx(peak[i, k] * 1e6,
+                                                       rel=(w[i] / 3000) ** 2 / 12)
+            assert r['decay_time_s'] == pytest.approx(1 / (zeta[i] * w[i]), rel=1e-6)
+
+
+def test_tcp_damper_rows_against_closed_forms():
+    """TCP yy: the one y mode makes a single-mode loop (closed forms hold exactly)."""
+    dt, g, z0 = 1 / 3000, 30.0, 0.001
+    plant = tcp_plant(z0)
+    rows = damping_rows(plant, [tcp_damper('xyz', g)], dt, count=1)
+    w, phi = 2 * np.pi * 35.0, 0.6
+    yy = next(r for r in rows if r['direction'] == 'yy')
+    assert yy['mode'] == 2 and yy['continuous_mac'] == pytest.approx(1.0)
+    assert yy['continuous_zeta'] == pytest.approx(z0 + g * phi ** 2 / (2 * w), rel=1e-9)
+    sys = control.ss([[0, 1], [-w ** 2, -2 * z0 * w]], [[0], [phi]], [[0, phi]], [[0]])
+    zd = control.poles(control.feedback(control.sample_system(sys, dt, 'zoh'), g))
+    s = np.log(zd[zd.imag > 0][0]) / dt
+    assert yy['sampled_zeta'] == pytest.approx(-s.real / abs(s), rel=1e-8)
+    assert yy['sampled_freq_hz'] == pytest.approx(abs(s) / (2 * np.pi), rel=1e-10)
+
+
+def test_low_pass_law_uses_its_continuous_filter():
+    dt, g, z0, bw = 1 / 3000, 30.0, 0.001, 150.0
+    law = tcp_damper('z', g, Dynamics(1, bw), dt)
+    rows = damping_rows(tcp_plant(z0), [law], dt, directions='z', count=3)
+    zz = next(r for r in rows if r['mode'] == 3)         # 50 Hz; z also moves at 120 Hz
+    wf = 2 * np.pi * bw
+    w = 2 * np.pi * FREQ[[2, 5]]
+    phi = SHAPE[[2, 5], 2]
+    # two z modes + first-order filter: det of the coupled loop, from python-control
+    plant = control.ss(np.block([[np.zeros((2, 2)), np.eye(2)],
+                                 [-np.diag(w ** 2), -np.diag(2 * z0 * w)]]),
+                       np.r_[0, 0, phi][:, None], np.r_[0, 0, phi][None, :], [[0]])
+    loop = control.feedback(plant, control.tf([g * wf], [1, wf]))
+    ref = [p for p in control.poles(loop) if p.imag > 0]
+    mine = 2 * np.pi * zz['continuous_freq_hz']
+    near = min(ref, key=lambda p: abs(abs(p) - mine))
+    assert zz['continuous_zeta'] == pytest.approx(-near.real / abs(near), rel=1e-8)
+    # the filter costs damping against the same law without it
+    plain = damping_rows(tcp_plant(z0), [tcp_damper('z', g)], dt, directions='z', count=3)
+    assert zz['continuous_zeta'] < next(r for r in plain if r['mode'] == 3)['continuous_zeta']
+
+
+def test_cli_refuses_a_bad_band(capsys):
+    assert main(['--band', '2']) == 1
+    assert 'damping:' in capsys.readouterr().err
+
+
+def _reduction_file(tmp_path: Path, groups: str) -> Path:
+    path = tmp_path / 'reduction.yaml'
+    path.write_text(default_path().read_text().replace('damping_groups: []', groups))
+    return path
+
+
+def test_damping_groups_from_the_file_set_the_modal_damping(tmp_path):
+    cfg = load_reduction_config(_reduction_file(
+        tmp_path, 'damping_groups:\n  - {f_min: 20.0, f_max: 45.0, ratio: 0.005}\n'
+                  '  - {f_min: 45.0, f_max: 60.0, ratio: 0.003}'))
+    zeta = modal_damping(FREQ, cfg.damping_ratio, cfg.damping_groups)
+    np.testing.assert_array_equal(zeta, [0.005, 0.005, 0.003, 0.001, 0.001, 0.001])
+    rows = damping_rows(tcp_plant(zeta), [], 1 / 3000, directions='y', count=1)
+    assert rows[0]['sampled_zeta'] == pytest.approx(0.005, rel=1e-6)
+
+
+@pytest.mark.parametrize('group,message', [
+    ('{f_min: 20.0, f_max: 45.0, ratio: -0.005}', 'ratio = -0.005'),
+    ('{f_min: 50.0, f_max: 45.0, ratio: 0.005}', 'f_min = 50.0'),
+    ('{f_min: 20.0, f_max: 45.0, ratoi: 0.005}', "did you mean 'ratio'"),
+    ('{f_min: 20.0, f_max: 45.0, ratio: 0.005}\n  - {f_min: 40.0, f_max: 50.0, ratio: 0.002}',
+     'overlap'),
+])
+def test_bad_damping_groups_are_refused_naming_the_value(tmp_path, group, message):
+    with pytest.raises(ConfigError, match=message):
+        load_reduction_config(_reduction_file(tmp_path, f'damping_groups:\n  - {group}'))
