@@ -120,3 +120,12 @@ def test_damping_groups_from_the_file_set_the_modal_damping(tmp_path):
 def test_bad_damping_groups_are_refused_naming_the_value(tmp_path, group, message):
     with pytest.raises(ConfigError, match=message):
         load_reduction_config(_reduction_file(tmp_path, f'damping_groups:\n  - {group}'))
+
+
+def test_table_in_statespace_md_is_what_the_code_computes():
+    from pentapod_damper.study.damping import markdown_table, rows
+    text = (Path(__file__).parents[1] / 'docs' / 'statespace.md').read_text()
+    begin, end = '<!-- loop-poles:begin -->\n', '\n<!-- loop-poles:end -->'
+    stated = text[text.index(begin) + len(begin):text.index(end)]
+    assert stated == markdown_table(rows(['P1', 'P2'], ['strut_damping_12', 'tcp_damping'],
+                                         directions='x'))

@@ -12,6 +12,7 @@ frequency, ζ and MAC in both closed loops. The study merges these rows with the
 from its recorded runs.
 
     python -m pentapod_damper.study.damping [--positions P1,P2] [--scenarios a,b] [--count 3]
+                                            [--directions xyz] [--band 2,200] [--markdown]
 
 Units: frequencies [Hz], damping ratios [-], peaks [µm/N], decay time constants [s].
 """
@@ -161,6 +162,21 @@ def format_table(table: list[dict]) -> str:
     return '\n'.join(lines)
 
 
+def markdown_table(table: list[dict]) -> str:
+    """Markdown table of :func:`damping_rows` rows (docs/statespace.md holds one)."""
+    lines = ['| position | scenario | TCP | mode | f open [Hz] | ζ open | f sampled [Hz] | '
+             'ζ sampled | MAC | f continuous [Hz] | ζ continuous | MAC | peak [µm/N] |',
+             '|---|---|---|---|---|---|---|---|---|---|---|---|---|']
+    for r in table:
+        lines.append(f'| {r["position"]} | `{r["scenario"]}` | {r["direction"]} | {r["mode"]} '
+                     f'| {r["open_freq_hz"]:.2f} | {r["open_zeta"]:.4f} '
+                     f'| {r["sampled_freq_hz"]:.2f} | {r["sampled_zeta"]:.4f} '
+                     f'| {r["sampled_mac"]:.2f} | {r["continuous_freq_hz"]:.2f} '
+                     f'| {r["continuous_zeta"]:.4f} | {r["continuous_mac"]:.2f} '
+                     f'| {r["peak_um_per_N"]:.3g} |')
+    return '\n'.join(lines)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Print the table; return 1 with a message on a configuration error."""
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
@@ -168,15 +184,17 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--scenarios', default=','.join(SCENARIOS))
     parser.add_argument('--count', type=int, default=COUNT, help='dominant modes per direction')
     parser.add_argument('--band', default=f'{BAND[0]:g},{BAND[1]:g}', help='LOW,HIGH [Hz]')
+    parser.add_argument('--directions', default='xyz', help='TCP directions, e.g. xyz or x')
+    parser.add_argument('--markdown', action='store_true', help='print a Markdown table')
     args = parser.parse_args(argv)
     try:
         lo, hi = (float(v) for v in args.band.split(','))
         table = rows(args.positions.split(','), args.scenarios.split(','), band=(lo, hi),
-                     count=args.count)
+                     count=args.count, directions=args.directions)
     except (ConfigError, ValueError) as err:
         print(f'damping: {err}', file=sys.stderr)
         return 1
-    print(format_table(table))
+    print(markdown_table(table) if args.markdown else format_table(table))
     return 0
 
 
