@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from pentapod_damper.laws import Dynamics, tcp_damper
-from pentapod_damper.study.damping import damping_rows, main
+from pentapod_damper.study.damping import damping_rows, main, settling_time
 from pentapod_sim.errors import ConfigError
 from pentapod_sim.plant.build import modal_damping
 from pentapod_sim.plant.config import default_path, load_reduction_config
@@ -49,6 +49,8 @@ def test_open_loop_rows_rank_modes_by_their_peak_compliance_in_the_band():
             assert r['peak_um_per_N'] == pytest.approx(peak[i, k] * 1e6,
                                                        rel=(w[i] / 3000) ** 2 / 12)
             assert r['decay_time_s'] == pytest.approx(1 / (zeta[i] * w[i]), rel=1e-6)
+    slowest = max(1 / (zeta[i] * w[i]) for i in {r['mode'] - 1 for r in rows})
+    assert settling_time(rows) == pytest.approx(5 * slowest, rel=1e-6)
 
 
 def test_tcp_damper_rows_against_closed_forms():

@@ -188,3 +188,41 @@ def test_statespace_closed_loop_poles_agree_with_python_control(tmp_path, capsys
     assert untouched.any() and np.allclose(table['continuous_mac'][untouched], 1.0)
     assert np.all((table['sampled_mac'] > 0) & (table['sampled_mac'] <= 1 + 1e-12))
     assert table['sampled_zeta'][0] < table['continuous_zeta'][0]     # sampling costs damping
+
+
+def _brute_force_classes(matrix_at, start, origin, steps=4000):
+    """Nearest-neighbour tracking over many small gain steps (no refinement)."""
+    from scipy.optimize import linear_sum_assignment
+    lam = start
+    for t in np.linspace(0, 1, steps + 1)[1:]:
+        new = np.linalg.eigvals(matrix_at(t))
+        rows, cols = linear_sum_assignment(np.abs(lam[:, None] - new[None, :]))
+        labels = np.empty_like(origin)
+        labels[cols] = origin[rows]
+        lam, origin = new, labels
+    return lam, origin
+
+
+def test_poles_near_a_resonant_filter_are_classed_as_fine_tracking_classes_them():
+    """Second-order low-pass at the mode's frequency: the filter and mode poles interact."""
+    from pentapod_sim.sim.loop_poles import _open_loop_start, _scaled, continuous_loop_system
+    w, wf, zf, phi, g = 2 * np.pi * 50.0, 2 * np.pi * 52.0, 0.05, 1.0, 40.0
+    plant = modal_plant([50.0], 0.002, [phi])
+    filt = DiscreteController([VEL], [IN], [[0, 1], [-wf ** 2, -2 * zf * wf]], [[0], [wf ** 2]],
+                              [[-g, 0]], [[0.0]])
+    poles = continuous_loop_poles(plant, [filt])
+
+    def matrix_at(t):
+        return continuous_loop_system(plant, [_scaled(filt, t)])[0]
+    start, origin = _open_loop_start(plant, [filt], 4, None)
+    lam, labels = _brute_force_classes(matrix_at, start, origin)
+    for s, structural in zip(poles.s, poles.structural):
+        k = np.argmin(np.abs(lam - s))
+        assert abs(lam[k] - s) < 1e-9 * abs(s)
+        assert structural == (labels[k] >= 0)
+    assert poles.structural.sum() == 1
+    # the loop's poles are those of python-control's feedback through the filter
+    sys = control.ss([[0, 1], [-w ** 2, -2 * 0.002 * w]], [[0], [phi]], [[0, phi]], [[0]])
+    ref = control.poles(control.feedback(sys, control.tf([g * wf ** 2],
+                                                         [1, 2 * zf * wf, wf ** 2])))
+    np.testing.assert_allclose(np.sort_complex(poles.all_lam), np.sort_complex(ref), rtol=1e-9)

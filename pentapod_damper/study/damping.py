@@ -116,7 +116,8 @@ def damping_rows(plant: PlantModel, laws: Sequence, dt: float,
         f = sampled.freq_hz
         cand = np.flatnonzero(sampled.structural & (sampled.mode >= 0) & (f >= band[0])
                               & (f <= band[1]))
-        cand = cand[peaks[cand] > NEGLIGIBLE * peaks[cand].max(initial=0.0)]
+        top = peaks[cand][np.isfinite(peaks[cand])].max(initial=0.0)    # inf: unstable pole
+        cand = cand[peaks[cand] > NEGLIGIBLE * top]
         for rank, j in enumerate(cand[np.argsort(-peaks[cand])][:count], 1):
             i = int(sampled.mode[j])
             decay = 1.0 / (sampled.zeta[j] * 2 * np.pi * f[j])
@@ -126,6 +127,11 @@ def damping_rows(plant: PlantModel, laws: Sequence, dt: float,
                          **_pole(continuous, continuous.of_mode(i), 'continuous'),
                          'peak_um_per_N': float(peaks[j] * 1e6), 'decay_time_s': float(decay)})
     return rows
+
+
+def settling_time(table: Sequence[dict], time_constants: float = 5.0) -> float:
+    """``time_constants`` decay time constants of the slowest dominant mode of the rows [s]."""
+    return time_constants * max((r['decay_time_s'] for r in table), default=0.0)
 
 
 def scenario_rows(plant: PlantModel, position: str, scenario: str, dt: float,
