@@ -32,9 +32,9 @@ TYPES = ('bool', 'int', 'float', 'str', 'double[]', 'integer[]', 'string[]')
 _SCALAR = {'bool': bool, 'int': int, 'float': float, 'str': str}
 _ELEMENT = {'double[]': 'float', 'integer[]': 'int', 'string[]': 'str'}
 #: Entries that mean "none" in a list parameter whose default is empty: rclpy types a
-#: parameter by its default and takes ``[]`` for a byte array, so a node declares ``['']`` or
-#: ``[0]`` instead, and the node ignores these entries in any value.
-_NONE_MARK = {'string[]': '', 'integer[]': 0}
+#: parameter by its default and takes ``[]`` for a byte array, so a node declares ``['']``,
+#: ``[0]`` or ``[0.0]`` instead, and the node ignores these entries in any value.
+_NONE_MARK = {'string[]': '', 'integer[]': 0, 'double[]': 0.0}
 #: Parameters every rclpy node declares itself; a parameter file may set them for any node.
 ROS_NODE_PARAMETERS = ('use_sim_time', 'start_type_description_service')
 

@@ -12,7 +12,7 @@ import math
 
 from pentapod_sim.parameters import Param, ParameterTable, Values
 from pentapod_sim.plant.check_model import DEFAULT_CHECK_F_MIN
-from pentapod_sim.sim.excitation import ExcitationSpec, KINDS
+from pentapod_sim.sim.excitation import ExcitationSpec, KINDS, PHASES, PULSE_SHAPES
 from pentapod_sim.sim.stepping import DEFAULT_MAX_STATE_NORM
 
 #: The plant's sample rate; the exciter and the PMA must be given the same.
@@ -87,24 +87,41 @@ _SPEC = ExcitationSpec()
 
 EXCITER = ParameterTable('exciter', [
     SAMPLE_RATE,
-    Param('kind', 'str', _SPEC.kind, 'signal', choices=KINDS),
+    Param('kind', 'str', _SPEC.kind, 'signal (docs/nodes.md, "Excitation signals")',
+          choices=KINDS),
     Param('amplitude', 'float', _SPEC.amplitude, 'peak force (RMS for random)', 'N', -1e9, 1e9),
     Param('direction', 'double[]', [float(v) for v in _SPEC.direction], 'force direction x, y, '
           'z in the machine frame (normalised)'),
     Param('frequency', 'float', _SPEC.frequency, 'sine frequency', 'Hz', 0.0, 1e6),
-    Param('f_start', 'float', _SPEC.f_start, 'chirp start / random band low edge', 'Hz',
-          0.0, 1e6),
-    Param('f_end', 'float', _SPEC.f_end, 'chirp end / random band high edge', 'Hz', 0.0, 1e6),
-    Param('duration', 'float', 0.0, 'signal length; 0 = endless (impulse, step, sine)', 's',
-          0.0, 1e7),
-    Param('start_delay', 'float', _SPEC.start_delay, 'time of the first non-zero force', 's',
-          0.0, 1e7),
+    Param('f_start', 'float', _SPEC.f_start, 'band low edge: chirp start, random, multisine, '
+          'periodic chirp, stepped-sine lines', 'Hz', 0.0, 1e6),
+    Param('f_end', 'float', _SPEC.f_end, 'band high edge (chirp end)', 'Hz', 0.0, 1e6),
+    Param('duration', 'float', 0.0, 'signal length; 0 = endless (impulse, step, sine, '
+          'multisine, periodic chirp, stepped sine)', 's', 0.0, 1e7),
+    Param('start_delay', 'float', _SPEC.start_delay, 'time of the first sample of the signal',
+          's', 0.0, 1e7),
     Param('pulse_width', 'float', _SPEC.pulse_width, 'impulse length; 0 = one sample', 's',
           0.0, 1e3),
-    Param('seed', 'int', _SPEC.seed, 'random seed', '', 0, 2 ** 31),
+    Param('pulse_shape', 'str', _SPEC.pulse_shape, 'impulse shape', choices=PULSE_SHAPES),
+    Param('seed', 'int', _SPEC.seed, 'random seed (random signal, random multisine phases)',
+          '', 0, 2 ** 31),
+    Param('period', 'float', _SPEC.period, 'period of multisine and periodic chirp (a whole '
+          'number of samples); multisine lines are its multiples', 's', 0.0, 1e6),
+    Param('phases', 'str', _SPEC.phases, 'multisine phases (schroeder: low crest factor)',
+          choices=PHASES),
+    Param('frequencies', 'double[]', [], 'multisine lines (multiples of 1/period) or '
+          'stepped-sine frequencies; empty: from f_start to f_end', 'Hz'),
+    Param('line_spacing', 'float', _SPEC.line_spacing, 'stepped sine: spacing of the lines '
+          'from f_start to f_end', 'Hz', 0.0, 1e6),
+    Param('settle_time', 'float', _SPEC.settle_time, 'stepped sine: time at each line before '
+          'its measurement window', 's', 0.0, 1e6),
+    Param('periods_per_line', 'int', _SPEC.periods_per_line, 'stepped sine: whole periods in '
+          'each measurement window', '', 1, 10 ** 6),
+    Param('settle_periods', 'int', _SPEC.settle_periods, 'multisine, periodic chirp: leading '
+          'periods the analysis discards', '', 0, 10 ** 6),
     *SOURCE_PARAMS,
-], summary='a force at the TCP (impulse, step, sine, chirp, band-limited random), answering '
-           'every /clock tick.')
+], summary='a force at the TCP (impulse, step, sine, chirp, band-limited random, multisine, '
+           'periodic chirp, stepped sine), answering every /clock tick.')
 
 RECORDER = ParameterTable('recorder', [
     Param('topics', 'string[]', [], 'topics to record; empty: every /pentapod/* topic and '
@@ -134,4 +151,8 @@ def excitation_spec(values: Values) -> ExcitationSpec:
         kind=values.kind, amplitude=values.amplitude, direction=values.direction,
         frequency=values.frequency, f_start=values.f_start, f_end=values.f_end,
         duration=values.duration or math.inf, start_delay=values.start_delay,
-        pulse_width=values.pulse_width, seed=values.seed)
+        pulse_width=values.pulse_width, seed=values.seed, period=values.period,
+        phases=values.phases, frequencies=list(values.frequencies),
+        line_spacing=values.line_spacing, settle_time=values.settle_time,
+        periods_per_line=values.periods_per_line, settle_periods=values.settle_periods,
+        pulse_shape=values.pulse_shape)

@@ -1,14 +1,21 @@
 """
-Force signals for exciting the machine at the TCP: impulse, step, sine, chirp, random.
+Force signals for exciting the machine at the TCP.
 
-Signals are sampled at the plant steps t_k = k dt (the exciter answers step k with the force
-for t_k, exactly as the offline closed loop does). Force [N] = magnitude(t_k) * direction,
-with direction a unit vector in the machine frame. Nothing is applied before ``start_delay``
-or after ``start_delay + duration``.
+Kinds: impulse (shaped pulse), step, sine, chirp, random, and for lightly damped structures
+multisine, periodic chirp and stepped sine (:mod:`pentapod_sim.sim.excitation_signals` defines
+them). Signals are sampled at the plant steps t_k = k dt (the exciter answers step k with the
+force for t_k, exactly as the offline closed loop does). Force [N] = magnitude(t_k) *
+direction, with direction a unit vector in the machine frame. Nothing is applied before
+``start_delay`` or after ``start_delay + duration``. Every signal is deterministic: random
+ones are seeded.
+
+The parameters are an :class:`ExcitationSpec` (:mod:`pentapod_sim.sim.excitation_spec`, with
+its JSON form :func:`spec_to_dict` / :func:`spec_from_dict`); :class:`Excitation` also tells
+the analysis what it needs: samples per period, excited lines, settling periods, stepped-sine
+measurement windows and the crest factor.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 import math
 
 import numpy as np
@@ -16,50 +23,21 @@ import numpy.typing as npt
 import scipy.signal
 
 from pentapod_sim.errors import ConfigError
+from pentapod_sim.sim import excitation_signals as signals
+from pentapod_sim.sim.excitation_spec import (
+    check_spec,
+    ExcitationSpec,
+    KINDS,
+    period_samples,
+    PERIODIC_KINDS,
+    PHASES,
+    PULSE_SHAPES,
+    spec_from_dict,
+    spec_to_dict,
+)
 
-KINDS = ('impulse', 'step', 'sine', 'chirp', 'random', 'none')
-
-
-@dataclass
-class ExcitationSpec:
-    """
-    Parameters of an excitation signal.
-
-    Attributes
-    ----------
-    kind : str
-        One of ``impulse`` (hammer: ``amplitude`` held for ``pulse_width``), ``step``,
-        ``sine`` (at ``frequency``), ``chirp`` (linear sweep ``f_start`` -> ``f_end`` over
-        ``duration``), ``random`` (Gaussian, band-limited to [f_start, f_end], RMS
-        ``amplitude``, seeded), ``none``.
-    amplitude : float
-        Peak force [N] (RMS for random).
-    direction : (3,) array_like
-        Direction of the force in the machine frame (normalised here).
-    frequency : float
-        Sine frequency [Hz].
-    f_start, f_end : float
-        Chirp start/end frequency, random band edges [Hz].
-    duration : float
-        Length of the signal [s]; inf for a step or sine without end.
-    start_delay : float
-        Time of the first non-zero sample [s].
-    pulse_width : float
-        Impulse length [s]; 0 = one sample.
-    seed : int
-        Seed of the random generator.
-    """
-
-    kind: str = 'impulse'
-    amplitude: float = 100.0
-    direction: npt.ArrayLike = field(default_factory=lambda: [1.0, 0.0, 0.0])
-    frequency: float = 40.0
-    f_start: float = 5.0
-    f_end: float = 300.0
-    duration: float = math.inf
-    start_delay: float = 0.0
-    pulse_width: float = 0.0
-    seed: int = 0
+__all__ = ['Excitation', 'ExcitationSpec', 'KINDS', 'PERIODIC_KINDS', 'PHASES', 'PULSE_SHAPES',
+           'spec_from_dict', 'spec_to_dict']
 
 
 class Excitation:
@@ -72,22 +50,118 @@ class Excitation:
         Signal parameters (ConfigError names a bad one).
     dt : float
         Sample time of the plant [s].
+
+    Attributes
+    ----------
+    first : int
+        Plant step of the signal's first sample (start_delay / dt, rounded up).
+    direction : (3,) ndarray
+        Unit direction of the force.
     """
 
     def __init__(self, spec: ExcitationSpec, dt: float):
         self.spec = spec
         self.dt = float(dt)
-        _check(spec, self.dt)
+        check_spec(spec, self.dt)
         direction = np.asarray(spec.direction, dtype=float)
         self.direction = direction / np.linalg.norm(direction)
         self.first = int(math.ceil(spec.start_delay / self.dt - 1e-9))
         self._random = None
-        if spec.kind == 'random':
+        self._table = None       # one period (periodic kinds) or the pulse (impulse)
+        self._bins = np.zeros(0, dtype=np.intp)
+        self._stepped = None
+        kind = spec.kind
+        if kind == 'random':
             self._random = _band_limited_noise(spec, self.dt, self._n_active())
+        elif kind == 'impulse':
+            n = max(1, int(round(spec.pulse_width / self.dt)))
+            self._table = spec.amplitude * signals.pulse(n, spec.pulse_shape)
+        elif kind in PERIODIC_KINDS:
+            n = period_samples(spec.period, self.dt)
+            freqs = spec.frequencies if kind == 'multisine' else []
+            self._bins = signals.multisine_bins(n, self.dt, spec.f_start, spec.f_end, freqs)
+            if kind == 'multisine':
+                phases = signals.line_phases(len(self._bins), spec.phases, spec.seed)
+                unit = signals.multisine_period(n, self._bins, phases)
+            else:
+                unit = signals.periodic_chirp_period(n, self.dt, spec.f_start, spec.f_end)
+            self._table = spec.amplitude * unit
+        elif kind == 'stepped_sine':
+            requested = (spec.frequencies if len(spec.frequencies) else
+                         signals.stepped_frequencies(spec.f_start, spec.f_end,
+                                                     spec.line_spacing))
+            self._stepped = signals.stepped_layout(requested, self.dt, spec.settle_time,
+                                                   int(spec.periods_per_line))
+            needed = self._stepped.end * self.dt
+            if needed > spec.duration * (1 + 1e-12):
+                raise ConfigError(f'duration {spec.duration!r} s ends before the last '
+                                  f'stepped-sine line (the lines need {needed:.6g} s)')
 
     def _n_active(self) -> int:
         """Number of samples in the active window (finite for random/chirp)."""
         return int(round(self.spec.duration / self.dt))
+
+    # --- what the analysis needs -----------------------------------------------------------
+
+    @property
+    def period_steps(self) -> int | None:
+        """Samples per period of a periodic kind (multisine, periodic chirp), else None."""
+        return len(self._table) if self.spec.kind in PERIODIC_KINDS else None
+
+    @property
+    def lines_hz(self) -> npt.NDArray[np.float64]:
+        """
+        Excited frequencies [Hz].
+
+        Multisine lines; for a periodic chirp the multiples of 1/period in [f_start, f_end]
+        (where its energy lies; a little spills outside); stepped-sine frequencies as applied;
+        empty for the other kinds.
+        """
+        if self.spec.kind in PERIODIC_KINDS:
+            return self._bins / (len(self._table) * self.dt)
+        if self._stepped is not None:
+            return self._stepped.frequencies.copy()
+        return np.zeros(0)
+
+    @property
+    def settle_periods(self) -> int:
+        """Leading periods the analysis discards (periodic kinds; 0 for the others)."""
+        return int(self.spec.settle_periods) if self.spec.kind in PERIODIC_KINDS else 0
+
+    def stepped_windows(self) -> list[tuple[float, int, int]]:
+        """
+        Measurement windows of a stepped sine (empty list for other kinds).
+
+        Returns
+        -------
+        list of (frequency [Hz], first step, end step)
+            Per line, after its settling: plant steps first .. end - 1 (start_delay
+            included) hold exactly ``periods_per_line`` periods of the frequency.
+        """
+        lay = self._stepped
+        if lay is None:
+            return []
+        return [(float(f), self.first + int(s) + lay.settle, self.first + int(s) + lay.settle
+                 + int(n)) for f, s, n in zip(lay.frequencies, lay.starts, lay.window)]
+
+    @property
+    def crest_factor(self) -> float:
+        """
+        Peak / RMS of the signal.
+
+        Over one period for periodic kinds, over the pulse for an impulse, over the record
+        for random; sqrt(2) for sine, chirp and stepped sine, 1 for a step, NaN for none.
+        """
+        kind = self.spec.kind
+        values = self._random if kind == 'random' else self._table
+        if values is not None:
+            rms = float(np.sqrt(np.mean(values ** 2)))
+            return float(np.max(np.abs(values))) / rms if rms > 0 else math.nan
+        if kind in ('sine', 'chirp', 'stepped_sine'):
+            return math.sqrt(2.0)
+        return 1.0 if kind == 'step' else math.nan
+
+    # --- samples ---------------------------------------------------------------------------
 
     def magnitude(self, k: int) -> float:
         """Signed magnitude of the force [N] at step k."""
@@ -95,16 +169,20 @@ class Excitation:
         if spec.kind == 'none' or j < 0 or j * self.dt >= spec.duration - 1e-12 * self.dt:
             return 0.0
         tau = j * self.dt  # time since the start of the signal [s]
-        if spec.kind == 'impulse':
-            width = max(1, int(round(spec.pulse_width / self.dt)))
-            return spec.amplitude if j < width else 0.0
-        if spec.kind == 'step':
+        kind = spec.kind
+        if kind in PERIODIC_KINDS:
+            return float(self._table[j % len(self._table)])
+        if kind == 'impulse':
+            return float(self._table[j]) if j < len(self._table) else 0.0
+        if kind == 'step':
             return spec.amplitude
-        if spec.kind == 'sine':
+        if kind == 'sine':
             return spec.amplitude * math.sin(2 * math.pi * spec.frequency * tau)
-        if spec.kind == 'chirp':
+        if kind == 'chirp':
             return spec.amplitude * float(scipy.signal.chirp(
                 tau, spec.f_start, spec.duration, spec.f_end, method='linear', phi=-90))
+        if kind == 'stepped_sine':
+            return spec.amplitude * self._stepped.value(j)
         return float(self._random[j])
 
     def force(self, k: int) -> npt.NDArray[np.float64]:
@@ -115,34 +193,6 @@ class Excitation:
         """Forces (n_steps, 3) [N] of steps 0..n_steps-1."""
         mags = np.array([self.magnitude(k) for k in range(n_steps)])
         return mags[:, None] * self.direction[None, :]
-
-
-def _check(spec: ExcitationSpec, dt: float) -> None:
-    """Raise ConfigError naming the first bad parameter."""
-    if spec.kind not in KINDS:
-        raise ConfigError(f'excitation kind {spec.kind!r} is not one of {", ".join(KINDS)}')
-    if not np.isfinite(dt) or dt <= 0:
-        raise ConfigError(f'sample time must be > 0 s, got {dt!r}')
-    direction = np.asarray(spec.direction, dtype=float)
-    if direction.shape != (3,) or not np.all(np.isfinite(direction)) or not direction.any():
-        raise ConfigError(f'direction must be a non-zero 3-vector, got {spec.direction!r}')
-    if not np.isfinite(spec.amplitude):
-        raise ConfigError(f'amplitude must be finite [N], got {spec.amplitude!r}')
-    if not spec.start_delay >= 0 or not np.isfinite(spec.start_delay):
-        raise ConfigError(f'start_delay must be >= 0 s, got {spec.start_delay!r}')
-    if not spec.duration > 0:
-        raise ConfigError(f'duration must be > 0 s, got {spec.duration!r}')
-    if spec.pulse_width < 0:
-        raise ConfigError(f'pulse_width must be >= 0 s, got {spec.pulse_width!r}')
-    nyquist = 0.5 / dt
-    if spec.kind == 'sine' and not 0 < spec.frequency < nyquist:
-        raise ConfigError(f'frequency {spec.frequency} Hz must lie in (0, {nyquist}) Hz')
-    if spec.kind in ('chirp', 'random'):
-        if not math.isfinite(spec.duration):
-            raise ConfigError(f'a {spec.kind} excitation needs a finite duration [s]')
-        if not 0 <= spec.f_start < spec.f_end < nyquist:
-            raise ConfigError(f'band f_start={spec.f_start}, f_end={spec.f_end} Hz must '
-                              f'satisfy 0 <= f_start < f_end < {nyquist} Hz')
 
 
 def _band_limited_noise(spec: ExcitationSpec, dt: float, n: int) -> npt.NDArray[np.float64]:
