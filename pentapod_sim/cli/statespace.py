@@ -247,8 +247,11 @@ def _loop_poles(args, position: str, plant, laws: list) -> Path:
     for r in rows:
         print(f'{r[0]:4d} {r[1]:9.3f} {r[2]:8.5f} {r[3]:9.3f} {r[4]:10.5f} {r[5]:5.3f} '
               f'{r[6]:9.3f} {r[7]:9.5f} {r[8]:5.3f}')
-    print(f'{position}: {int((~sampled.structural).sum())} controller poles in the sampled '
-          f'loop, {int((~cont.structural).sum())} in the continuous loop (not structural)')
+    for name, poles in (('sampled', sampled), ('continuous', cont)):
+        ctrl = np.flatnonzero(~poles.structural)
+        listed = ', '.join(f'{poles.freq_hz[j]:.4g} Hz ζ {poles.zeta[j]:.3g}' for j in ctrl)
+        print(f'{position}: {ctrl.size} controller poles in the {name} loop (not structural)'
+              f'{": " + listed if listed else ""}')
     path = args.out / f'loop_poles_{position}.csv'
     path.parent.mkdir(parents=True, exist_ok=True)
     with open(path, 'w', newline='') as stream:
