@@ -83,6 +83,8 @@ def identify_modes(freq: npt.ArrayLike, H: npt.ArrayLike,
         Band [Hz] to fit; default all lines above 0 Hz.
     orders : sequence of int, optional
         Model orders of the stability diagram; default ``1 .. DEFAULT_MAX_ORDER / Ni``.
+        Orders above ``F No / (No + Ni) - 1`` (F lines in the band, No outputs, Ni inputs:
+        half the real equations per unknown) are dropped.
     sigma : array_like, optional
         Noise standard deviation of H per line (weights), shaped like H.
     frf_form : {'receptance', 'mobility', 'accelerance'}
@@ -100,7 +102,8 @@ def identify_modes(freq: npt.ArrayLike, H: npt.ArrayLike,
     Raises
     ------
     ValueError
-        If the band holds too few lines, or no pole is stable over ``tol.min_stable`` orders.
+        If the band holds too few lines for ``tol.min_stable + 1`` orders, or no pole is stable
+        over ``tol.min_stable`` orders.
     """
     freq = np.asarray(freq, dtype=float)
     H = as_frf_array(H, len(freq))
@@ -108,15 +111,17 @@ def identify_modes(freq: npt.ArrayLike, H: npt.ArrayLike,
     if not 0 <= f_low < f_high:
         raise ValueError(f'band {f_low:g} .. {f_high:g} Hz: need 0 <= f_low < f_high')
     inside = (freq >= f_low) & (freq <= f_high) & (freq > 0) & np.all(np.isfinite(H), axis=(0, 1))
-    n_in = H.shape[1]
-    if orders is None:
-        orders = range(1, DEFAULT_MAX_ORDER // n_in + 1)
-    orders = sorted(int(n) for n in orders)
-    needed = 2 * (max(orders) * n_in) // max(H.shape[0] * n_in, 1) + 4
-    if np.count_nonzero(inside) < max(needed, 8):
-        raise ValueError(f'band {f_low:g} .. {f_high:g} Hz holds {np.count_nonzero(inside)} '
-                         f'FRF lines; need at least {max(needed, 8)} for orders up to '
-                         f'{max(orders)} (widen the band or lower the order)')
+    n_out, n_in = H.shape[:2]
+    n_lines = int(np.count_nonzero(inside))
+    # real equations 2 F No Ni >= unknowns (n + 1)(No Ni + Ni^2); keep a factor 2 in hand
+    supported = n_lines * n_out // (n_out + n_in) - 1
+    orders = sorted(int(n) for n in (orders if orders is not None
+                                     else range(1, DEFAULT_MAX_ORDER // n_in + 1)))
+    orders = [n for n in orders if 1 <= n <= supported]
+    if len(orders) < tol.min_stable + 1:
+        raise ValueError(f'band {f_low:g} .. {f_high:g} Hz holds {n_lines} FRF lines: too few '
+                         f'for {tol.min_stable + 1} model orders (widen the band or record '
+                         'with a finer line spacing)')
     f_in, h_in = freq[inside], H[..., inside]
     s_in = None if sigma is None else as_frf_array(sigma, len(freq))[..., inside]
     diagram = stability_diagram(plscf(f_in, h_in, orders, s_in, tol.max_damping), tol)

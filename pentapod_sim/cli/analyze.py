@@ -9,6 +9,7 @@ Examples::
     analyze peaks BAG --input ... --output ... [--compare BAG2]
     analyze time BAG /pentapod/tcp_state.position.tcp_x /pentapod/excitation.force.x
     analyze amplitudes BAG [--topic /pentapod/pma/state]
+    analyze modes BAG [--band F1 F2] [--outputs TOPIC.FIELD ...]
 """
 import argparse
 import csv
@@ -27,6 +28,8 @@ from pentapod_sim.analysis.estimation import amplitude_spectrum, EXCITATIONS, fr
 from pentapod_sim.analysis.export import write_csv, write_uff58
 from pentapod_sim.analysis.peaks import find_resonances, peak_reductions
 from pentapod_sim.cli import run_command
+from pentapod_sim.cli.analyze_modes import add_parser as add_modes_parser
+from pentapod_sim.cli.analyze_modes import cmd_modes
 from pentapod_sim.errors import BagError
 from pentapod_sim.interface import PMA_STATE
 
@@ -228,6 +231,7 @@ def build_parser() -> argparse.ArgumentParser:
     amp.add_argument('bag')
     amp.add_argument('--topic', default=PMA_STATE)
     amp.add_argument('--nperseg', type=int, default=None)
+    add_modes_parser(subs)
     return parser
 
 
@@ -237,7 +241,7 @@ def main(argv=None) -> int:
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
                         format='%(levelname)s %(name)s: %(message)s')
     commands = {'info': cmd_info, 'frf': cmd_frf, 'time': cmd_time,
-                'amplitudes': cmd_amplitudes,
+                'amplitudes': cmd_amplitudes, 'modes': cmd_modes,
                 'peaks': lambda a: cmd_frf(a, plot=False)}
     return run_command('analyze', commands[args.command], args, errors=(ValueError,))
 

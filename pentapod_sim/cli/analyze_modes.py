@@ -1,0 +1,89 @@
+"""
+`analyze modes BAG`: natural frequencies, damping ratios and modal constants of a recorded run.
+
+The FRF estimator follows the excitation stored in the bag
+(:mod:`pentapod_sim.analysis.run_frf`); modes come from pLSCF, automatic pole selection and
+LSFD (:mod:`pentapod_sim.analysis.modal_ema`). Writes ``<bag>_modes.csv``, ``<bag>_frf.csv``,
+``<bag>_stability.png`` and ``<bag>_synthesis.png`` to ``--out``.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+import re
+
+import numpy as np
+
+from pentapod_sim.analysis import modal_plots
+from pentapod_sim.analysis.modal_ema import DEFAULT_MAX_ORDER, identify_modes
+from pentapod_sim.analysis.modal_export import mode_table, write_frf_csv, write_modes_csv
+from pentapod_sim.analysis.modal_id import Tolerances
+from pentapod_sim.analysis.run_frf import frfs_from_bag
+from pentapod_sim.errors import BagError
+
+
+def add_parser(subs) -> None:
+    """Add the ``modes`` subcommand to the ``analyze`` subparsers."""
+    sub = subs.add_parser('modes', help='modal identification (pLSCF + LSFD) of a recorded run')
+    sub.add_argument('bag', help='bag folder or .mcap file (with its excitation record)')
+    sub.add_argument('--band', nargs=2, type=float, metavar=('F1', 'F2'),
+                     help='band to identify [Hz] (default: the excited band)')
+    sub.add_argument('--outputs', nargs='+', metavar='TOPIC.FIELD',
+                     help='responses (default: /pentapod/tcp_state.position.tcp_x/y/z)')
+    sub.add_argument('--input', metavar='TOPIC.FIELD',
+                     help='input force [N] (default: excitation force along its direction)')
+    sub.add_argument('--source', help='exciter name, if the bag holds several excitations')
+    sub.add_argument('--max-order', type=int, default=DEFAULT_MAX_ORDER,
+                     help=f'highest model order of the stability diagram '
+                          f'(default {DEFAULT_MAX_ORDER})')
+    sub.add_argument('--min-stable', type=int, default=Tolerances.min_stable,
+                     help='orders a pole must be stable over to count as a mode '
+                          f'(default {Tolerances.min_stable})')
+    sub.add_argument('--no-refine', action='store_true',
+                     help='keep the pLSCF poles (no nonlinear least-squares refinement)')
+
+
+def cmd_modes(args) -> int:
+    """Identify modes from a bag; print the table; write CSV and PNG files."""
+    if args.max_order < 2 or args.min_stable < 1:
+        raise BagError(f'--max-order {args.max_order} must be >= 2 and --min-stable '
+                       f'{args.min_stable} >= 1')
+    run = frfs_from_bag(args.bag, args.outputs, args.input, args.source)
+    band = tuple(args.band) if args.band else run.band
+    if len(set(run.units)) > 1:
+        raise BagError(f'outputs of different units {sorted(set(run.units))}; identify them '
+                       'one unit at a time (--outputs)')
+    unit = run.units[0]
+    tol = Tolerances(min_stable=args.min_stable)
+    try:
+        model = identify_modes(run.freq, run.H, band=band, orders=range(1, args.max_order + 1),
+                               sigma=run.sigma, frf_form=run.frf_form, tol=tol,
+                               refine=not args.no_refine)
+    except ValueError as err:
+        raise BagError(f'{args.bag}: {err}') from None
+    print(f'{args.bag}: {run.kind} excitation, {run.estimator}, {len(run.freq)} lines; '
+          f'band {model.band[0]:g} .. {model.band[1]:g} Hz, orders '
+          f'{model.diagram[0].order}..{model.diagram[-1].order}, '
+          f'{len(model.freq_hz)} modes ({run.frf_form} {unit})')
+    if run.transient is not None and run.sigma is not None:
+        inside = (run.freq >= model.band[0]) & (run.freq <= model.band[1])
+        ratio = run.transient[..., inside] / np.maximum(run.sigma[..., inside], 1e-300)
+        if np.median(ratio) > 5:
+            print(f'WARNING: transient error is {np.median(ratio):.1f}x the noise error '
+                  '(median); settle longer (settle_periods / settle_time)')
+    for line in mode_table(model, run.labels, unit):
+        print(line)
+    out = Path(args.out)
+    tag = re.sub(r'[^A-Za-z0-9]+', '_', Path(args.bag).name).strip('_')
+    synth = model.synthesise(run.freq)
+    written = [
+        write_modes_csv(out / f'{tag}_modes.csv', model, run.labels, unit),
+        write_frf_csv(out / f'{tag}_frf.csv', run.freq, run.H, synth, run.labels, unit,
+                      run.sigma, run.transient),
+        modal_plots.stability_plot(model, run.freq, run.H, out / f'{tag}_stability.png',
+                                   title=f'{tag}: stability diagram ({run.estimator})'),
+        modal_plots.synthesis_plot(model, run.freq, run.H, run.labels, unit,
+                                   out / f'{tag}_synthesis.png',
+                                   title=f'{tag}: measured and synthesised FRFs')]
+    for path in written:
+        print(f'wrote {path}')
+    return 0
