@@ -143,6 +143,9 @@ def test_mac_pairing_with_permuted_modes_and_independent_shapes():
     # the 29 and 31 Hz modes are close: the damper mixes them, MAC < 1
     assert poles.mac[poles.structural].min() < 0.99
     assert sorted(poles.mode[poles.structural]) == [0, 1, 2]
+    rows = poles.rows(plant)
+    assert [r['mode'] for r in rows] == [2, 3, 1]            # by frequency: 12, 29, 31 Hz
+    assert [r['open_freq_hz'] for r in rows] == pytest.approx([12.0, 29.0, 31.0])
 
 
 def test_peak_terms_of_the_open_loop_are_the_modal_peaks():
