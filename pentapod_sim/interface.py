@@ -55,6 +55,12 @@ CONTROLLER_MODEL_PREFIX = '/pentapod/controller_models/'
 NO_FEEDBACK = 'no feedback'
 #: Start of the model text of a source whose law has no linear model (limits, ...).
 NO_LINEAR_MODEL = 'no linear model'
+#: An exciter ``<name>`` publishes the parameters of its signal once, on
+#: ``EXCITATION_SPEC_PREFIX + <name>`` (std_msgs/String, reliable, transient local, depth 1, so a
+#: recorder started later still records it): the JSON text of
+#: :func:`pentapod_sim.sim.excitation_spec.spec_message`, which
+#: :func:`pentapod_sim.analysis.excitation_record.excitation_of` reads back from a bag.
+EXCITATION_SPEC_PREFIX = '/pentapod/excitation_spec/'
 #: Channels only the live view serves (Foxglove WebSocket, not ROS topics): its derived data.
 LIVE_PREFIX = '/pentapod/live/'
 #: Run status (sensor_msgs/JointState, one joint per figure: pentapod_sim.live.status).
@@ -100,6 +106,11 @@ def force_topic(source: str) -> str:
 def controller_model_topic(source: str) -> str:
     """Topic of the linear model of the force source ``source``."""
     return CONTROLLER_MODEL_PREFIX + source
+
+
+def excitation_spec_topic(source: str) -> str:
+    """Topic of the signal parameters of the exciter ``source``."""
+    return EXCITATION_SPEC_PREFIX + source
 
 
 def is_step_topic(topic: str) -> bool:
@@ -150,10 +161,12 @@ STREAM_DEPTH = int(math.ceil((RECORDER_STALL + REPAIR_TIME) * MAX_SHIPPED_RATE))
 #: QoS per class of topic: plant outputs and /clock ('state'), forces from the sources
 #: ('force'; one message per step), diagnostics such as PMA state and excitation ('info'), the
 #: run status ('status': the last one kept for a late reader) and the sources' controller models
-#: ('model': published once, kept for a late reader).
+#: ('model': published once, kept for a late reader) and the exciters' signal parameters
+#: ('spec': published once, kept for a late reader).
 QOS = {'state': QosSpec(STREAM_DEPTH), 'force': QosSpec(STREAM_DEPTH),
        'info': QosSpec(STREAM_DEPTH), 'status': QosSpec(4, durability='transient_local'),
-       'model': QosSpec(1, durability='transient_local')}
+       'model': QosSpec(1, durability='transient_local'),
+       'spec': QosSpec(1, durability='transient_local')}
 
 
 def qos_class(topic: str) -> str | None:
@@ -166,7 +179,15 @@ def qos_class(topic: str) -> str | None:
         return 'info'
     if topic.startswith(CONTROLLER_MODEL_PREFIX):
         return 'model'
+    if topic.startswith(EXCITATION_SPEC_PREFIX):
+        return 'spec'
     return 'status' if topic == RUN_STATUS else None
+
+
+def is_latched(topic: str) -> bool:
+    """True for a testbed topic whose publishers keep messages for late readers."""
+    kind = qos_class(topic)
+    return kind is not None and QOS[kind].durability == 'transient_local'
 
 
 def _table() -> dict[str, tuple[str, str, str]]:

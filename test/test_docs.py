@@ -216,7 +216,9 @@ def test_topic_tables_match_the_interface(path):
     rows = _table_rows(path.read_text(), 'topic')
     types = dict(interface.TOPIC_TYPES, **{interface.RUN_STATUS: interface.DIAGNOSTIC_STATUS,
                                           interface.force_topic('<source>'):
-                                          interface.JOINT_STATE})
+                                          interface.JOINT_STATE,
+                                          interface.excitation_spec_topic('<source>'):
+                                          interface.STRING})
     assert sorted(r[0].strip('`') for r in rows) == sorted(types)
     header = next(line for line in path.read_text().splitlines()
                   if line.startswith('| topic |'))

@@ -1,22 +1,28 @@
 """
-Exciter node: a force at the TCP (impulse, step, sine, chirp, band-limited random).
+Exciter node: a force at the TCP, answering every plant step.
 
-It is a lockstep force source: every /clock tick t_k it answers on /pentapod/forces/<name>
-(ports tcp_force_{x,y,z}, efforts [N]) and publishes the applied force on
-/pentapod/excitation (geometry_msgs/WrenchStamped, force [N], torque zero). The signal is
+Signals: impulse, step, sine, chirp, band-limited random, multisine, periodic chirp, stepped
+sine (docs/nodes.md, "Excitation signals"). It is a lockstep force source: every /clock tick
+t_k it answers on /pentapod/forces/<name> (ports tcp_force_{x,y,z}, efforts [N]) and publishes
+the applied force on /pentapod/excitation (geometry_msgs/WrenchStamped, force [N], torque
+zero). The signal is
 :class:`pentapod_sim.sim.excitation.Excitation` evaluated at step k = t_k / dt, so the offline
-closed loop applies bit-identical forces.
+closed loop applies bit-identical forces. At start it publishes the signal's parameters once
+on /pentapod/excitation_spec/<name> (std_msgs/String, JSON, transient local), so a recording
+holds them for the analysis.
 """
 from __future__ import annotations
 
 from geometry_msgs.msg import WrenchStamped
+from std_msgs.msg import String
 
 from pentapod_sim.errors import ConfigError
-from pentapod_sim.interface import EXCITATION, stamp_ns, step_of
-from pentapod_sim.nodes.common import INFO_QOS, run_node
+from pentapod_sim.interface import EXCITATION, excitation_spec_topic, stamp_ns, step_of
+from pentapod_sim.nodes.common import INFO_QOS, qos, run_node
 from pentapod_sim.nodes.lockstep_source import LockstepSource
 from pentapod_sim.nodes.parameter_tables import excitation_spec, EXCITER
 from pentapod_sim.sim.excitation import Excitation
+from pentapod_sim.sim.excitation_spec import spec_message
 
 TCP_PORTS = ['tcp_force_x', 'tcp_force_y', 'tcp_force_z']
 
@@ -35,8 +41,11 @@ class ExciterNode(LockstepSource):
         self.setup([], TCP_PORTS)
         self.wrench_pub = self.create_publisher(WrenchStamped, EXCITATION, INFO_QOS)
         self.info_pubs.append(self.wrench_pub)
-        self.get_logger().info(f'{spec.kind} excitation, {spec.amplitude} N along '
-                               f'{self.signal.direction.tolist()}')
+        self.spec_pub = self.create_publisher(String, excitation_spec_topic(self.source_name),
+                                              qos('spec'))
+        self.spec_pub.publish(String(data=spec_message(spec, self.params.sample_rate,
+                                                       self.source_name)))
+        self.get_logger().info(describe(self.signal))
 
     def compute(self, ns: int, sensors):
         """Force at step k = round(t_k / dt) [N]."""
@@ -53,6 +62,19 @@ class ExciterNode(LockstepSource):
         msg.header.frame_id = 'tcp'
         msg.wrench.force.x, msg.wrench.force.y, msg.wrench.force.z = map(float, efforts)
         self.wrench_pub.publish(msg)
+
+
+def describe(signal: Excitation) -> str:
+    """The start log line: kind, amplitude, direction, crest factor, period and lines."""
+    spec = signal.spec
+    text = (f'{spec.kind} excitation, {spec.amplitude} N along {signal.direction.tolist()}, '
+            f'crest factor {signal.crest_factor:.3f}')
+    if signal.period_steps is not None:
+        text += (f', period {signal.period_steps} steps, {len(signal.lines_hz)} lines, '
+                 f'{signal.settle_periods} settling period(s)')
+    elif len(signal.lines_hz):
+        text += f', {len(signal.lines_hz)} lines'
+    return text
 
 
 def main(argv=None) -> int:

@@ -114,11 +114,13 @@ class RecorderNode(Node):
 
     def _subscribe(self, topic: str, msg_type: str, publishers) -> None:
         best_effort = _any_best_effort(publishers)
-        status = topic == interface.RUN_STATUS   # transient local: a late recorder gets it too
+        status = topic == interface.RUN_STATUS
+        # transient local (run status, excitation spec): a late recorder gets it too
         qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=self.depth,
                          reliability=(ReliabilityPolicy.BEST_EFFORT if best_effort
                                       else ReliabilityPolicy.RELIABLE),
-                         durability=(DurabilityPolicy.TRANSIENT_LOCAL if status
+                         durability=(DurabilityPolicy.TRANSIENT_LOCAL
+                                     if interface.is_latched(topic)
                                      else DurabilityPolicy.VOLATILE))
         stamped = has_header_stamp(msg_type)
         callback = self._callback(topic, msg_type, stamped, self._selected(topic))
