@@ -12,7 +12,11 @@ messages (docs/architecture.md, docs/nodes.md):
   [rad/s] = bending rate), ``strut{i}_axial`` (position [m], velocity [m/s]) and
   ``strut{i}_chord_{2,3}`` (position [m] = chord displacement, velocity [m/s]);
 * ``/pentapod/pma_mount_state``: ``pma_mount_{x,y,z}``, velocity = ``pma_mount_velocity_*``
-  [m/s] (position NaN: the plant has no displacement output there).
+  [m/s] (position NaN: the plant has no displacement output there);
+* ``/pentapod/tcp_state_fullrate`` (multi-rate plant, N = ``substeps`` > 1, published only while
+  subscribed): the N full-rate TCP samples of exchange k in one message, stamp t_k, joints
+  ``tcp_{x,y,z}@j`` (j = 0..N-1, sample time t_k + j dt / N), position [m], velocity [m/s]
+  (:func:`fullrate_layout`).
 
 A quantity the model lacks is published as NaN.
 """
@@ -35,6 +39,7 @@ TCP_STATE = '/pentapod/tcp_state'
 STRUT_STATES = '/pentapod/strut_states'
 PMA_MOUNT_STATE = '/pentapod/pma_mount_state'
 STATE_TOPICS = (TCP_STATE, STRUT_STATES, PMA_MOUNT_STATE)
+TCP_STATE_FULLRATE = '/pentapod/tcp_state_fullrate'
 EXCITATION = '/pentapod/excitation'
 PMA_STATE = '/pentapod/pma/state'
 #: Run status of the plant (diagnostic_msgs/DiagnosticStatus, reliable, transient local):
@@ -78,10 +83,11 @@ STRING = 'std_msgs/msg/String'
 #: Message type of every fixed data topic (force topics are JOINT_STATE; RUN_STATUS is
 #: DIAGNOSTIC_STATUS).
 TOPIC_TYPES = {CLOCK: CLOCK_TYPE, TCP_STATE: JOINT_STATE, STRUT_STATES: JOINT_STATE,
-               PMA_MOUNT_STATE: JOINT_STATE, EXCITATION: WRENCH_STAMPED, PMA_STATE: JOINT_STATE}
+               TCP_STATE_FULLRATE: JOINT_STATE, PMA_MOUNT_STATE: JOINT_STATE,
+               EXCITATION: WRENCH_STAMPED, PMA_STATE: JOINT_STATE}
 #: Topics that carry one message per plant step (stamp t_k) when they are published at all;
 #: force topics (:data:`FORCE_PREFIX`) do too. The recorder expects one message per step on them.
-STEP_TOPICS = (CLOCK, *STATE_TOPICS, EXCITATION, PMA_STATE)
+STEP_TOPICS = (CLOCK, *STATE_TOPICS, TCP_STATE_FULLRATE, EXCITATION, PMA_STATE)
 
 #: Values of the ``state`` key of a run-status message (DiagnosticStatus.message holds it too).
 RUN_RUNNING, RUN_FINISHED, RUN_STOPPED = 'running', 'finished', 'stopped'
@@ -171,7 +177,7 @@ QOS = {'state': QosSpec(STREAM_DEPTH), 'force': QosSpec(STREAM_DEPTH),
 
 def qos_class(topic: str) -> str | None:
     """Class of :data:`QOS` the testbed's publishers of ``topic`` use (None: not a testbed one)."""
-    if topic in (CLOCK, *STATE_TOPICS):
+    if topic in (CLOCK, *STATE_TOPICS, TCP_STATE_FULLRATE):
         return 'state'
     if topic.startswith(FORCE_PREFIX):
         return 'force'
@@ -266,6 +272,25 @@ def state_layouts(output_names: Sequence[str]) -> list[TopicLayout]:
         vel = np.array([table[j].get('velocity', -1) for j in names], dtype=np.intp)
         layouts.append(TopicLayout(topic, names, pos, vel))
     return layouts
+
+
+def fullrate_layout(output_names: Sequence[str], substeps: int) -> TopicLayout | None:
+    """
+    Layout of :data:`TCP_STATE_FULLRATE` on the flattened (N, n_out) full-rate outputs.
+
+    Joint ``tcp_<axis>@<j>`` of substep j takes its position and velocity from row j; None if
+    the model has no TCP output.
+    """
+    tcp = next((lay for lay in state_layouts(output_names) if lay.topic == TCP_STATE), None)
+    if tcp is None:
+        return None
+    n_out, rows = len(output_names), np.arange(substeps)[:, None]
+
+    def flat(index):
+        return np.where(index < 0, -1, rows * n_out + index).reshape(-1)
+    return TopicLayout(TCP_STATE_FULLRATE, [f'{j}@{s}' for s in range(substeps)
+                                            for j in tcp.joints],
+                       flat(tcp.position_index), flat(tcp.velocity_index))
 
 
 def stamp_ns(step: int, dt: float) -> int:

@@ -6,6 +6,7 @@ import pytest
 from fixtures.demo_model import demo_model
 from pentapod_damper.laws import Dynamics, ProofMassActuator, tcp_damper
 from pentapod_sim.errors import ConfigError
+from pentapod_sim.interface import fullrate_layout, TCP_STATE_FULLRATE
 from pentapod_sim.sim.closed_loop import closed_loop_system, excitation_matrix, simulate
 from pentapod_sim.sim.multirate import full_rate_loop_outputs, MultiRatePlant
 from pentapod_sim.sim.stepping import DiscretePlant
@@ -144,3 +145,19 @@ def test_full_rate_of_a_single_rate_plant_is_its_outputs():
     run = simulate(plant, [], exc, full_rate=True)
     assert np.array_equal(run.y_full, run.y)
     assert simulate(plant, [], exc).y_full is None
+
+
+def test_fullrate_layout_picks_the_tcp_columns_of_every_substep():
+    model = demo_model(3, seed=1)
+    names = model.output_names
+    layout = fullrate_layout(names, 4)
+    assert layout.topic == TCP_STATE_FULLRATE
+    assert layout.joints[:4] == ['tcp_x@0', 'tcp_y@0', 'tcp_z@0', 'tcp_x@1']
+    rows = np.arange(4 * len(names), dtype=float).reshape(4, len(names))
+    pos, vel = layout.values(rows.reshape(-1))
+    for i, joint in enumerate(layout.joints):
+        axis, j = joint[4], int(joint.split('@')[1])
+        assert pos[i] == rows[j, names.index(f'tcp_displacement_{axis}')]
+        assert vel[i] == rows[j, names.index(f'tcp_velocity_{axis}')]
+    no_tcp = [n for n in names if not n.startswith('tcp_')]
+    assert fullrate_layout(no_tcp, 4) is None

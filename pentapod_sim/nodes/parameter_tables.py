@@ -13,6 +13,7 @@ import math
 from pentapod_sim.parameters import Param, ParameterTable, Values
 from pentapod_sim.plant.check_model import DEFAULT_CHECK_F_MIN
 from pentapod_sim.sim.excitation import ExcitationSpec, KINDS, PHASES, PULSE_SHAPES
+from pentapod_sim.sim.multirate import MAX_SUBSTEPS
 from pentapod_sim.sim.stepping import DEFAULT_MAX_STATE_NORM
 
 #: The plant's sample rate; the exciter and the PMA must be given the same.
@@ -34,6 +35,10 @@ PLANT = ParameterTable('plant', [
           'for (cached)'),
     Param('model_cache_dir', 'str', 'out/models', 'folder of cached built models'),
     SAMPLE_RATE,
+    Param('substeps', 'int', 1, 'plant steps per exchange: the plant integrates at '
+          'sample_rate * substeps (exact zero-order hold, forces held over the substeps) and '
+          'exchanges /clock, states and forces at sample_rate; the full-rate outputs go to '
+          '/pentapod/tcp_state_fullrate and output_file', '', 1, MAX_SUBSTEPS),
     Param('timing', 'str', 'lockstep', 'lockstep: wait for every source each step; realtime: '
           'y_k published at the start of period k, u_k applied if it arrives before the end '
           'of the period, else the last force held and the miss counted',

@@ -3,12 +3,13 @@ Plant node: integrates the modal plant and exchanges outputs and forces over ROS
 
 Every step k it publishes /clock and the state topics (y_k, stamp t_k), then applies the
 forces of its sources (/pentapod/forces/<source>) as u_k and steps x_{k+1} = A_d x_k + B_d u_k
-(:class:`pentapod_sim.sim.stepping.DiscretePlant`). Timing ``lockstep`` waits for every source's
-answer to step k (deterministic; a silent source stops the run naming it); ``realtime`` paces
-steps by the wall clock, holds the newest force of each source and reports the achieved rate,
-lateness percentiles and overruns. Before step 0 it checks the sampled loop with its sources'
-linear models (``loop_check``, :mod:`pentapod_sim.nodes.loop_check`); during the run it
-publishes its run status every ``status_period`` s (:mod:`.run_status`). See docs/nodes.md.
+(``substeps`` exact ZOH substeps: :mod:`pentapod_sim.sim.multirate`, :mod:`.fullrate`). Timing
+``lockstep`` waits for every source's answer to step k (deterministic; a silent source stops the
+run naming it); ``realtime`` paces steps by the wall clock, holds the newest force of each
+source and reports the achieved rate, lateness percentiles and overruns. Before step 0 it
+checks the sampled loop with its sources' linear models (``loop_check``,
+:mod:`pentapod_sim.nodes.loop_check`); during the run it publishes its run status every
+``status_period`` s (:mod:`.run_status`). See docs/nodes.md.
 """
 from __future__ import annotations
 
@@ -36,11 +37,13 @@ from pentapod_sim.nodes.common import (
     STATE_QOS,
     subscribers_of,
 )
+from pentapod_sim.nodes.fullrate import FullRateOutputs
 from pentapod_sim.nodes.parameter_tables import PLANT
 from pentapod_sim.nodes.realtime_stats import LatenessStats
 from pentapod_sim.nodes.run_status import RunStatusPublisher
 from pentapod_sim.plant.build import load_or_build_model
-from pentapod_sim.sim.stepping import DiscretePlant, ForceMixer, parse_sources
+from pentapod_sim.sim.multirate import MultiRatePlant
+from pentapod_sim.sim.stepping import ForceMixer, parse_sources
 from pentapod_sim.sim.trace import Trace
 
 GRAPH_CHECK_PERIOD = 0.25   # s of wall time between checks of the force topics' publishers
@@ -56,12 +59,12 @@ class PlantNode(Node):
         model, origin = load_or_build_model(self.params.model_file, self.params.position,
                                             self.params.model_cache_dir)
         self.model = model
-        self.core = DiscretePlant(model.discretize(1.0 / self.params.sample_rate),
-                                  max_state_norm=self.params.max_state_norm)
+        self.core = MultiRatePlant.from_model(model, self.params.sample_rate,
+                                              self.params.substeps, self.params.max_state_norm)
         self.dt = self.core.dt
         self.get_logger().info(f'plant model {origin}: {model.n_modes} modes, '
                                f'{len(model.input_names)} inputs, {len(model.output_names)} '
-                               f'outputs, dt = {self.dt:.6g} s')
+                               f'outputs, dt = {self.dt:.6g} s, {self.core.substeps} substep(s)')
         self.mixer = ForceMixer(self.core.input_names, parse_sources(self.params.sources, ports),
                                 max_effort=self.params.max_effort)
         self.lost: set[str] = set()       # sources whose publisher left the graph
@@ -71,6 +74,7 @@ class PlantNode(Node):
         self.layouts = state_layouts(self.core.output_names)
         self.state_pubs = [(self.create_publisher(JointState, lay.topic, STATE_QOS), lay)
                            for lay in self.layouts]
+        self.fullrate = FullRateOutputs(self, self.core)
         self.force_subs = [self.create_subscription(
             JointState, force_topic(name),
             lambda msg, name=name: self._on_force(name, msg), FORCE_QOS)
@@ -108,6 +112,7 @@ class PlantNode(Node):
         self._active = [(pub, lay) for pub, lay in self.state_pubs
                         if pub.get_subscription_count() > 0]
         self._clock_active = self.clock_pub.get_subscription_count() > 0
+        self.fullrate.refresh()
         self._next_refresh = time.monotonic() + 0.25
 
     def publish_outputs(self, y: np.ndarray) -> None:
@@ -145,8 +150,8 @@ class PlantNode(Node):
         if state == interface.RUN_RUNNING and not periodic:
             self.refresh_subscribers()
         topics = ([self.clock_pub.topic_name] if self._clock_active else []) + [
-            pub.topic_name for pub, _ in self._active] + [force_topic(s)
-                                                          for s in self.mixer.sources]
+            pub.topic_name for pub, _ in self._active] + self.fullrate.active_topics() + [
+            force_topic(s) for s in self.mixer.sources]
         self.status.publish(state, topics)
 
     # -- runs ------------------------------------------------------------------------------
@@ -198,7 +203,7 @@ class PlantNode(Node):
         """
         wanted = self.params.wait_for_subscribers
 
-        pubs = [self.clock_pub] + [pub for pub, _ in self.state_pubs]
+        pubs = [self.clock_pub] + [pub for pub, _ in self.state_pubs] + self.fullrate.publishers
 
         def missing():
             seen, unmatched = set(), []
@@ -224,7 +229,7 @@ class PlantNode(Node):
         subscriber that died), or after ``ack_timeout`` in all.
         """
         end = time.monotonic() + self.params.ack_timeout
-        for pub in [self.clock_pub] + [pub for pub, _ in self.state_pubs]:
+        for pub in [self.clock_pub, *(p for p, _ in self.state_pubs), *self.fullrate.publishers]:
             while pub.get_subscription_count():
                 if pub.wait_for_all_acked(Duration(seconds=0.1)):
                     break
@@ -273,7 +278,7 @@ class PlantNode(Node):
                     self.publish_outputs(y)
                     last_sent = now
             u = mixer.total()
-            trace.record(k, y, u)
+            self.fullrate.record(k, y, u, trace)
             core.advance(u)
 
     def run_realtime(self, executor, trace) -> LatenessStats:
@@ -313,7 +318,7 @@ class PlantNode(Node):
                 self.misses[source] += 1
             stats.missed(k, len(late))
             u = mixer.total()
-            trace.record(k, y, u)
+            self.fullrate.record(k, y, u, trace)
             core.advance(u)
             if now > next_check:
                 self._watch_lost_sources()

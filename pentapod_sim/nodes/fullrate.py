@@ -1,0 +1,83 @@
+"""
+Full-rate outputs of a multi-rate plant node: into the trace, and batched onto a topic.
+
+With ``substeps`` N > 1 the plant integrates N exact ZOH substeps per exchange
+(:class:`pentapod_sim.sim.multirate.MultiRatePlant`); the states go out once per exchange as
+usual. The N full-rate outputs of exchange k depend on u_k, so they exist once the forces of the
+exchange are in: :meth:`FullRateOutputs.record` computes them then (only if the trace keeps
+them or someone subscribes) and publishes the TCP samples as *one* sensor_msgs/JointState on
+:data:`pentapod_sim.interface.TCP_STATE_FULLRATE` (stamp t_k, joints ``tcp_{x,y,z}@j``).
+
+Why one JointState per exchange: it carries the stamp, so the recorder logs it at sim time and
+waits for its last step like the other per-step topics, and the bag readers know the type. One
+pre-built message with 3N joints costs about 31 us per exchange with a subscriber here, a
+std_msgs/Float64MultiArray (no stamp) 21 us, N JointStates per exchange 1,300-1,900 us
+(N = 10; /tmp measurement, see the report of issue 12 item 3).
+"""
+from __future__ import annotations
+
+import array
+
+import numpy as np
+from sensor_msgs.msg import JointState
+
+from pentapod_sim.interface import fullrate_layout, stamp_ns, TCP_STATE_FULLRATE
+from pentapod_sim.nodes.common import stamp_msg, STATE_QOS
+
+
+class FullRateOutputs:
+    """
+    The plant node's full-rate outputs (nothing at all for a single-rate plant).
+
+    Parameters
+    ----------
+    node : rclpy.node.Node
+        The plant node (creates the publisher when N > 1 and the model has TCP outputs).
+    core : DiscretePlant or MultiRatePlant
+        The plant core.
+    """
+
+    def __init__(self, node, core):
+        self.core = core
+        self.substeps = getattr(core, 'substeps', 1)
+        self.layout = (fullrate_layout(core.output_names, self.substeps)
+                       if self.substeps > 1 else None)
+        self.pub = (node.create_publisher(JointState, TCP_STATE_FULLRATE, STATE_QOS)
+                    if self.layout is not None else None)
+        self.msg = JointState(name=self.layout.joints) if self.layout else None
+        self.active = False
+        self._rows = np.empty((self.substeps, len(core.output_names)))
+
+    def refresh(self) -> None:
+        """Note whether the topic has a subscriber (called with the plant's own refresh)."""
+        self.active = self.pub is not None and self.pub.get_subscription_count() > 0
+
+    @property
+    def publishers(self) -> list:
+        """The publisher, if any (for the plant's subscriber waits and acks)."""
+        return [self.pub] if self.pub is not None else []
+
+    def active_topics(self) -> list[str]:
+        """The topic, if it is published every exchange now."""
+        return [self.pub.topic_name] if self.active else []
+
+    def record(self, k: int, y: np.ndarray, u: np.ndarray, trace) -> None:
+        """
+        Record exchange k: ``trace.record(k, y, u)``, plus its full-rate outputs if wanted.
+
+        Call between ``outputs`` (y_k) and ``advance`` (u_k). The full-rate outputs are
+        computed only if the trace keeps them or the topic has a subscriber.
+        """
+        trace.record(k, y, u)
+        full = trace.full
+        if not self.active and full is None:
+            return
+        rows = full[k] if full is not None else self._rows
+        self.core.fine_outputs(u, y, rows)
+        if self.active:
+            pos, vel = self.layout.values(rows.reshape(-1))
+            msg = self.msg
+            msg.position = array.array('d', pos.tobytes())
+            msg.velocity = array.array('d', vel.tobytes())
+            msg.header.stamp = stamp_msg(stamp_ns(k, self.core.dt))
+            self.pub.publish(msg)
