@@ -13,7 +13,8 @@ matrix-fraction model ``H_o(w) = B_o(z) A(z)^-1`` with ``z = exp(j w dt_m)``,
 eigenvectors' first block holds the participation factors). The numerator coefficients are
 eliminated from the (real-valued) normal equations, so every order costs only a small solve;
 orders 1..n_max reuse one set of matrices. Each output row is weighted by ``1 / sigma_o`` (noise
-standard deviation per line if known, else the RMS of the row over the band).
+standard deviation per line if known, floored at 1e-3 of its median and 1e-8 of the row's RMS
+so that a noise-free record gets even weights; else ``1 / RMS`` of the row over the band).
 
 Stability (order n against order n-1; nearest pole in frequency): ``f`` if the frequency moves
 less than ``tol_freq`` (relative), ``d`` if the damping ratio also moves less than
@@ -139,12 +140,13 @@ def as_frf_array(H: npt.ArrayLike, n_freq: int) -> np.ndarray:
 
 def _weights(H: np.ndarray, sigma) -> np.ndarray:
     """Weight per output and line (F,) from the noise std, or 1/RMS of the output's FRFs."""
-    if sigma is not None:
-        sig = np.sqrt(np.sum(as_frf_array(sigma, H.shape[2]).real ** 2, axis=1))
-        floor = 1e-3 * np.maximum(np.median(sig, axis=1, keepdims=True), 1e-300)
-        return 1.0 / np.maximum(sig, floor)
-    rms = np.sqrt(np.mean(np.abs(H) ** 2, axis=(1, 2)))
-    return np.repeat((1.0 / np.maximum(rms, 1e-300))[:, None], H.shape[2], axis=1)
+    rms = np.maximum(np.sqrt(np.mean(np.abs(H) ** 2, axis=(1, 2))), 1e-300)[:, None]
+    if sigma is None:
+        return np.repeat(1.0 / rms, H.shape[2], axis=1)
+    sig = np.sqrt(np.sum(as_frf_array(sigma, H.shape[2]).real ** 2, axis=1))
+    # floor: 1e-3 of the median noise, and 1e-8 of the FRF level (noise-free records)
+    floor = np.maximum(1e-3 * np.median(sig, axis=1, keepdims=True), 1e-8 * rms)
+    return 1.0 / np.maximum(sig, floor)
 
 
 def _order_poles(m: np.ndarray, n: int, n_in: int, dt_m: float, band: tuple,

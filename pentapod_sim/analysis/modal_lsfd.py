@@ -128,7 +128,9 @@ def _line_weights(H: np.ndarray, sigma) -> np.ndarray:
     if sigma is None:
         return np.ones((n_out * n_in, n_freq))
     sig = as_frf_array(sigma, n_freq).real.reshape(n_out * n_in, n_freq)
-    floor = 1e-3 * np.maximum(np.median(sig, axis=1, keepdims=True), 1e-300)
+    rms = np.sqrt(np.mean(np.abs(H.reshape(n_out * n_in, n_freq)) ** 2, axis=1, keepdims=True))
+    floor = np.maximum(1e-3 * np.median(sig, axis=1, keepdims=True),
+                       1e-8 * np.maximum(rms, 1e-300))  # noise-free records: even weights
     return 1.0 / np.maximum(sig, floor)
 
 
