@@ -218,6 +218,8 @@ def test_topic_tables_match_the_interface(path):
                                           interface.force_topic('<source>'):
                                           interface.JOINT_STATE,
                                           interface.excitation_spec_topic('<source>'):
+                                          interface.STRING,
+                                          interface.controller_model_topic('<source>'):
                                           interface.STRING})
     assert sorted(r[0].strip('`') for r in rows) == sorted(types)
     header = next(line for line in path.read_text().splitlines()
