@@ -69,6 +69,7 @@ def test_analyze_modes_identifies_the_recorded_chain(multisine_bag, tmp_path, ca
     assert main(['--out', str(out), 'modes', str(path)]) == 0
     text = capsys.readouterr().out
     assert 'multisine excitation, synchronous average of 5 periods' in text
+    assert 'WARNING' not in text  # 3 settling periods: 9 time constants of the 0.5 % mode
     with open(out / 'multisine_modes.csv', newline='', encoding='utf-8') as handle:
         rows = list(csv.DictReader(handle))
     freq = np.array([float(r['freq_Hz']) for r in rows])
@@ -105,6 +106,14 @@ def test_bag_without_excitation_record_is_a_clear_error(tmp_path, capsys):
     assert main(['--out', str(tmp_path / 'out'), 'modes', str(tmp_path / 'bare')]) == 1
     err = capsys.readouterr().err
     assert 'holds no excitation record' in err and 'Traceback' not in err
+
+
+def test_an_unsettled_record_is_flagged(tmp_path, capsys):
+    spec = ExcitationSpec('multisine', 20.0, period=1.0, f_start=2.0, f_end=100.0,
+                          settle_periods=0)
+    record(tmp_path / 'early', spec, 4000)  # 4 s from rest: 3 time constants of 0.5 %
+    main(['--out', str(tmp_path / 'out'), 'modes', str(tmp_path / 'early')])
+    assert 'WARNING: transient error / noise error is' in capsys.readouterr().out
 
 
 def test_stepped_sine_bag_uses_the_line_fit(tmp_path):

@@ -11,7 +11,8 @@ in one bin exactly (no leakage). Per line (Pintelon & Schoukens, System Identifi
   ``var H ~ |H|^2 (var Y/|Y|^2 + var U/|U|^2 - 2 Re(cov(Y, U)/(Y conj U))) / M``;
 * transient error: ``|H_first - H_second|`` of the FRFs averaged over the first and the second
   half of the periods. A transient that has not died out makes the halves differ; at steady
-  state the difference is at the noise level (``~ 2 noise std``).
+  state the difference is noise only: its ratio to the noise std is Rayleigh distributed with
+  median ``2 sqrt(ln 2) = 1.67``.
 """
 from __future__ import annotations
 
