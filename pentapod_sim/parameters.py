@@ -357,8 +357,8 @@ test/test_parameters.py checks that this file is up to date. Do not edit it by h
 Units are SI. Every node refuses a parameter name it does not know, naming the closest known
 one, and so does the scenario runner for a scenario file; a `/**` section may hold parameters
 that only some nodes declare. Read-only parameters are read once at start; the others may be
-changed while the node runs (`ros2 param set`). An empty list default is declared as `['']`
-or `[0]` (ROS 2 cannot type an empty list); these entries mean nothing in any list.
+changed while the node runs (`ros2 param set`). An empty list default is declared as `['']`,
+`[0]` or `[0.0]` (ROS 2 cannot type an empty list); these entries mean nothing in any list.
 `ros2 run pentapod_testbed <node> --help` prints a node's table.
 """
 
