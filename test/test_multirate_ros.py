@@ -1,6 +1,8 @@
 """
 Multi-rate plant through ROS: the scenario runner's lockstep run equals the offline loop.
 
+Separate processes and composed (``--composed``: one process, one executor) alike.
+
 The plant integrates ``substeps`` exact ZOH substeps per exchange; the sources answer once per
 exchange (/clock tick). The trace (exchange y, u and full-rate y) and the batched full-rate
 topic must be the very bits of :func:`pentapod_sim.sim.closed_loop.simulate` with a
@@ -57,16 +59,20 @@ def _scenario(tmp_path, kind: str, rate: float, substeps: int, steps: int, recor
     return path
 
 
-@pytest.mark.parametrize('kind,rate,substeps,record', [
-    ('damper', 1000.0, 10, True), ('pma', 1500.0, 8, False)])
+@pytest.mark.parametrize('kind,rate,substeps,record,composed', [
+    ('damper', 1000.0, 10, True, False), ('pma', 1500.0, 8, False, False),
+    ('damper', 1000.0, 10, True, True)], ids=['damper', 'pma', 'damper-composed'])
 def test_ros_multirate_run_equals_offline_loop_bit_for_bit(tmp_path, kind, rate, substeps,
-                                                          record):
+                                                          record, composed):
     steps = 500
     path = _scenario(tmp_path, kind, rate, substeps, steps, record)
     proc = subprocess.run([sys.executable, '-m', 'pentapod_sim.scenario.runner', str(path),
-                           '--timeout', '240'], env=dict(os.environ), capture_output=True,
-                          text=True, timeout=300)
-    assert proc.returncode == 0, proc.stdout + proc.stderr
+                           '--timeout', '240', *(['--composed'] if composed else [])],
+                          env=dict(os.environ), capture_output=True, text=True, timeout=300)
+    log = proc.stdout + proc.stderr
+    assert proc.returncode == 0, log
+    assert len([line for line in log.splitlines() if 'starting ' in line]) == (
+        1 if composed else len(read_scenario(path).sections)), log
     run = np.load(tmp_path / 'trace.npz')
     assert int(run['steps_run']) == steps and int(run['substeps']) == substeps
     assert float(run['dt']) == pytest.approx(1 / rate, rel=1e-15)
