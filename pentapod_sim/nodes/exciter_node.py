@@ -72,8 +72,10 @@ def describe(signal: Excitation) -> str:
     if signal.period_steps is not None:
         text += (f', period {signal.period_steps} steps, {len(signal.lines_hz)} lines, '
                  f'{signal.settle_periods} settling period(s)')
-    elif len(signal.lines_hz):
-        text += f', {len(signal.lines_hz)} lines'
+    windows = signal.stepped_windows()
+    if windows:
+        text += (f', {len(windows)} lines over '
+                 f'{(windows[-1][2] - signal.first) * signal.dt:.6g} s')
     return text
 
 
