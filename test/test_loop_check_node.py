@@ -20,6 +20,7 @@ from test_stopping import Runner
 from fixtures.demo_model import demo_model
 from pentapod_sim import interface
 from pentapod_sim.analysis.bag_reader import open_bag
+from pentapod_sim.plant.model import PlantModel
 from pentapod_sim.scenario.files import dump_params
 
 RATE = 2000.0
@@ -159,3 +160,52 @@ def test_stable_loop_logs_its_margin_names_unchecked_sources_and_reports_progres
     implied = sum((steps_seen[i] - steps_seen[i - 1]) / float(values[i]['step_rate'])
                   for i in range(1, last + 1) if steps_seen[i] > steps_seen[i - 1])
     assert implied == pytest.approx(times[last] - times[0], rel=0.1, abs=0.05)
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_a_loop_stable_only_thanks_to_truncation_is_refused_then_warned_about(tmp_path, start):
+    """
+    Truncation: a loop stable on the plant, unstable on the check model, refused or warned.
+
+    P2 at 2 kHz, bending damper 500 N m s/rad on strut 1: stable on the plant, not on the check
+    model (FE modes below 5 kHz). The first run builds and caches the check model and refuses;
+    the second loads it (no second build) and runs with a warning.
+    """
+    cache = tmp_path / 'models'
+
+    def real(loop_check):
+        doc = {'/**': {'ros__parameters': {'sample_rate': RATE}},
+               'exciter': {'ros__parameters': {'kind': 'impulse', 'amplitude': 10.0}},
+               'damper': {'ros__parameters': {'bending_struts': [1], 'bending_gain': 500.0}},
+               'plant': {'ros__parameters': {
+                   'position': 'P2', 'model_cache_dir': str(cache), 'steps': 200,
+                   'sources': ['exciter', 'damper'], 'loop_check': loop_check,
+                   'startup_timeout': 120.0}}}
+        path = tmp_path / f'{loop_check}.yaml'
+        path.write_text(dump_params(doc))
+        return finish(start(path), timeout=300.0)
+
+    code, out = real('refuse')
+    assert code != 0, out
+    assert 'building the check model of P2 (FE modes below 5000 Hz)' in out, out
+    line = next(x for x in out.splitlines() if x.startswith('error: truncation check'))
+    assert 'is stable only thanks to truncation' in line, line
+    plant = PlantModel.load(next(cache.glob('plant_P2_*.npz')))
+    check = PlantModel.load(next(cache.glob('check_P2_5000hz_*.npz')))
+    assert check.n_modes > 2 * plant.n_modes
+    sensors, actuators = ['strut1_bending_rate_2', 'strut1_bending_rate_3'], [
+        'strut1_bending_moment_2', 'strut1_bending_moment_3']
+    on_plant = python_control_radius(plant, sensors, actuators, [500.0, 500.0], 1 / RATE)
+    on_check = python_control_radius(check.select(plant.input_names, plant.output_names),
+                                     sensors, actuators, [500.0, 500.0], 1 / RATE)
+    assert on_plant < 1.0 < on_check
+    radii = [float(r) for r in RADIUS.findall(line)] + [
+        float(r) for r in re.findall(r'([0-9.]+) on the check model', line)]
+    assert radii[0] == pytest.approx(on_plant, abs=5e-7), line      # printed: 6 digits
+    assert radii[-1] == pytest.approx(on_check, abs=5e-6), line
+
+    code, out = real('warn')
+    assert 'building the check model' not in out and 'loaded cached' in out, out
+    assert '!!! truncation check (loop_check = warn)' in out, out
+    assert code == 0 and 'finished: ran 200 of 200 steps' in out, out
