@@ -161,3 +161,11 @@ def test_fullrate_layout_picks_the_tcp_columns_of_every_substep():
         assert vel[i] == rows[j, names.index(f'tcp_velocity_{axis}')]
     no_tcp = [n for n in names if not n.startswith('tcp_')]
     assert fullrate_layout(no_tcp, 4) is None
+
+
+def test_fine_outputs_refuse_an_array_they_cannot_write_in_place():
+    plant = MultiRatePlant.from_model(demo_model(3, seed=1), RATE, 4)
+    u = np.zeros(len(plant.input_names))
+    wide = np.zeros((4, 2 * len(plant.output_names)))
+    with pytest.raises(ValueError, match='C-contiguous'):
+        plant.fine_outputs(u, plant.outputs(), wide[:, ::2])

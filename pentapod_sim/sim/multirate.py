@@ -177,6 +177,8 @@ class MultiRatePlant(DiscretePlant):
         """
         if out is None:
             out = np.empty((self.substeps, len(self.output_names)))
+        elif not out.flags.c_contiguous:
+            raise ValueError('fine_outputs: out must be C-contiguous (rows are written in place)')
         out[0] = y
         if self.substeps > 1:
             rest = out[1:].reshape(-1)
