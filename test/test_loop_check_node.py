@@ -57,6 +57,7 @@ def scenario(tmp_path: Path, gain: float, steps: int, loop_check: str, example=F
         'plant': {'ros__parameters': {
             'model_file': str(model_file), 'steps': steps, 'sources': sources,
             'loop_check': loop_check, 'source_timeout': 5.0, 'startup_timeout': 60.0,
+            'model_cache_dir': str(tmp_path / 'models'),
             'wait_for_subscribers': ['recorder'], **plant}},
         'recorder': {'ros__parameters': {'output_dir': str(tmp_path / 'bags'),
                                          'bag_name': 'run'}},
@@ -207,5 +208,9 @@ def test_a_loop_stable_only_thanks_to_truncation_is_refused_then_warned_about(tm
 
     code, out = real('warn')
     assert 'building the check model' not in out and 'loaded cached' in out, out
-    assert '!!! truncation check (loop_check = warn)' in out, out
+    assert 'truncation check: result of an earlier run read from' in out, out
+    warning = next(x for x in out.splitlines() if '!!! truncation check (loop_check = warn)'
+                   in x)
+    assert [float(r) for r in RADIUS.findall(warning)][0] == radii[0], warning
+    assert f'{radii[-1]:g} on the check model' in warning, warning
     assert code == 0 and 'finished: ran 200 of 200 steps' in out, out

@@ -15,7 +15,9 @@ for at most :data:`MODEL_TIMEOUT` s, and closes the sampled loop with them
 (:func:`pentapod_sim.sim.stability.check_loop`) on its own model and on the check model of its
 position: every FE mode below ``max(loop_check_f_min, 2 sample_rate)``, built once and cached in
 ``model_cache_dir`` (the cache the study's check models use, so neither pays twice). A plant
-model without a position (a synthetic or modal-data model) is checked on itself only. It logs
+model without a position (a synthetic or modal-data model) is checked on itself only. The radii
+of a loop are kept in ``model_cache_dir`` too (:func:`loop_result`), so a run of the same loop
+again reads them instead of solving the eigenvalue problem (seconds for a 5 kHz scenario). It logs
 the margins and names the sources it could not check; with ``loop_check`` = ``refuse`` a loop
 that is not stable ends the run with a RunError naming the spectral radius, with ``warn`` it
 logs a loud warning and runs, ``off`` skips the check.
@@ -23,7 +25,11 @@ logs a loud warning and runs, ``off`` skips the check.
 from __future__ import annotations
 
 from contextlib import contextmanager
+import dataclasses
+import hashlib
+import json
 import logging
+from pathlib import Path
 import time
 from typing import Callable, Mapping, Sequence
 
@@ -41,7 +47,7 @@ from pentapod_sim.plant.check_model import (
 )
 from pentapod_sim.plant.model import PlantModel
 from pentapod_sim.sim.controllers import DiscreteController
-from pentapod_sim.sim.stability import check_loop, LoopCheck, UnstableLoopError
+from pentapod_sim.sim.stability import apply_policy, check_loop, LoopCheck, UnstableLoopError
 
 #: Wall time [s] the plant waits for the models of its sources after they appeared.
 MODEL_TIMEOUT = 2.0
@@ -172,21 +178,58 @@ def forwarded_logs(logger, name: str = 'pentapod_sim'):
         py.setLevel(level)
 
 
-def check_plant_model(node) -> PlantModel | None:
-    """The check model of the plant's position (built once, cached); None without one."""
+def check_plant_model(node) -> tuple[PlantModel | None, str]:
+    """The check model of the plant's position (built once, cached) and its file name."""
     position = node.model.meta.get('position') or ''
     log = node.get_logger()
     if not position:
         log.info('truncation check on the plant model only: it has no FE position')
-        return None
+        return None, ''
     f_max = check_f_max(node.params.sample_rate, node.params.loop_check_f_min)
-    if not check_cache_file(position, f_max, node.params.model_cache_dir).exists():
+    cached = check_cache_file(position, f_max, node.params.model_cache_dir)
+    if not cached.exists():
         log.info(f'truncation check: building the check model of {position} (FE modes below '
                  f'{f_max:g} Hz) once; later runs load it from {node.params.model_cache_dir}')
     with forwarded_logs(log):
         check, origin = load_or_build_check_model(position, f_max, node.params.model_cache_dir)
     log.info(f'check model {origin}: {check.n_modes} modes')
-    return check
+    return check, cached.name
+
+
+def loop_result(node, models: Mapping[str, DiscreteController], check: PlantModel | None,
+                check_name: str, label: str) -> tuple[LoopCheck, Path | None]:
+    """
+    The radii of the loop on plant and check model, computed once per loop and kept.
+
+    With a check model the result is stored as ``loop_check_<key>.json`` in
+    ``model_cache_dir``, keyed by the plant's content hash, the check model's file name, dt and
+    the models, so a scenario run again (or the study's runs of one scenario) does not solve the
+    same eigenvalue problem twice (a plant checked on itself is quick and kept nowhere). Returns
+    the result and the file it was read from (None: computed now).
+    """
+    doc = [node.model.content_hash(), check_name, repr(node.dt), label,
+           [m.to_json() for m in models.values()]]
+    key = hashlib.sha256(json.dumps(doc).encode()).hexdigest()[:16]
+    path = (None if check is None
+            else Path(node.params.model_cache_dir) / f'loop_check_{key}.json')
+    if path is not None and path.is_file():
+        try:
+            return LoopCheck(**json.loads(path.read_text())), path
+        except (OSError, ValueError, TypeError):
+            pass                                    # unreadable: computed and written again
+    quiet = logging.getLogger('pentapod_sim.sim.stability')
+    was, quiet.disabled = quiet.disabled, True      # the policy is applied (and logged) here
+    try:
+        result = check_loop(node.model, check, list(models.values()), node.dt, 'warn', label)
+    finally:
+        quiet.disabled = was
+    try:
+        if path is not None:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            path.write_text(json.dumps(dataclasses.asdict(result)))
+    except OSError as err:
+        node.get_logger().warning(f'truncation check result not kept: {err}')
+    return result, None
 
 
 def check_at_start(node, executor) -> LoopCheck | None:
@@ -213,10 +256,13 @@ def check_at_start(node, executor) -> LoopCheck | None:
                  f'sources: {open_loop or "none"}); nothing to check')
         return None
     start = time.monotonic()
-    check = check_plant_model(node)
-    label = f'loop of plant and {", ".join(models)}'
+    check, check_name = check_plant_model(node)
+    result, kept = loop_result(node, models, check, check_name, f'loop of plant and '
+                               f'{", ".join(models)}')
+    if kept is not None:
+        log.info(f'truncation check: result of an earlier run read from {kept}')
     try:
-        result = check_loop(node.model, check, list(models.values()), node.dt, 'refuse', label)
+        apply_policy(result, 'refuse')
     except UnstableLoopError as err:
         if policy == 'refuse':
             raise RunError(f'truncation check (loop_check = refuse): {err}{missing}') from None
