@@ -7,6 +7,7 @@ spectral radii the plant reports are checked against loops closed here with pyth
 construction. The ROS-free pieces (model texts, stacking a node's laws, sorting the models,
 status values) are checked without ROS.
 """
+import ast
 from pathlib import Path
 import re
 
@@ -45,12 +46,12 @@ def python_control_radius(plant, sensors, actuators, gains, dt) -> float:
 
 
 def scenario(tmp_path: Path, gain: float, steps: int, loop_check: str, example=False,
-             **plant) -> Path:
+             rate: float = RATE, **plant) -> Path:
     """Plant (demo model, no FE position) + exciter + TCP damper (+ example) + recorder."""
     model_file = demo_model(6, seed=4).save(tmp_path / 'model.npz')
     sources = ['exciter', 'damper'] + (['example'] if example else [])
     doc = {
-        '/**': {'ros__parameters': {'sample_rate': RATE}},
+        '/**': {'ros__parameters': {'sample_rate': rate}},
         'exciter': {'ros__parameters': {'kind': 'sine', 'amplitude': 20.0, 'frequency': 7.0,
                                         'duration': 1.0e6}},
         'damper': {'ros__parameters': {'tcp_directions': ['x', 'y'], 'tcp_gain': gain}},
@@ -214,3 +215,22 @@ def test_a_loop_stable_only_thanks_to_truncation_is_refused_then_warned_about(tm
     assert [float(r) for r in RADIUS.findall(warning)][0] == radii[0], warning
     assert f'{radii[-1]:g} on the check model' in warning, warning
     assert code == 0 and 'finished: ran 200 of 200 steps' in out, out
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_realtime_run_status_counts_the_deadline_misses_of_the_trace(tmp_path, start):
+    """20 kHz in real time on a shared machine: answers miss their periods, the status counts."""
+    path = scenario(tmp_path, 2000.0, 10000, 'off', rate=20000.0, timing='realtime',
+                    status_period=0.2, output_file=str(tmp_path / 'trace.npz'))
+    code, out = finish(start(path))
+    assert code == 0, out
+    trace = np.load(tmp_path / 'trace.npz')
+    misses = sum(ast.literal_eval(str(trace['misses_per_source'])).values())
+    bag = open_bag(tmp_path / 'bags' / 'run', topics=[interface.RUN_STATUS])
+    values = [{kv.key: kv.value for kv in deserialize_message(p, DiagnosticStatus).values}
+              for p in bag.topic(interface.RUN_STATUS).payloads]
+    assert values[-1]['state'] == 'finished' and values[-1]['steps'] == '10000'
+    assert int(values[-1]['deadline_misses']) == misses > 0, (misses, out)
+    running = [int(v['deadline_misses']) for v in values[:-1]]
+    assert running == sorted(running) and running[-1] <= misses
