@@ -130,6 +130,40 @@ def test_run_status_step_rate_and_real_time_factor():
     assert report['dropped_by_live_view'] == 7
 
 
+def test_run_status_passes_the_plant_figures_through():
+    status = RunStatus()
+    dt_ns = 200_000
+    status.add(np.arange(0, 1000) * dt_ns)
+    status.report(10.0, 0)
+    status.add(np.arange(1000, 1200) * dt_ns)
+    status.add_plant({'state': 'running', 'steps': '1500', 'dt': '0.0002', 'step_rate': '812.5',
+                      'deadline_misses': '4', 'rejected_messages': '2'})
+    report = dict(zip(STATUS_NAMES, status.report(11.0, 3)))
+    assert report['step'] == 1499                      # the plant is ahead of the view
+    assert report['steps_per_second'] == 812.5
+    assert (report['deadline_misses'], report['rejected_messages']) == (4, 2)
+    assert report['sim_time'] == pytest.approx(1199 * 2e-4)      # from the stamps
+    assert report['real_time_factor'] == pytest.approx(200 * 2e-4)
+    assert report['dropped_by_live_view'] == 3
+    status.add(np.arange(1200, 1700) * dt_ns)
+    assert dict(zip(STATUS_NAMES, status.report(12.0, 3)))['step'] == 1699   # view ahead
+    status.add_plant({'state': 'running', 'steps': '0', 'step_rate': 'x'})  # new run, old plant
+    report = dict(zip(STATUS_NAMES, status.report(13.0, 3)))
+    assert report['step'] == 1699 and math.isnan(report['steps_per_second'])
+    assert math.isnan(report['deadline_misses']) and math.isnan(report['rejected_messages'])
+
+
+def test_topic_stream_counts_messages_lost_between_sequence_numbers():
+    stream = TopicStream(interface.TCP_STATE, interface.JOINT_STATE, 1_000_000, backlog=100)
+    msg = encode_joint_state(0, ['tcp_x'], [1.0], [])
+    for sequence in (5, 6, 9, 10, 14):          # joined at 5; 7, 8 and 11-13 never came
+        stream.offer(msg, sequence)
+    assert stream.dropped == 5 and len(stream.queue) == 5
+    for sequence in (1, 2, 4):                  # a new publisher starts again at 1
+        stream.offer(msg, sequence)
+    assert stream.dropped == 6
+
+
 def test_topic_stream_drops_resent_steps_and_sees_a_new_run():
     stream = TopicStream(interface.TCP_STATE, interface.JOINT_STATE, 1_000_000, backlog=100)
     names = ['tcp_x', 'tcp_y', 'tcp_z']
@@ -169,7 +203,7 @@ def test_committed_layout_is_the_generated_one():
     assert all(p in referenced for p in panels if p != 'Tab!forces')
     topics = {p.split('.')[0] for p in message_paths(build_layout())}
     fixed = {interface.TCP_STATE, interface.EXCITATION, interface.PMA_STATE,
-             interface.LIVE_STATUS}
+             interface.LIVE_STATUS, interface.RUN_STATUS}
     assert fixed <= topics
     assert all(t in fixed or t.startswith((interface.FORCE_PREFIX,
                                            interface.TCP_SPECTRUM_PREFIX)) for t in topics)

@@ -1,10 +1,12 @@
 """
 The live view's worker: topic streams in, Foxglove WebSocket channels out (ROS-free).
 
-:class:`LiveHub` owns the foxglove-sdk WebSocket server and a worker thread. The ROS node
-hands it raw CDR bytes (:meth:`TopicStream.offer`, constant time on the executor thread); every
-``tick_period`` the worker decodes the backlogs, downsamples them to min/max envelopes, updates
-the TCP spectrum and the run status and logs the results on Foxglove channels whose schemas are
+:class:`LiveHub` owns the foxglove-sdk WebSocket server and a worker thread. Every
+``tick_period`` the worker calls the node's ``poll`` (which takes the raw CDR bytes its
+subscriptions hold into the :class:`TopicStream` backlogs), decodes the backlogs, downsamples
+them to min/max envelopes, updates the TCP spectrum and the run status (passing the plant's
+run-status messages through, :meth:`LiveHub.add_run_status`) and logs the results on Foxglove
+channels whose schemas are
 the ros2msg definitions of the message types and whose payloads are CDR, as a ROS 2 graph
 would deliver them. Channel topics are the ROS topic names (plus the live-only channels of
 :data:`pentapod_sim.interface.LIVE_PREFIX`), so one Foxglove layout works live and on bags.
@@ -12,12 +14,13 @@ Messages are serialised by an encoder the node passes in (rclpy), keeping this m
 """
 from __future__ import annotations
 
+from collections import deque
 import logging
 import os
 from pathlib import Path
 import threading
 import time
-from typing import Callable, Protocol, Sequence
+from typing import Callable, Mapping, Protocol, Sequence
 
 import foxglove
 from foxglove.websocket import Capability
@@ -85,11 +88,15 @@ class LiveHub:
         Message serialiser.
     clock : callable
         Wall clock [s] (monotonic).
+    poll : callable
+        Called by the worker at the start of every pass to fill the topic streams.
     """
 
     def __init__(self, params: Values, encoder: Encoder,
-                 clock: Callable[[], float] = time.monotonic):
-        self.p, self.encoder, self.clock = params, encoder, clock
+                 clock: Callable[[], float] = time.monotonic,
+                 poll: Callable[[], None] = lambda: None):
+        self.p, self.encoder, self.clock, self.poll = params, encoder, clock, poll
+        self._run_status: deque[tuple[bytes, dict[str, str]]] = deque()
         self.period_ns = max(1, int(round(1e9 / params.display_rate)))
         self.context = foxglove.Context()
         self.streams: dict[str, TopicStream] = {}
@@ -103,6 +110,7 @@ class LiveHub:
         self._arrival: dict[str, float] = {}
         self._next = {'status': 0.0, 'spectrum': 0.0}
         self._channel(interface.LIVE_STATUS, interface.JOINT_STATE)
+        self._channel(interface.RUN_STATUS, interface.DIAGNOSTIC_STATUS)
         for name in ('frequency',) + TCP_JOINTS:
             self._channel(interface.tcp_spectrum_topic(name), interface.FLOAT64_MULTI_ARRAY)
 
@@ -121,6 +129,15 @@ class LiveHub:
         self._channel(topic, msg_type)
         self.streams[topic] = stream
         return stream
+
+    def add_run_status(self, data: bytes, values: Mapping[str, str]) -> None:
+        """
+        Take one run-status message of the plant: its CDR bytes and key/value pairs.
+
+        Any thread; the worker forwards the bytes as they are on the run-status channel and
+        passes the figures into the live status at its next pass.
+        """
+        self._run_status.append((data, dict(values)))
 
     def start(self) -> int:
         """Start the WebSocket server and the worker; return the port it listens on."""
@@ -153,6 +170,11 @@ class LiveHub:
 
     def tick(self, wall: float, final: bool = False) -> None:
         """One pass: every backlog, idle flushes, status and spectrum when due."""
+        self.poll()
+        while self._run_status:
+            data, values = self._run_status.popleft()
+            self.status.add_plant(values)
+            self.channels[interface.RUN_STATUS].log(data, log_time=self._status_stamp(values))
         newest = -1
         for stream in list(self.streams.values()):
             self._pass(stream, wall, final)
@@ -225,8 +247,15 @@ class LiveHub:
                 self.encoder.float_array(f'{joint}_{self.p.spectrum_field}_amplitude',
                                          amplitude[:, k].tolist()), log_time=stamp)
 
+    def _status_stamp(self, values: Mapping[str, str]) -> int:
+        """Log time of a run-status message: its last step's stamp (0 before the first)."""
+        try:
+            return max(int(values.get('last_stamp_ns', 0)), 0)
+        except ValueError:
+            return 0
+
     def dropped(self) -> int:
-        """Messages every stream discarded (backlog full) or could not decode."""
+        """Messages every stream lost (backlog full, never delivered) or could not decode."""
         return sum(s.dropped + s.rejected for s in list(self.streams.values()))
 
     def _send_status(self, wall: float) -> None:

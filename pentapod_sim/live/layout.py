@@ -4,9 +4,10 @@ The Foxglove layout of the testbed (config/foxglove/testbed_layout.json), built 
 The layout plots message paths of the ROS topic names, which the live view serves with the
 same names and types as the bags hold, so one layout works live and on a recorded bag: TCP
 displacement and velocity, the forces of every source of the shipped scenarios (one tab per
-source), the PMA stroke and force, and from the live view only the TCP spectrum and the run
-status. It is written in the layout file format that Foxglove's and Lichtblick's "Import
-layout from file" read (``configById`` + ``layout`` tree). Regenerate after a change with::
+source), the PMA stroke and force, the plant's run-status messages (/pentapod/run_status, text
+keys), and from the live view only the TCP spectrum and the run figures. It is written in the
+layout file format that Foxglove's and Lichtblick's "Import layout from file" read
+(``configById`` + ``layout`` tree). Regenerate after a change with::
 
     python -m pentapod_sim.live.layout > config/foxglove/testbed_layout.json
 
@@ -106,13 +107,16 @@ def build_layout() -> dict:
     cfg['Plot!run_rate'] = _plot('Run status, live only', [
         _series(f'{interface.LIVE_STATUS}.position[{status_index(name)}]', name)
         for name in ('steps_per_second', 'real_time_factor')])
+    cfg['Plot!run_counters'] = _plot('Run counters, live only', [
+        _series(f'{interface.LIVE_STATUS}.position[{status_index(name)}]', name)
+        for name in ('deadline_misses', 'rejected_messages', 'dropped_by_live_view')])
     cfg['RawMessages!run_status'] = {
-        'topicPath': interface.LIVE_STATUS, 'diffEnabled': False, 'diffMethod': 'custom',
+        'topicPath': interface.RUN_STATUS, 'diffEnabled': False, 'diffMethod': 'custom',
         'diffTopicPath': '', 'showFullMessageForDiff': False}
     tree = _row([
         _row(['Plot!tcp_displacement', 'Plot!tcp_velocity', 'Plot!tcp_spectrum']),
         _row(['Tab!forces', 'Plot!pma_stroke', 'Plot!pma_force']),
-        _row(['Plot!run_rate', 'RawMessages!run_status']),
+        _row(['Plot!run_rate', 'Plot!run_counters', 'RawMessages!run_status']),
     ], 'column')
     return {'configById': cfg, 'globalVariables': {}, 'userNodes': {},
             'playbackConfig': {'speed': 1.0}, 'layout': tree}

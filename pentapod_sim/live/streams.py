@@ -1,8 +1,9 @@
 """
 One subscribed topic of the live view: raw CDR in, deduplicated samples and envelopes out.
 
-The ROS executor thread only calls :meth:`TopicStream.offer` (append the bytes, or count a drop
-when the backlog is full); the live view's worker thread takes the backlog, decodes it in one
+The node's subscriptions are polled by the live view's worker thread, which hands every message
+to :meth:`TopicStream.offer` (append the bytes, count the messages lost before it or a drop when
+the backlog is full); once per pass the worker takes the backlog, decodes it in one
 vectorised pass (:mod:`pentapod_sim.analysis.cdr_arrays`), drops the copies of a step that a
 lockstep plant re-sends while it waits, notices a new run (stamps going back) and feeds the
 envelope downsampler. Supported types: sensor_msgs/JointState (columns: the joints' position,
@@ -88,14 +89,25 @@ class TopicStream:
         self.topic, self.msg_type = topic, msg_type
         self.queue: deque[bytes] = deque()
         self.backlog = backlog
-        self.dropped = 0
-        self.rejected = 0
+        self.dropped = 0          # lost: backlog full or never delivered (sequence gaps)
+        self.rejected = 0         # could not be decoded
+        self.sequence: int | None = None
         self.shape: Shape | None = None
         self.last_stamp = -1
         self.envelope = EnvelopeDownsampler(period_ns)
 
-    def offer(self, data: bytes) -> None:
-        """Queue one message (executor thread; constant time, never blocks)."""
+    def offer(self, data: bytes, sequence: int | None = None) -> None:
+        """
+        Queue one message (constant time, never blocks).
+
+        ``sequence`` is the publisher's sequence number of the message (1, 2, ...), if known:
+        a gap counts the messages that never arrived in ``dropped`` (one publisher per topic;
+        a number that does not grow means a new publisher).
+        """
+        if sequence is not None:
+            if self.sequence is not None and sequence > self.sequence + 1:
+                self.dropped += sequence - self.sequence - 1
+            self.sequence = sequence
         if len(self.queue) >= self.backlog:
             self.dropped += 1
             return

@@ -3,11 +3,17 @@ Live view node: serves the testbed topics to Foxglove over its WebSocket protoco
 
 A thin rclpy adapter around :class:`pentapod_sim.live.hub.LiveHub`. It subscribes to every
 testbed topic of type JointState or WrenchStamped (found at start and by discovery) with raw
-(CDR bytes) subscriptions whose callbacks only queue the bytes; decoding, downsampling and the
-WebSocket work run on the hub's worker thread. The subscriptions are best effort by default:
-the plant's reliable KEEP_LAST writers then neither keep, resend nor wait for acknowledgements
-for the live view, so a slow or stalled live view cannot hold up the lockstep loop (it loses
-display samples instead, counted in the run status). See docs/live_view.md.
+(CDR bytes) subscriptions that no executor serves: they sit in a callback group the executor
+never waits on (:class:`PolledGroup`), and the hub's worker thread takes what they hold once
+every ``tick_period`` (:meth:`LiveViewNode.take`). So the process does no work per message
+in Python and wakes at its own pace, not the plant's; decoding, downsampling and the WebSocket
+work run on the same worker thread, and every thread of the process runs at a lower priority
+(``nice``). The subscriptions are best effort by default: the plant's reliable KEEP_LAST
+writers then neither keep, resend nor wait for acknowledgements for the live view, so a slow or
+stalled live view cannot hold up the lockstep loop (it loses display samples instead, counted
+in the run status from the gaps in the publishers' sequence numbers). The plant's run status
+(/pentapod/run_status) comes through an ordinary subscription and is passed through.
+See docs/live_view.md.
 
 Parameters: :data:`pentapod_sim.live.params.LIVE_VIEW`.
 """
@@ -15,11 +21,14 @@ from __future__ import annotations
 
 import time
 
+from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import WrenchStamped
 import rclpy
+from rclpy.callback_groups import CallbackGroup
+from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.serialization import serialize_message
+from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
@@ -27,7 +36,7 @@ from pentapod_sim import interface, shutdown
 from pentapod_sim.live.hub import LiveHub, lower_priority
 from pentapod_sim.live.params import LIVE_VIEW
 from pentapod_sim.live.streams import SUPPORTED_TYPES
-from pentapod_sim.nodes.common import declare_table, node_args, run_node, stamp_msg
+from pentapod_sim.nodes.common import declare_table, node_args, qos, run_node, stamp_msg
 
 MESSAGE_CLASSES = {interface.JOINT_STATE: JointState, interface.WRENCH_STAMPED: WrenchStamped}
 #: Topics subscribed at start, before any publisher exists (others come by discovery).
@@ -59,6 +68,21 @@ class RclpyEncoder:
         return serialize_message(msg)
 
 
+class PolledGroup(CallbackGroup):
+    """Subscriptions no executor waits on or takes from: the live view's worker takes them."""
+
+    def can_execute(self, entity) -> bool:
+        """Never: the executor leaves these subscriptions alone."""
+        return False
+
+    def beginning_execution(self, entity) -> bool:
+        """Never."""
+        return False
+
+    def ending_execution(self, entity) -> None:
+        """Nothing to end."""
+
+
 class LiveViewNode(Node):
     """Subscriptions and discovery of the live view (parameters: docs/parameters.md)."""
 
@@ -68,12 +92,21 @@ class LiveViewNode(Node):
         self.qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=params.queue_depth,
                               reliability=ReliabilityPolicy[params.reliability.upper()],
                               durability=DurabilityPolicy.VOLATILE)
-        self.hub = LiveHub(params, RclpyEncoder())
+        self.hub = LiveHub(params, RclpyEncoder(), poll=self.take)
         self.subs = {}
+        self.polled = []          # (stream, subscription), taken by the hub's worker
+        self.group = PolledGroup()
         for topic in KNOWN_TOPICS:
             if self._selected(topic):
                 self._subscribe(topic, interface.TOPIC_TYPES[topic])
+        self.subs[interface.RUN_STATUS] = self.create_subscription(
+            DiagnosticStatus, interface.RUN_STATUS, self._run_status,
+            qos(interface.qos_class(interface.RUN_STATUS)), raw=True)
         self.discover()
+
+    def _run_status(self, data: bytes) -> None:
+        msg = deserialize_message(data, DiagnosticStatus)
+        self.hub.add_run_status(data, {kv.key: kv.value for kv in msg.values})
 
     def _selected(self, topic: str) -> bool:
         if topic.startswith(interface.LIVE_PREFIX):
@@ -94,9 +127,19 @@ class LiveViewNode(Node):
 
     def _subscribe(self, topic: str, msg_type: str) -> None:
         stream = self.hub.add_topic(topic, msg_type)
-        self.subs[topic] = self.create_subscription(MESSAGE_CLASSES[msg_type], topic,
-                                                    stream.offer, self.qos, raw=True)
+        sub = self.create_subscription(MESSAGE_CLASSES[msg_type], topic, stream.offer,
+                                       self.qos, raw=True, callback_group=self.group)
+        self.subs[topic] = sub
+        self.polled.append((stream, sub))
         self.get_logger().info(f'serving {topic} [{msg_type}]')
+
+    def take(self) -> None:
+        """Move every message the subscriptions hold into the streams (the hub's worker)."""
+        for stream, sub in list(self.polled):
+            with sub.handle:
+                while (got := sub.handle.take_message(sub.msg_type, True)) is not None:
+                    data, info = got
+                    stream.offer(data, info.get('publication_sequence_number'))
 
 
 def serve(node: LiveViewNode, executor) -> None:
@@ -118,7 +161,8 @@ def serve(node: LiveViewNode, executor) -> None:
 
 def main(argv=None) -> int:
     """Entry point of ``ros2 run pentapod_testbed live_view``."""
-    return run_node(LiveViewNode, argv, serve, table=LIVE_VIEW)
+    return run_node(LiveViewNode, argv, serve, table=LIVE_VIEW,
+                    executor=SingleThreadedExecutor)
 
 
 if __name__ == '__main__':
