@@ -134,6 +134,9 @@ def _scenario(name: str) -> Path:
     ({'check_policy': 'ignore'}, 'truncation_check.policy'),
     ({'pma_band': (400.0, 10.0)}, 'pma_requirements.band'),
     ({'check_f_min': 0.0}, 'truncation_check.f_min'),
+    ({'damping_band': (2.0, 1600.0)}, 'damping.band'),
+    ({'damping_scenarios': ('tcp_dampnig',)}, r"damping\.scenarios\[0\].*'tcp_damping'"),
+    ({'damping_periods': 0}, 'damping.periods'),
 ])
 def test_bad_check_and_pma_settings_name_the_key(override, message):
     with pytest.raises(ConfigError, match=message):

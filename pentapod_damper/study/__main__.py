@@ -15,11 +15,11 @@ import time
 
 import numpy as np
 
-from pentapod_damper.study import bending, pipeline, plots
+from pentapod_damper.study import bending, damping, measured_damping, pipeline, plots
 from pentapod_damper.study.analytic import continuous_frf
 from pentapod_damper.study.config import load_study_config, StudyConfig
 from pentapod_damper.study.report import struts12_share, StudyResults, summary_rows, write_report
-from pentapod_damper.study.runs import run_on_testbed
+from pentapod_damper.study.runs import damping_excitation, run_on_testbed
 from pentapod_sim.errors import BagError, ConfigError, RunError
 
 LOG = logging.getLogger('pentapod_damper.study')
@@ -91,6 +91,38 @@ def _testbed(res: StudyResults, cfg: StudyConfig) -> dict:
                              res.out_dir, kind='step')
         steps[scn] = pipeline.step_series(run, cfg)
     return steps
+
+
+def _damping(res: StudyResults, cfg: StudyConfig, runs: bool) -> None:
+    """Damping per mode: analytic poles of every loop, identified modes of the damping runs."""
+    dt, d = 1.0 / cfg.sample_rate, cfg.direction
+    todo = [(pos, scn) for pos in cfg.positions for scn in cfg.damping_scenarios
+            if scn in cfg.scenarios] if runs else []
+    for pos in cfg.positions:
+        for scn in cfg.scenarios:
+            res.damping[(pos, scn)] = damping.scenario_rows(res.models[pos].plant, pos, scn, dt)
+    for i, (pos, scn) in enumerate(todo, 1):
+        model, rows = res.models[pos], res.damping[(pos, scn)]
+        settle = damping.settling_time([r for r in rows if r['direction'] == d + d],
+                                       cfg.damping_time_constants)
+        exciter = damping_excitation(cfg, settle)
+        _say(f'damping run {i}/{len(todo)}: {scn} at {pos} (multisine, settle '
+             f'{exciter["settle_periods"] * cfg.damping_period:g} s = '
+             f'{cfg.damping_time_constants:g} decay times of the slowest dominant mode, then '
+             f'{cfg.damping_periods} periods of {cfg.damping_period:g} s; '
+             f'{int(exciter["duration"] * cfg.sample_rate)} steps)')
+        run = run_on_testbed(scn, pos, model.model_file, model.model_hash, cfg, res.out_dir,
+                             kind='damping', exciter=exciter)
+        ident = measured_damping.identify_run(run.bag, d, cfg.damping_band)
+        rows = measured_damping.compare(rows, ident, model.plant, res.analytic[(pos, scn)].laws,
+                                        dt, d)
+        res.damping_measured[(pos, scn)] = rows
+        tag = f'{pos}_{scn}'
+        res.damping_figures[tag] = measured_damping.figures(ident, res.out_dir / 'figures', tag)
+        worst = max((abs(r['zeta_error']) for r in rows), default=float('nan'))
+        _say(f'    {run.steps} steps in {run.wall_time:.1f} s ({run.steps / run.wall_time:.0f} '
+             f'steps/s); {len(ident.model.freq_hz)} modes identified; dominant modes: damping '
+             f'ratio within {worst:.1%} of the sampled-loop poles')
 
 
 def _figures(res: StudyResults, cfg: StudyConfig, steps: dict) -> None:
@@ -197,6 +229,9 @@ def main(argv: list[str] | None = None) -> int:
             t0 = time.perf_counter()
             steps = _testbed(res, cfg)
             res.timings['testbed runs and bag analysis'] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        _damping(res, cfg, runs=not args.analytic_only)
+        res.timings['damping per mode (poles, runs, identification)'] = time.perf_counter() - t0
         t0 = time.perf_counter()
         _figures(res, cfg, steps)
         res.timings['figures'] = time.perf_counter() - t0

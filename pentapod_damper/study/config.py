@@ -87,6 +87,19 @@ class StudyConfig:
         Frequencies of the reported PMA stroke and force [Hz].
     pma_highpass_hz : float
         Corner of the high-pass PMA variant [Hz].
+    damping_scenarios : tuple of str
+        Scenarios of the damping runs (multisine, modal identification), per position; those
+        not among ``scenarios`` are not run.
+    damping_band : tuple of float
+        Band of the multisine lines and of the identification [Hz].
+    damping_period : float
+        Multisine period [s] (line spacing 1 / period).
+    damping_amplitude : float
+        Peak of the multisine force [N].
+    damping_periods : int
+        Periods averaged after settling.
+    damping_time_constants : float
+        Settling time in decay time constants of the slowest dominant mode of the loop.
     """
 
     positions: tuple
@@ -110,6 +123,12 @@ class StudyConfig:
     pma_band: tuple
     pma_frequencies: tuple
     pma_highpass_hz: float
+    damping_scenarios: tuple
+    damping_band: tuple
+    damping_period: float
+    damping_amplitude: float
+    damping_periods: int
+    damping_time_constants: float
 
 
 @dataclass(frozen=True)
@@ -169,6 +188,22 @@ class StepResponse:
 
 
 @dataclass(frozen=True)
+class DampingRuns:
+    """Damping per mode measured on the testbed: multisine runs identified from their bags."""
+
+    scenarios: tuple[str, ...] = spec(min_length=1, description='scenarios of the damping '
+                                      'runs (each at every position)')
+    band: tuple[float, ...] = spec('Hz', POSITIVE, length=2,
+                                   description='multisine lines and identification band')
+    period: float = spec('s', POSITIVE, description='multisine period (line spacing 1 / '
+                         'period)')
+    amplitude: float = spec('N', POSITIVE, description='peak of the multisine force')
+    periods: int = spec('-', POSITIVE, description='periods averaged after settling')
+    time_constants: float = spec('-', POSITIVE, description='settling time in decay time '
+                                 'constants of the slowest dominant mode of the loop')
+
+
+@dataclass(frozen=True)
 class StudyFile:
     """config/study.yaml; see that file for the meaning of each key."""
 
@@ -184,6 +219,7 @@ class StudyFile:
     step_response: StepResponse = spec(description='PMA step-response run')
     truncation_check: TruncationCheck = spec(description='truncation check of the loops')
     pma_requirements: PmaRequirements = spec(description='PMA requirements')
+    damping: DampingRuns = spec(description='damping runs (multisine, modal identification)')
 
     def __post_init__(self) -> None:
         exc, fs = self.excitation, self.sample_rate
@@ -194,6 +230,10 @@ class StudyFile:
         if not 0 <= lo < hi < fs / 2:
             raise ConfigError(f'excitation.band = {list(exc.band)} Hz: must satisfy 0 <= low < '
                               f'high < sample_rate / 2 = {fs / 2:g} Hz')
+        lo, hi = self.damping.band
+        if not 0 < lo < hi < fs / 2:
+            raise ConfigError(f'damping.band = {list(self.damping.band)} Hz: must satisfy 0 < '
+                              f'low < high < sample_rate / 2 = {fs / 2:g} Hz')
         if not 16 <= self.analysis.nperseg <= exc.duration * fs:
             raise ConfigError(f'analysis.nperseg = {self.analysis.nperseg}: must lie in '
                               f'[16, excitation.duration * sample_rate = {exc.duration * fs:g}]')
@@ -213,7 +253,11 @@ FILE_KEYS = {'positions': 'positions', 'scenarios': 'scenarios', 'sample_rate': 
              'check_policy': 'truncation_check.policy',
              'pma_band': 'pma_requirements.band',
              'pma_frequencies': 'pma_requirements.frequencies',
-             'pma_highpass_hz': 'pma_requirements.highpass_hz'}
+             'pma_highpass_hz': 'pma_requirements.highpass_hz',
+             'damping_scenarios': 'damping.scenarios', 'damping_band': 'damping.band',
+             'damping_period': 'damping.period', 'damping_amplitude': 'damping.amplitude',
+             'damping_periods': 'damping.periods',
+             'damping_time_constants': 'damping.time_constants'}
 
 
 def _get(obj: Any, key_path: str) -> Any:
@@ -245,6 +289,9 @@ def _check_names(study: StudyFile, source: str) -> None:
             check_choice(name, positions, key, 'position of positions.yaml')
         for i, name in enumerate(study.scenarios):
             check_choice(name, scenarios, f'scenarios[{i}]', 'scenario of config/scenarios')
+        for i, name in enumerate(study.damping.scenarios):
+            check_choice(name, scenarios, f'damping.scenarios[{i}]',
+                         'scenario of config/scenarios')
     except ConfigError as err:
         raise ConfigError(f'{source}: {err}') from None
 

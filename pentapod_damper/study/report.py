@@ -31,6 +31,9 @@ class StudyResults:
     scenario_gains: dict = field(default_factory=dict)   # bending model -> scenario gain
     bending_models: list = field(default_factory=list)   # rows of study.bending.compare
     bending_curves: dict = field(default_factory=dict)   # label -> peak reduction over gain
+    damping: dict = field(default_factory=dict)          # (pos, scn) -> analytic pole rows
+    damping_measured: dict = field(default_factory=dict)  # (pos, scn) -> rows with identified
+    damping_figures: dict = field(default_factory=dict)  # run tag -> (stability, synthesis)
     out_dir: Path = Path('out/study')
 
 
@@ -167,6 +170,27 @@ def pma_highpass_rows(res: StudyResults) -> list[dict]:
     return rows
 
 
+def damping_rows(res: StudyResults) -> list[dict]:
+    """
+    Dominant modes of every loop: open-loop, sampled-loop, continuous-loop and identified ζ.
+
+    Rows of the damping runs carry the identified frequency, damping ratio and peak; the
+    other rows (other TCP directions, scenarios without a damping run) the analytic values.
+    """
+    keep = ('position', 'scenario', 'direction', 'rank', 'mode', 'open_freq_hz', 'open_zeta',
+            'sampled_freq_hz', 'sampled_zeta', 'continuous_zeta', 'sampled_mac',
+            'measured_freq_hz', 'measured_zeta', 'zeta_error', 'freq_error',
+            'peak_analytic_um_per_N', 'peak_measured_um_per_N', 'peak_error_db',
+            'decay_time_s')
+    out = []
+    for key, rows in res.damping.items():
+        measured = {(r['direction'], r['rank']): r for r in res.damping_measured.get(key, [])}
+        for r in rows:
+            r = measured.get((r['direction'], r['rank']), r)
+            out.append({k: r.get(k, '') for k in keep})
+    return out
+
+
 def _fmt(v) -> str:
     if isinstance(v, float):
         return '-' if not np.isfinite(v) else f'{v:.3g}'
@@ -235,13 +259,30 @@ def _pma_text(res: StudyResults) -> str:
         'as 1/f below the band, so its worst case sits at the lower band edge.')
 
 
+def _damping_text(res: StudyResults) -> str:
+    cfg = res.cfg
+    return (
+        'The three modes that dominate TCP aa (largest sampled-loop pole term between 2 and 200 '
+        'Hz) per direction; open_zeta: the plant; sampled_zeta: the poles of the sampled loop '
+        '(plant, laws, their dynamics and delay); continuous_zeta: the continuous loop without '
+        'sampling; measured_zeta: identified (pLSCF + LSFD) from the damping run of the '
+        f'scenario, a {cfg.damping_band[0]:g}-{cfg.damping_band[1]:g} Hz Schroeder multisine of '
+        f'{cfg.damping_amplitude:g} N peak along {cfg.direction}, settled '
+        f'{cfg.damping_time_constants:g} decay times of the slowest dominant mode, then '
+        f'{cfg.damping_periods} periods of {cfg.damping_period:g} s averaged synchronously. '
+        'Peaks: the identified FRF and the analytic sampled-loop FRF, each maximised near the '
+        f'mode. Only the rows of the damping runs ({cfg.direction}{cfg.direction}) are shown; '
+        'damping.csv has every loop and direction (analytic only).')
+
+
 def write_report(res: StudyResults, out_dir: Path) -> Path:
     """Write report.md (and the tables as CSV) into ``out_dir``; return the report path."""
     cfg = res.cfg
     tables = {'summary': summary_rows(res), 'stability': stability_rows(res),
               'peaks': peak_rows(res), 'struts12_share': struts12_share(res),
               'bending_models': res.bending_models,
-              'pma': pma_rows(res), 'pma_highpass': pma_highpass_rows(res)}
+              'pma': pma_rows(res), 'pma_highpass': pma_highpass_rows(res),
+              'damping': damping_rows(res)}
     for name, rows in tables.items():
         write_csv(rows, out_dir / f'{name}.csv')
     models = [{'position': p, 'dof': m.plant.meta.get('n_dof'),
@@ -256,7 +297,8 @@ def write_report(res: StudyResults, out_dir: Path) -> Path:
         '# Damping study of the pentapod on the virtual testbed', '',
         f'Generated {time.strftime("%Y-%m-%d %H:%M")} by pentapod_testbed {__version__} '
         f'(`python -m pentapod_damper.study`). Every row marked *testbed run* comes from a '
-        f'lockstep ROS 2 run (plant, exciter, controllers and recorder as separate processes) '
+        f'lockstep ROS 2 run (plant, exciter, controllers and recorder composed in one process, '
+        f'bit-identical to separate processes) '
         f'recorded to an MCAP bag; the bags and the parameter file of each run are under '
         f'`runs/`.', '',
         f'Excitation: random force at the TCP in {cfg.direction}, {cfg.amplitude:g} N RMS, '
@@ -294,6 +336,9 @@ def write_report(res: StudyResults, out_dir: Path) -> Path:
         f'{cfg.f_max:g} Hz (bounded: below the corner the proof mass stops following); '
         'tcp_peak_cost: its exact TCP peak over that of the ideal law.', '',
         markdown_table(tables['pma_highpass']), '',
+        '## Damping per mode', '', _damping_text(res), '',
+        markdown_table([r for r in tables['damping'] if (r['position'], r['scenario'])
+                        in res.damping_measured]), '',
         '## Figures', '']
     for caption, path in res.figures.items():
         lines += [f'### {caption}', '', f'![{caption}]({Path(path).relative_to(out_dir)})', '']

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 import logging
+import math
 import os
 from pathlib import Path
 import shutil
@@ -21,15 +22,16 @@ import yaml
 from pentapod_damper.study.config import StudyConfig
 from pentapod_sim import __version__
 from pentapod_sim.errors import RunError
-from pentapod_sim.interface import EXCITATION, PMA_STATE, TCP_STATE
+from pentapod_sim.interface import EXCITATION, excitation_spec_topic, PMA_STATE, TCP_STATE
 from pentapod_sim.scenario.files import dump_params, read_scenario
 from pentapod_sim.scenario.runner import run_scenario
 
 LOG = logging.getLogger(__name__)
 
 #: Topics every study run records (the strut states are left out: each recorded topic costs
-#: the lockstep loop time, and the study's analysis does not need them).
-RECORDED_TOPICS = [TCP_STATE, EXCITATION, PMA_STATE]
+#: the lockstep loop time, and the study's analysis does not need them); the exciter's signal
+#: parameters let the analysis find periods and lines in the bag.
+RECORDED_TOPICS = [TCP_STATE, EXCITATION, PMA_STATE, excitation_spec_topic('exciter')]
 DIRECTIONS = {'x': [1.0, 0.0, 0.0], 'y': [0.0, 1.0, 0.0], 'z': [0.0, 0.0, 1.0]}
 
 
@@ -56,10 +58,30 @@ def excitation_params(cfg: StudyConfig, kind: str = 'random') -> dict[str, Any]:
             'duration': cfg.duration, 'seed': cfg.seed}
 
 
+def damping_excitation(cfg: StudyConfig, settle: float) -> dict[str, Any]:
+    """
+    Exciter parameters of a damping run: Schroeder multisine, settled ``settle`` s or more.
+
+    The settling time is rounded up to whole periods (``settle_periods``); then
+    ``cfg.damping_periods`` periods follow, which the analysis averages.
+    """
+    period = cfg.damping_period
+    settle_periods = max(1, math.ceil(settle / period - 1e-9))
+    return {'kind': 'multisine', 'amplitude': cfg.damping_amplitude,
+            'direction': DIRECTIONS[cfg.direction], 'f_start': float(cfg.damping_band[0]),
+            'f_end': float(cfg.damping_band[1]), 'period': period, 'phases': 'schroeder',
+            'settle_periods': settle_periods,
+            'duration': (settle_periods + cfg.damping_periods) * period}
+
+
 def run_sections(scenario: str, position: str, model_file: Path, cfg: StudyConfig,
-                 bag_dir: Path, run_info: dict, kind: str = 'random') -> dict:
+                 bag_dir: Path, run_info: dict, kind: str = 'random',
+                 exciter: dict | None = None) -> dict:
     """
     Node sections of one run: the scenario's, with the study settings and a recorder.
+
+    ``exciter`` replaces the exciter parameters of ``kind`` (damping runs); the run then lasts
+    the exciter's ``duration``.
 
     Returns
     -------
@@ -67,7 +89,7 @@ def run_sections(scenario: str, position: str, model_file: Path, cfg: StudyConfi
         A ROS 2 parameter file as a mapping (``node: {ros__parameters: {...}}``).
     """
     sections = read_scenario(scenario).sections
-    duration = cfg.duration if kind == 'random' else cfg.step_duration
+    duration = run_duration(cfg, kind, exciter)
     doc: dict[str, Any] = {'/**': {'ros__parameters': {'sample_rate': cfg.sample_rate}}}
     for name, params in sections.items():
         params = {k: v for k, v in params.items() if k != 'sample_rate'}   # from /** only
@@ -75,7 +97,7 @@ def run_sections(scenario: str, position: str, model_file: Path, cfg: StudyConfi
             params.update(position=position, model_file=str(model_file), duration=duration,
                           timing='lockstep', steps=0, output_file='')
         elif name.startswith('exciter'):
-            params = excitation_params(cfg, kind)
+            params = dict(exciter) if exciter else excitation_params(cfg, kind)
         # nothing is published before the recorder is matched (plant: step 0; sources: their
         # first answer), so the bag holds every step
         params['wait_for_subscribers'] = ['recorder']
@@ -87,11 +109,23 @@ def run_sections(scenario: str, position: str, model_file: Path, cfg: StudyConfi
     return doc
 
 
+def run_duration(cfg: StudyConfig, kind: str, exciter: dict | None = None) -> float:
+    """Simulated time of a run [s]: the exciter's duration if given, else the study's."""
+    if exciter:
+        return float(exciter['duration'])
+    return cfg.duration if kind == 'random' else cfg.step_duration
+
+
 def run_on_testbed(scenario: str, position: str, model_file: Path, model_hash: str,
                    cfg: StudyConfig, out_dir: Path, kind: str = 'random',
-                   timeout: float = 600.0) -> RunResult:
+                   timeout: float = 900.0, exciter: dict | None = None,
+                   composed: bool = True) -> RunResult:
     """
     Run one scenario at one position in lockstep and record it.
+
+    ``composed`` (default) runs every node in one process on one executor
+    (:mod:`pentapod_sim.nodes.composed`): the same node classes and, bit for bit, the same run
+    as separate processes, but faster.
 
     Raises
     ------
@@ -106,12 +140,13 @@ def run_on_testbed(scenario: str, position: str, model_file: Path, model_hash: s
     info = {'study_run': name, 'scenario': scenario, 'position': position,
             'excitation': kind, 'model_file': str(model_file), 'model_hash': model_hash,
             'sample_rate': cfg.sample_rate, 'package_version': __version__}
-    doc = run_sections(scenario, position, model_file, cfg, bag_dir, info, kind)
+    doc = run_sections(scenario, position, model_file, cfg, bag_dir, info, kind, exciter)
     params_file = run_dir / 'scenario.yaml'
     params_file.write_text(dump_params(doc))
     env = dict(os.environ, ROS_LOG_DIR=str(run_dir / 'ros_log'))
     t0 = time.perf_counter()
-    code = run_scenario(params_file, {}, timeout, env, log_dir=run_dir / 'logs')
+    code = run_scenario(params_file, {}, timeout, env, log_dir=run_dir / 'logs',
+                        composed=composed)
     wall = time.perf_counter() - t0
     if code != 0:
         errors = [line.strip() for log in sorted((run_dir / 'logs').glob('*.log'))
@@ -121,8 +156,7 @@ def run_on_testbed(scenario: str, position: str, model_file: Path, model_hash: s
                        f'parameters in {params_file}, node logs in {run_dir / "logs"}')
     if not (bag_dir / 'metadata.yaml').is_file():
         raise RunError(f'run {name}: the recorder left no complete bag in {bag_dir}')
-    steps = int(round((cfg.duration if kind == 'random' else cfg.step_duration)
-                      * cfg.sample_rate))
+    steps = int(round(run_duration(cfg, kind, exciter) * cfg.sample_rate))
     LOG.info('run %s: %d steps in %.1f s wall time (%.0f steps/s)', name, steps, wall,
              steps / wall)
     return RunResult(name, position, scenario, bag_dir, params_file, wall, steps)

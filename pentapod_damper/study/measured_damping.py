@@ -1,0 +1,131 @@
+"""
+Damping per mode: the analytic sampled-loop poles against the modes identified from a run.
+
+A damping run excites the TCP with a periodic multisine (:func:`runs.damping_excitation`)
+for a settling time that follows from the loop's analytic poles
+(:func:`pentapod_damper.study.damping.settling_time`), then
+for whole periods that the analysis averages synchronously. The bag's FRFs are identified by
+pLSCF + LSFD (:mod:`pentapod_sim.analysis.modal_ema`) and each dominant mode of the analytic
+table (:mod:`pentapod_damper.study.damping`) is paired with the identified pole nearest in
+frequency. Peaks compare the identified model's FRF with the analytic sampled-loop FRF, both
+maximised at the resonance (:func:`pentapod_sim.plant.frf_peaks.maximise_near_poles`).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+import math
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from pentapod_damper.study.analytic import SampledPairFrf
+from pentapod_sim.analysis import modal_plots
+from pentapod_sim.analysis.modal_ema import identify_modes, ModalModel
+from pentapod_sim.analysis.run_frf import frfs_from_bag, RunFrfs
+from pentapod_sim.errors import BagError
+from pentapod_sim.interface import TCP_STATE
+from pentapod_sim.plant.frf_peaks import maximise_near_poles
+from pentapod_sim.plant.model import PlantModel
+
+#: An identified pole is paired with an analytic one if their frequencies differ by less
+#: than this fraction, or by less than PAIR_BANDWIDTHS analytic half-power bandwidths.
+PAIR_TOLERANCE = 0.02
+PAIR_BANDWIDTHS = 3.0
+#: Half width of the band a peak is searched in, in half-power bandwidths (at least 0.5 Hz).
+PEAK_BANDWIDTHS = 5.0
+
+
+@dataclass
+class Identified:
+    """The identification of one damping run."""
+
+    run: RunFrfs
+    model: ModalModel
+    output: str
+
+
+def identify_run(bag: Path, direction: str, band: Sequence[float]) -> Identified:
+    """
+    FRF TCP displacement / TCP force along ``direction`` from the bag, and its modes.
+
+    Raises
+    ------
+    BagError
+        If the bag lacks the excitation record or the identification finds no mode.
+    """
+    output = f'{TCP_STATE}.position.tcp_{direction}'
+    run = frfs_from_bag(bag, [output])
+    try:
+        # unweighted: the testbed has no measurement noise, so the scatter of the averaged
+        # periods is rounding (about 1e-12 of |H|) and weighting by it would be arbitrary
+        # (it moved the damping ratio of the 27 Hz mode by 7-11 % in the study's runs)
+        model = identify_modes(run.freq, run.H, band=tuple(band), sigma=None,
+                               frf_form=run.frf_form)
+    except ValueError as err:
+        raise BagError(f'{bag}: modal identification failed: {err}') from None
+    return Identified(run, model, output)
+
+
+def _pair(f0: float, zeta0: float, model: ModalModel) -> int | None:
+    """Index of the identified pole paired with an analytic one, or None."""
+    if not len(model.freq_hz):
+        return None
+    j = int(np.argmin(np.abs(model.freq_hz - f0)))
+    tol = max(PAIR_TOLERANCE * f0, PAIR_BANDWIDTHS * 2.0 * zeta0 * f0)
+    return j if abs(model.freq_hz[j] - f0) <= tol else None
+
+
+def _local_band(f0: float, zeta: float) -> tuple[float, float]:
+    half = max(PEAK_BANDWIDTHS * zeta * f0, 0.5)
+    return max(f0 - half, 1e-3), f0 + half
+
+
+def compare(rows: Sequence[dict], ident: Identified, plant: PlantModel, laws: Sequence,
+            dt: float, direction: str) -> list[dict]:
+    """
+    The analytic rows of ``direction`` with the identified frequency, damping ratio and peak.
+
+    Adds ``measured_freq_hz``, ``measured_zeta`` (NaN if no identified pole pairs with the
+    mode), ``zeta_error`` (relative), ``freq_error`` (relative), ``peak_analytic_um_per_N``
+    (sampled-loop FRF maximised near the mode), ``peak_measured_um_per_N`` (identified model's
+    FRF maximised near its pole) and ``peak_error_db``.
+    """
+    model = ident.model
+    frf = SampledPairFrf(plant, laws, dt, f'tcp_displacement_{direction}',
+                         f'tcp_force_{direction}')
+    out = []
+    for row in rows:
+        if row['direction'] not in (direction, direction * 2):
+            continue
+        f0, z0 = row['sampled_freq_hz'], row['sampled_zeta']
+        lo, hi = _local_band(f0, z0)
+        analytic = maximise_near_poles(lambda f: np.abs(frf(f)), frf.poles, lo, hi).value
+        j = _pair(f0, z0, model)
+        new = dict(row, peak_analytic_um_per_N=analytic * 1e6)
+        if j is None:
+            new.update(measured_freq_hz=math.nan, measured_zeta=math.nan, freq_error=math.nan,
+                       zeta_error=math.nan, peak_measured_um_per_N=math.nan,
+                       peak_error_db=math.nan)
+        else:
+            f1, z1 = float(model.freq_hz[j]), float(model.damping[j])
+            lo, hi = _local_band(f1, z1)
+
+            def synth(f: np.ndarray) -> np.ndarray:
+                return np.abs(model.synthesise(np.atleast_1d(f))[0, 0])
+            measured = maximise_near_poles(synth, model.poles, lo, hi).value
+            new.update(measured_freq_hz=f1, measured_zeta=z1, freq_error=f1 / f0 - 1.0,
+                       zeta_error=z1 / z0 - 1.0, peak_measured_um_per_N=measured * 1e6,
+                       peak_error_db=20.0 * math.log10(measured / analytic))
+        out.append(new)
+    return out
+
+
+def figures(ident: Identified, folder: Path, tag: str) -> tuple[Path, Path]:
+    """Stability diagram and identified-vs-measured FRF of a damping run (PNG files)."""
+    run, model = ident.run, ident.model
+    return (modal_plots.stability_plot(model, run.freq, run.H, folder / f'stability_{tag}.png',
+                                       title=f'{tag}: stability diagram ({run.estimator})'),
+            modal_plots.synthesis_plot(model, run.freq, run.H, run.labels, run.units[0],
+                                       folder / f'identified_frf_{tag}.png',
+                                       title=f'{tag}: measured and identified FRF'))
