@@ -4,10 +4,10 @@ The plant's truncation check at start-up and its periodic run status, as a ROS u
 Real processes (the scenario runner, like test/test_stopping.py) on the session's domain. The
 spectral radii the plant reports are checked against loops closed here with python-control
 (``c2d`` of the continuous modal plant, static velocity feedback), not the testbed's own loop
-construction. The ROS-free pieces (model texts, stacking a node's laws, sorting the models,
-status values) are checked without ROS.
+construction. The ROS-free pieces are in test/test_loop_check.py.
 """
 import ast
+import os
 from pathlib import Path
 import re
 
@@ -15,14 +15,23 @@ import control
 from diagnostic_msgs.msg import DiagnosticStatus
 import numpy as np
 import pytest
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
 from rclpy.serialization import deserialize_message
+from std_msgs.msg import String
 from test_stopping import Runner
 
 from fixtures.demo_model import demo_model
+from pentapod_damper.nodes.damper_node import DamperNode
 from pentapod_sim import interface
 from pentapod_sim.analysis.bag_reader import open_bag
+from pentapod_sim.nodes.common import spin_until
+from pentapod_sim.nodes.loop_check import MODEL_QOS
 from pentapod_sim.plant.model import PlantModel
 from pentapod_sim.scenario.files import dump_params
+from pentapod_sim.sim.controllers import DiscreteController
 
 RATE = 2000.0
 TCP = (['tcp_velocity_x', 'tcp_velocity_y'], ['tcp_force_x', 'tcp_force_y'])
@@ -234,3 +243,37 @@ def test_realtime_run_status_counts_the_deadline_misses_of_the_trace(tmp_path, s
     assert int(values[-1]['deadline_misses']) == misses > 0, (misses, out)
     running = [int(v['deadline_misses']) for v in values[:-1]]
     assert running == sorted(running) and running[-1] <= misses
+
+
+@pytest.mark.ros
+def test_a_damper_publishes_its_model_latched_and_again_after_a_gain_change():
+    """A subscriber created after the publication gets the model; a new gain sends a new one."""
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=int(os.environ.get('ROS_DOMAIN_ID', '0')))
+    nodes = []
+    try:
+        damper = DamperNode(context=ctx, cli_args=['--ros-args', '-p', "tcp_directions:=['x']",
+                                                   '-p', 'tcp_gain:=700.0'])
+        listener = Node('model_listener', context=ctx)
+        nodes += [damper, listener]
+        got = []
+        listener.create_subscription(String, interface.controller_model_topic('damper'),
+                                     lambda msg: got.append(msg.data), MODEL_QOS)
+        executor = SingleThreadedExecutor(context=ctx)
+        for node in nodes:
+            executor.add_node(node)
+
+        def gains():
+            return [float(-DiscreteController.from_json(text).d[0, 0]) for text in got]
+        assert spin_until(executor, lambda: len(got) >= 1, 10.0), got
+        assert gains() == [700.0]
+        assert damper.set_parameters([Parameter('tcp_gain', value=123.0)])[0].successful
+        assert spin_until(executor, lambda: len(got) >= 2, 10.0), got
+        assert gains() == [700.0, 123.0]
+        model = DiscreteController.from_json(got[-1])
+        assert model.sensor_ports == ('tcp_velocity_x',)
+        assert model.actuator_ports == ('tcp_force_x',)
+    finally:
+        for node in nodes:
+            node.destroy_node()
+        rclpy.shutdown(context=ctx)
