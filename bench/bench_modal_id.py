@@ -3,11 +3,12 @@ Benchmark of the modal identification (pentapod_sim.analysis.modal_ema) against 
 
 Data: the test systems of test/modal_systems.py (2-DOF chain, 0.1 % and 2 %; 10-mode model,
 0.1 % to 2 %), FRFs by synchronous averaging of a periodic multisine with 2 % white output
-noise. Ours runs the whole non-interactive chain (pLSCF orders 1-60, automatic selection, LSFD,
-pole refinement); the baseline ``sdypy.EMA.Model`` (LSCF orders 2-60, LSFD) is given the true
-natural frequencies for its pole picking (``select_closest_poles``, f_window 2 Hz), which it
-needs because it has no automatic selection. Each row's note gives both accuracies (largest
-relative error of frequency and damping ratio over the modes); ratio = baseline time / ours.
+noise. Ours runs the whole non-interactive chain (pLSCF orders 1-60, automatic selection, LSFD;
+with and without pole refinement); the baseline ``sdypy.EMA.Model`` (LSCF orders 2-60, LSFD)
+is given the true natural frequencies for its pole picking (``select_closest_poles``, f_window
+2 Hz), which it needs because it has no automatic selection. Each row's note gives both
+accuracies (largest relative error of frequency and damping ratio over the modes); ratio =
+baseline time / ours.
 Without sdypy-ema installed (``pip install sdypy-ema``, see requirements-dev.txt) the rows
 have no baseline.
 """

@@ -69,7 +69,7 @@ def identify_modes(freq: npt.ArrayLike, H: npt.ArrayLike,
                    band: Optional[Sequence[float]] = None,
                    orders: Optional[Sequence[int]] = None,
                    sigma: Optional[npt.ArrayLike] = None, frf_form: str = 'receptance',
-                   tol: Tolerances = Tolerances(), refine: bool = True) -> ModalModel:
+                   tol: Tolerances = Tolerances(), refine: bool = False) -> ModalModel:
     """
     Identify natural frequencies, damping ratios and modal constants from FRFs.
 
@@ -92,8 +92,11 @@ def identify_modes(freq: npt.ArrayLike, H: npt.ArrayLike,
     tol : Tolerances
         Stability tolerances and selection settings.
     refine : bool
-        Refine the selected poles by nonlinear least squares
+        Refine the selected poles by nonlinear least squares on the lines around each
         (:func:`pentapod_sim.analysis.modal_lsfd.refine_poles`); else LSFD at the pLSCF poles.
+        Use it for noisy FRFs whose lines are sparser than the half-power bands; on noise-free
+        records of a sampled plant (continuous pole-residue model against a ZOH system) and
+        next to modes that were not selected it can pull a pole away (docs/recording.md).
 
     Returns
     -------

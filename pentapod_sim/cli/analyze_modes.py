@@ -38,8 +38,9 @@ def add_parser(subs) -> None:
     sub.add_argument('--min-stable', type=int, default=Tolerances.min_stable,
                      help='orders a pole must be stable over to count as a mode '
                           f'(default {Tolerances.min_stable})')
-    sub.add_argument('--no-refine', action='store_true',
-                     help='keep the pLSCF poles (no nonlinear least-squares refinement)')
+    sub.add_argument('--refine', action='store_true',
+                     help='refine each pole by nonlinear least squares on the lines around it '
+                          '(noisy FRFs with lines sparser than the half-power bands)')
 
 
 def cmd_modes(args) -> int:
@@ -58,7 +59,7 @@ def cmd_modes(args) -> int:
     try:
         model = identify_modes(run.freq, run.H, band=band, orders=range(1, args.max_order + 1),
                                sigma=run.sigma, frf_form=run.frf_form, tol=tol,
-                               refine=not args.no_refine)
+                               refine=args.refine)
     except ValueError as err:
         raise BagError(f'{args.bag}: {err}') from None
     print(f'{args.bag}: {run.kind} excitation, {run.estimator}, {len(run.freq)} lines; '
