@@ -66,7 +66,8 @@ def test_damping_identified_from_a_recorded_run_matches_the_sampled_loop_poles(t
     rows = damping.scenario_rows(plant, 'demo', 'tcp_damping', dt)
     xx = [r for r in rows if r['direction'] == 'xx']
     assert xx and max(r['sampled_zeta'] for r in xx) > 2 * 0.002     # the damper adds damping
-    settle = damping.settling_time(xx, cfg.damping_time_constants)
+    settle = damping.settling_time(measured_damping.settle_rows(plant, laws, dt, 'x'),
+                                   cfg.damping_time_constants)
     exciter = damping_excitation(cfg, settle)
     assert exciter['settle_periods'] * cfg.damping_period >= settle
     run = run_on_testbed('tcp_damping', 'P1', model_file, plant.content_hash(), cfg, tmp_path,

@@ -103,19 +103,20 @@ def _damping(res: StudyResults, cfg: StudyConfig, runs: bool) -> None:
             res.damping[(pos, scn)] = damping.scenario_rows(res.models[pos].plant, pos, scn, dt)
     for i, (pos, scn) in enumerate(todo, 1):
         model, rows = res.models[pos], res.damping[(pos, scn)]
-        settle = damping.settling_time([r for r in rows if r['direction'] == d + d],
+        laws = res.analytic[(pos, scn)].laws
+        settle = damping.settling_time(measured_damping.settle_rows(model.plant, laws, dt, d),
                                        cfg.damping_time_constants)
         exciter = damping_excitation(cfg, settle)
         _say(f'damping run {i}/{len(todo)}: {scn} at {pos} (multisine, settle '
              f'{exciter["settle_periods"] * cfg.damping_period:g} s = '
-             f'{cfg.damping_time_constants:g} decay times of the slowest dominant mode, then '
+             f'{cfg.damping_time_constants:g} decay times of the slowest of the '
+             f'{measured_damping.SETTLE_MODES} strongest modes, then '
              f'{cfg.damping_periods} periods of {cfg.damping_period:g} s; '
              f'{int(exciter["duration"] * cfg.sample_rate)} steps)')
         run = run_on_testbed(scn, pos, model.model_file, model.model_hash, cfg, res.out_dir,
                              kind='damping', exciter=exciter)
         ident = measured_damping.identify_run(run.bag, d, cfg.damping_band)
-        rows = measured_damping.compare(rows, ident, model.plant, res.analytic[(pos, scn)].laws,
-                                        dt, d)
+        rows = measured_damping.compare(rows, ident, model.plant, laws, dt, d)
         res.damping_measured[(pos, scn)] = rows
         tag = f'{pos}_{scn}'
         res.damping_figures[tag] = measured_damping.figures(ident, res.out_dir / 'figures', tag)

@@ -20,6 +20,7 @@ import sys
 import textwrap
 
 from pentapod_damper.study.config import load_study_config, StudyConfig
+from pentapod_damper.study.measured_damping import SETTLE_MODES
 
 SECTION = 'study-tables'
 TABLES = ('summary', 'struts12_share', 'pma', 'pma_highpass', 'damping')
@@ -143,7 +144,8 @@ def study_section(results: Path, cfg: StudyConfig) -> str:
                'laws, their dynamics and delay), of the continuous loop without sampling, and '
                'identified (pLSCF + LSFD, `analyze modes`) from a recorded run excited by a '
                f'{cfg.damping_band[0]:g}-{cfg.damping_band[1]:g} Hz Schroeder multisine, settled '
-               f'{cfg.damping_time_constants:g} decay times of the slowest dominant mode, then '
+               f'{cfg.damping_time_constants:g} decay times of the slowest of the '
+               f'{SETTLE_MODES} modes with the largest terms in the response, then '
                f'{cfg.damping_periods} periods of {cfg.damping_period:g} s averaged. Peaks: '
                'identified and analytic sampled-loop FRF, each maximised at the mode. '
                '`damping.csv` holds every scenario and direction (analytic).'),

@@ -10,6 +10,7 @@ import numpy as np
 
 from pentapod_damper.study.analytic import improvement_share, peak_and_rms
 from pentapod_damper.study.config import StudyConfig
+from pentapod_damper.study.measured_damping import SETTLE_MODES
 from pentapod_damper.study.pma import bounded_stroke, requirement_row
 from pentapod_sim import __version__
 
@@ -268,7 +269,8 @@ def _damping_text(res: StudyResults) -> str:
         'sampling; measured_zeta: identified (pLSCF + LSFD) from the damping run of the '
         f'scenario, a {cfg.damping_band[0]:g}-{cfg.damping_band[1]:g} Hz Schroeder multisine of '
         f'{cfg.damping_amplitude:g} N peak along {cfg.direction}, settled '
-        f'{cfg.damping_time_constants:g} decay times of the slowest dominant mode, then '
+        f'{cfg.damping_time_constants:g} decay times of the slowest of the '
+        f'{SETTLE_MODES} modes with the largest terms in the response, then '
         f'{cfg.damping_periods} periods of {cfg.damping_period:g} s averaged synchronously. '
         'Peaks: the identified FRF and the analytic sampled-loop FRF, each maximised near the '
         f'mode. Only the rows of the damping runs ({cfg.direction}{cfg.direction}) are shown; '
