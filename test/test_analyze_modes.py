@@ -136,3 +136,14 @@ def test_stepped_sine_bag_uses_the_line_fit(tmp_path):
     worst = np.unravel_index(np.argmax(err / np.abs(exact)), err.shape)
     assert run.transient[worst[0], 0, worst[1]] > 0.3 * err[worst]
     np.testing.assert_allclose(run.freq, Excitation(spec, dt).lines_hz)
+
+
+def test_random_bag_uses_h1(tmp_path):
+    spec = ExcitationSpec('random', 10.0, f_start=5.0, f_end=150.0, duration=40.0, seed=3)
+    system = record(tmp_path / 'random', spec, 40000, noise=0.0)
+    run = frfs_from_bag(tmp_path / 'random')
+    assert run.estimator == 'H1' and run.band == (5.0, 150.0) and run.sigma is None
+    # H1 of the 2 % mode's peak region (Welch, Hann): within 10 % of the continuous FRF
+    near = np.abs(run.freq - system.freq_hz[1]) < 3.0
+    exact = system.frf(run.freq[near])[:, 0, :]
+    np.testing.assert_allclose(np.abs(run.H[:, 0, near]), np.abs(exact), rtol=0.1)

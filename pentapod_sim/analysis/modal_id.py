@@ -228,7 +228,8 @@ def select_poles(orders: list, tol: Tolerances = Tolerances()) -> np.ndarray:
     rows = [(f, z, e.order, p) for e in orders
             for f, z, p, c in zip(e.freq, e.damping, e.poles, e.classes) if c == 's']
     rows.sort(key=lambda row: row[0])
-    clusters, current = [], []
+    clusters: list[list[tuple]] = []
+    current: list[tuple] = []
     for row in rows:
         if current and row[0] - current[-1][0] >= tol.tol_freq * row[0]:
             clusters.append(current)

@@ -82,6 +82,14 @@ class RunFrfs:
     n_averages: int
 
 
+@dataclasses.dataclass
+class _Common:
+    labels: list
+    units: list
+    kind: str
+    frf_form: str
+
+
 def default_outputs(bag) -> list:
     """The translational TCP displacements ``/pentapod/tcp_state.position.tcp_{x,y,z}``."""
     if TCP_STATE not in bag.topics:
@@ -169,23 +177,24 @@ def frfs_from_bag(bag_path, outputs: Optional[Sequence[str]] = None,
     ys = arrays[len(u_series):]
     units = [f'{s.unit}/N' for s in y_series]
     form = FRF_FORMS.get(y_series[0].unit, 'receptance')
-    common = {'labels': outputs, 'units': units, 'kind': spec.kind, 'frf_form': form}
+    common = _Common(outputs, units, spec.kind, form)
     if spec.kind in PERIODIC_KINDS:
         return _periodic(exc, u, ys, start, dt, common)
     if spec.kind == 'stepped_sine':
         windows = [(f, a - start, b - start) for f, a, b in exc.stepped_windows()]
-        res = [stepped_sine_frf(u, y, dt, windows) for y in ys]
         lines = exc.lines_hz
-        return _line_result(res, 'stepped-sine line fit', (lines.min(), lines.max()), common)
-    res = [estimate_frf(u, y, 1.0 / dt, H1_KINDS[spec.kind]) for y in ys]
+        return _line_result([stepped_sine_frf(u, y, dt, windows) for y in ys],
+                            'stepped-sine line fit', (lines.min(), lines.max()), common)
+    h1 = [estimate_frf(u, y, 1.0 / dt, H1_KINDS[spec.kind]) for y in ys]
     band = (spec.f_start, spec.f_end) if spec.kind != 'impulse' else (0.0, 0.5 / dt)
-    return RunFrfs(res[0].freq, np.array([r.H for r in res])[:, None, :], None, None,
-                   estimator='H1', band=band, n_averages=res[0].n_averages, **common)
+    return RunFrfs(h1[0].freq, np.array([r.H for r in h1])[:, None, :], None, None,
+                   common.labels, common.units, common.kind, 'H1', band, common.frf_form,
+                   h1[0].n_averages)
 
 
 def _periodic(exc: Excitation, u: np.ndarray, ys: list, start: int, dt: float,
-              common: dict) -> RunFrfs:
-    period = exc.period_steps
+              common: _Common) -> RunFrfs:
+    period = int(exc.period_steps or 0)
     first = exc.first + exc.settle_periods * period  # absolute step of the first used period
     if first < start:  # recording began later: skip to the next period boundary
         first += math.ceil((start - first) / period) * period
@@ -204,9 +213,9 @@ def _periodic(exc: Excitation, u: np.ndarray, ys: list, start: int, dt: float,
                         (lines.min(), lines.max()), common)
 
 
-def _line_result(res: list, estimator: str, band: tuple, common: dict) -> RunFrfs:
+def _line_result(res: list, estimator: str, band: tuple, common: _Common) -> RunFrfs:
     return RunFrfs(res[0].freq, np.array([r.H for r in res])[:, None, :],
                    np.array([r.noise_std for r in res])[:, None, :],
-                   np.array([r.transient for r in res])[:, None, :], estimator=estimator,
-                   band=(float(band[0]), float(band[1])), n_averages=res[0].n_averages,
-                   **common)
+                   np.array([r.transient for r in res])[:, None, :], common.labels,
+                   common.units, common.kind, estimator, (float(band[0]), float(band[1])),
+                   common.frf_form, res[0].n_averages)
