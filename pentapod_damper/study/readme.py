@@ -149,7 +149,11 @@ def study_section(results: Path, cfg: StudyConfig) -> str:
                f'{cfg.damping_periods} periods of {cfg.damping_period:g} s averaged. Peaks: '
                'identified and analytic sampled-loop FRF, each maximised at the mode. '
                '`damping.csv` holds every scenario and direction (analytic).'),
-        markdown_table(_damping_rows(tables['damping'], cfg), COLUMNS['damping'])])
+        markdown_table(_damping_rows(tables['damping'], cfg), COLUMNS['damping']),
+        _prose('Stability diagram and identified FRF of the damping run of `tcp_damping` at P2 '
+               "(every run's are in the study's `figures/`):"),
+        '![stability diagram](docs/figures/stability_P2_tcp_damping.png)\n'
+        '![identified FRF](docs/figures/identified_frf_P2_tcp_damping.png)'])
 
 
 def _prose(text: str) -> str:
