@@ -10,8 +10,12 @@ Benchmarks of the plant core and the lockstep / real-time ROS runs.
   sizes and the default executor (rclpy.spin).
 * Real-time mode with one damper node at 1, 5 and 10 kHz: achieved rate, lateness p50/p99,
   overruns.
+* Real time at machine rates: 1 kHz exchange with a multi-rate plant at 5 and 10 kHz
+  (``substeps`` 5, 10), separate processes and composed: share of missed deadlines (target
+  < 0.1 %), lateness p50/p99.
 
-Full: 100k offline steps, 20k lockstep steps, 5 s real time; quick: 20k, 3k, 1 s.
+Full: 100k offline steps, 20k lockstep steps, 5 s real time (60 s at machine rates); quick:
+20k, 3k, 1 s (5 s).
 ``python bench/bench_plant.py --offline [--quick]`` prints the offline rows only;
 ``python bench/run_all.py --only plant`` runs all and saves bench/results/plant.json.
 """
@@ -101,7 +105,7 @@ rclpy.try_shutdown()
 
 def _row(name, value, unit, baseline, baseline_value, higher_better=True, note=''):
     ratio = (value / baseline_value if higher_better else baseline_value / value) \
-        if baseline_value else float('nan')
+        if baseline_value and value else float('nan')
     return {'name': name, 'value': value, 'unit': unit, 'baseline': baseline,
             'baseline_value': baseline_value, 'ratio': ratio, 'note': note}
 
@@ -214,18 +218,32 @@ def multirate_rows(n_exchanges: int, rate: float = 1000.0, substeps: int = 10,
                  n_exchanges / best['fine'], note=note)]
 
 
-class Session:
-    """Node processes on a private ROS domain; all killed at the end."""
+FIFO_PRIORITY = 10   # SCHED_FIFO priority of the real-time runs at machine rates (chrt)
 
-    def __init__(self, folder: Path):
+
+def fifo_prefix() -> list[str]:
+    """``chrt -f FIFO_PRIORITY`` if this user may run processes so, else nothing."""
+    try:
+        ok = subprocess.run(['chrt', '-f', str(FIFO_PRIORITY), 'true'],
+                            capture_output=True).returncode == 0
+    except OSError:
+        ok = False
+    return ['chrt', '-f', str(FIFO_PRIORITY)] if ok else []
+
+
+class Session:
+    """Node processes on a private ROS domain (optionally under a command prefix); all killed."""
+
+    def __init__(self, folder: Path, prefix: list[str] | None = None):
         self.folder = folder
+        self.prefix = prefix or []
         # a free domain reserved for the session, LOCALHOST discovery (unless already set)
         changes, self.lease = isolation(os.environ)
         self.env = dict(os.environ, **changes)
         self.procs = []
 
     def start(self, args: list[str], log: str) -> subprocess.Popen:
-        proc = subprocess.Popen([sys.executable] + args, env=self.env, text=True,
+        proc = subprocess.Popen(self.prefix + [sys.executable] + args, env=self.env, text=True,
                                 stdout=subprocess.PIPE if log == 'pipe' else
                                 open(self.folder / log, 'w'), stderr=subprocess.STDOUT)
         self.procs.append(proc)
@@ -286,10 +304,11 @@ def _trace_figures(trace: Path, rss: float) -> dict:
 
 
 def plant_run(folder: Path, model_file: Path, n_controllers: int, steps: int,
-              timing: str = 'lockstep', rate: float = RATE) -> dict:
+              timing: str = 'lockstep', rate: float = RATE, substeps: int = 1,
+              prefix: list[str] | None = None) -> dict:
     """Run the plant node with n damper nodes; return the figures of its trace file."""
-    session = Session(folder)
-    trace = folder / f'trace_{timing}_{n_controllers}_{int(rate)}.npz'
+    session = Session(folder, prefix)
+    trace = folder / f'trace_{timing}_{n_controllers}_{int(rate)}_{substeps}.npz'
     try:
         names = [f'damper{i}' for i in range(n_controllers)]
         for i, name in enumerate(names):
@@ -298,8 +317,8 @@ def plant_run(folder: Path, model_file: Path, n_controllers: int, steps: int,
         plant = session.node('pentapod_sim.nodes.plant_node', 'plant',
                              f'model_file:={model_file}', f'steps:={steps}',
                              f'sample_rate:={rate}', f'timing:={timing}',
-                             'sources:=[' + ','.join(names) + ']', f"output_file:='{trace}'",
-                             'startup_timeout:=60.0')
+                             f'substeps:={substeps}', 'sources:=[' + ','.join(names) + ']',
+                             f"output_file:='{trace}'", 'startup_timeout:=60.0')
         code, rss = wait_rss(plant, 300)
         if code != 0:
             raise RuntimeError((folder / 'plant.log').read_text())
@@ -309,23 +328,26 @@ def plant_run(folder: Path, model_file: Path, n_controllers: int, steps: int,
 
 
 def composed_run(folder: Path, model_file: Path, n_controllers: int, steps: int,
-                 recorder: bool = False) -> dict:
+                 recorder: bool = False, timing: str = 'lockstep', rate: float = RATE,
+                 substeps: int = 1, prefix: list[str] | None = None) -> dict:
     """Plant + n damper nodes (+ a recorder) in one process on one executor; trace figures."""
     from pentapod_sim.scenario.files import dump_params
-    trace = folder / f'trace_composed_{n_controllers}_{int(recorder)}.npz'
+    trace = folder / (f'trace_composed_{n_controllers}_{int(recorder)}_{timing}_{int(rate)}_'
+                      f'{substeps}.npz')
     names = [f'damper{i}' for i in range(n_controllers)]
     doc = {name: {'ros__parameters': {'bending_struts': [i + 1], 'bending_gain': 100.0}}
            for i, name in enumerate(names)}
     doc['plant'] = {'ros__parameters': {
-        'model_file': str(model_file), 'steps': steps, 'sample_rate': RATE, 'sources': names,
-        'output_file': str(trace), 'startup_timeout': 60.0}}
+        'model_file': str(model_file), 'steps': steps, 'sample_rate': rate, 'sources': names,
+        'output_file': str(trace), 'startup_timeout': 60.0, 'timing': timing,
+        'substeps': substeps}}
     if recorder:
         doc['recorder'] = {'ros__parameters': {'output_dir': str(folder / 'bags'),
                                                'bag_name': f'composed_{n_controllers}'}}
         doc['plant']['ros__parameters']['wait_for_subscribers'] = ['recorder']
-    path = folder / f'composed_{n_controllers}_{int(recorder)}.yaml'
+    path = folder / f'{trace.stem}.yaml'
     path.write_text(dump_params(doc))
-    session = Session(folder)
+    session = Session(folder, prefix)
     try:
         proc = session.start(['-m', 'pentapod_sim.nodes.composed', str(path)], 'composed.log')
         code, rss = wait_rss(proc, 300)
@@ -350,6 +372,50 @@ def pingpong(folder: Path, n: int) -> tuple[float, float]:
         return float(out.strip().splitlines()[-1]), _vm_hwm(pong.pid)
     finally:
         session.close()
+
+
+MISS_TARGET = 0.001    # share of exchanges with a missed deadline that real time may have
+
+
+def multirate_realtime_rows(folder: Path, model_file: Path, seconds: float,
+                            rate: float = 1000.0) -> list[dict]:
+    """
+    Real time at machine rates: 1 kHz exchange with a 5 and a 10 kHz plant, one damper node.
+
+    Separate processes and composed (one process, one executor); per run the share of
+    exchanges with a missed deadline (target < 0.1 %) and the lateness of the period starts
+    p50 / p99 against the exchange period. The node processes run at SCHED_FIFO priority
+    ``FIFO_PRIORITY`` where allowed (a real-time setup; on this shared 2-core machine the
+    other jobs' load otherwise descheduled them for milliseconds).
+    """
+    prefix = fifo_prefix()
+    policy = (f'SCHED_FIFO {FIFO_PRIORITY}' if prefix else
+              'normal scheduling (SCHED_FIFO not allowed)')
+    rows = []
+    n = int(seconds * rate)
+    period_us = 1e6 / rate
+    for substeps in (5, 10):
+        for where in ('separate processes', 'composed'):
+            if where == 'composed':
+                res = composed_run(folder, model_file, 1, n, timing='realtime', rate=rate,
+                                   substeps=substeps, prefix=prefix)
+            else:
+                res = plant_run(folder, model_file, 1, n, 'realtime', rate, substeps, prefix)
+            label = (f'realtime {rate / 1000:g} kHz exchange, {rate * substeps / 1000:g} kHz '
+                     f'plant, {where}')
+            note = (f'{n} exchanges ({seconds:g} s), plant + 1 damper, 200 states, full-rate '
+                    f'outputs kept in the trace, processes at {policy}; achieved '
+                    f'{res["achieved_rate"]:.1f} Hz, '
+                    f'{int(res["missed_steps"])} missed deadlines, lateness max '
+                    f'{res["lateness_max"] * 1e6:.0f} us, {int(res["overruns"])} overruns')
+            rows += [
+                _row(f'{label}: missed deadlines', res['missed_steps'] / n, 'share',
+                     'target', MISS_TARGET, higher_better=False, note=note),
+                _row(f'{label}: lateness p50', res['lateness_p50'] * 1e6, 'us',
+                     'exchange period', period_us, higher_better=False, note=note),
+                _row(f'{label}: lateness p99', res['lateness_p99'] * 1e6, 'us',
+                     'exchange period', period_us, higher_better=False, note=note)]
+    return rows
 
 
 def ros_rows(quick: bool) -> list[dict]:
@@ -391,6 +457,7 @@ def ros_rows(quick: bool) -> list[dict]:
                                   f'{int(res["overruns"])} overruns, '
                                   f'{int(res.get("missed_steps", 0))} missed deadlines of '
                                   f'{int(seconds * rate)} steps (plant + 1 damper)'))
+        rows += multirate_realtime_rows(folder, model_file, 5.0 if quick else 60.0)
     return rows
 
 

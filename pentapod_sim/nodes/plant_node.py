@@ -39,7 +39,7 @@ from pentapod_sim.nodes.common import (
 )
 from pentapod_sim.nodes.fullrate import FullRateOutputs
 from pentapod_sim.nodes.parameter_tables import PLANT
-from pentapod_sim.nodes.realtime_stats import LatenessStats
+from pentapod_sim.nodes.realtime_stats import fault_in, LatenessStats, POLL_AHEAD
 from pentapod_sim.nodes.run_status import RunStatusPublisher
 from pentapod_sim.plant.build import load_or_build_model
 from pentapod_sim.sim.multirate import MultiRatePlant
@@ -295,6 +295,7 @@ class PlantNode(Node):
         core, mixer, dt = self.core, self.mixer, self.dt
         stats = LatenessStats(self.n_steps, dt)
         self.run_lockstep(executor, trace, n_steps=1)
+        fault_in(trace.y, trace.u, trace.full, stats.lateness, stats.misses)
         t0 = time.monotonic() - dt
         next_report = t0 + self.params.report_period
         next_check = t0 + GRAPH_CHECK_PERIOD
@@ -303,8 +304,9 @@ class PlantNode(Node):
                 break
             start = t0 + k * dt
             now = time.monotonic()
-            while now < start:              # idle until the period starts
-                executor.spin_once(timeout_sec=start - now)
+            while now < start:   # sleep in the executor, poll the clock for the last POLL_AHEAD
+                if start - now > POLL_AHEAD:
+                    executor.spin_once(timeout_sec=start - POLL_AHEAD - now)
                 now = time.monotonic()
             stats.add(k, now - start)
             y = core.outputs()
@@ -324,7 +326,7 @@ class PlantNode(Node):
                 self._watch_lost_sources()
                 next_check = now + GRAPH_CHECK_PERIOD
             if now > next_report:
-                self.get_logger().info('realtime: ' + stats.summary(k + 1, now - t0))
+                self.get_logger().info('realtime, last period: ' + stats.report(k + 1, now, t0))
                 next_report = now + self.params.report_period
         stats.elapsed = time.monotonic() - t0
         return stats
