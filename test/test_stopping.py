@@ -220,6 +220,28 @@ def test_a_second_publisher_joining_mid_run_is_refused(tmp_path, runner_of):
     assert 0 < int(trace['steps_run']) < LONG and str(trace['end']).startswith('error: ')
 
 
+def test_a_shared_topic_is_refused_by_name_once_the_names_are_discovered(monkeypatch):
+    """An undiscovered node name defers the refusal (at most NAME_DISCOVERY s), then names."""
+    from types import SimpleNamespace
+
+    from pentapod_sim.nodes import common
+    now = [100.0]
+    monkeypatch.setattr(common.time, 'monotonic', lambda: now[0])
+    known = SimpleNamespace(node_namespace='/', node_name='damper')
+    unknown = SimpleNamespace(node_namespace='_NODE_NAMESPACE_UNKNOWN_/',
+                              node_name='_NODE_NAME_UNKNOWN_')
+    seen: dict = {}
+    topic = '/pentapod/forces/damper'
+    assert common.shared_topic_error(topic, [known, unknown], seen) is None
+    now[0] += common.NAME_DISCOVERY / 2
+    assert common.shared_topic_error(topic, [known, unknown], seen) is None
+    other = SimpleNamespace(node_namespace='/', node_name='damper_late')
+    assert '(/damper, /damper_late)' in common.shared_topic_error(topic, [known, other], seen)
+    now[0] += common.NAME_DISCOVERY
+    late = common.shared_topic_error(topic, [known, unknown], seen)
+    assert late.startswith(f'force topic {topic} has 2 publishers (/damper, ')
+
+
 def test_absurd_forces_are_rejected_and_counted():
     """An effort above max_effort is refused like NaN; nothing accepted before is lost."""
     mixer = ForceMixer(['a', 'b'], [ForceSource('s')], max_effort=1e6)

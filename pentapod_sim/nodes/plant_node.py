@@ -31,6 +31,7 @@ from pentapod_sim.nodes.common import (
     FORCE_QOS,
     node_args,
     run_node,
+    shared_topic_error,
     spin_until,
     stamp_msg,
     stamp_to_ns,
@@ -68,6 +69,7 @@ class PlantNode(Node):
         self.mixer = ForceMixer(self.core.input_names, parse_sources(self.params.sources, ports),
                                 max_effort=self.params.max_effort)
         self.lost: set[str] = set()       # sources whose publisher left the graph
+        self._shared_seen: dict[str, float] = {}   # force topic -> first seen shared [s]
         self.misses: dict[str, int] = dict.fromkeys(self.mixer.sources, 0)
         self.n_steps = self._n_steps()
         self.clock_pub = self.create_publisher(Clock, CLOCK, STATE_QOS)
@@ -174,17 +176,15 @@ class PlantNode(Node):
         ------
         RunError
             If a force topic has more than one publisher and ``shared_source_topics`` is
-            false; the message names the topic and every publishing node.
+            false; the message names the topic and every publishing node
+            (:func:`~pentapod_sim.nodes.common.shared_topic_error`).
         """
         gone = []
         for name in self.mixer.sources:
             infos = self.get_publishers_info_by_topic(force_topic(name))
             if len(infos) > 1 and not self.params.shared_source_topics:
-                nodes = ', '.join(sorted(f'{i.node_namespace.rstrip("/")}/{i.node_name}'
-                                         for i in infos))
-                raise RunError(f'force topic {force_topic(name)} has {len(infos)} publishers '
-                               f'({nodes}); one source per topic (parameter '
-                               'shared_source_topics allows more)')
+                if error := shared_topic_error(force_topic(name), infos, self._shared_seen):
+                    raise RunError(error)
             if not infos:
                 gone.append(name)
         return gone

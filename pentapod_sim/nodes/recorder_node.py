@@ -262,11 +262,29 @@ def _any_best_effort(publishers) -> bool:
     return any(p.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT for p in publishers)
 
 
+#: After a stop signal the recorder waits this long [s, wall time] for the plant's end
+#: announcement (a plant stopped by the same signal ends its step and announces it), then
+#: drains up to ``drain_timeout``; without an announcement it closes with what it has.
+SIGNAL_GRACE = 2.0
+
+
 def record(node: RecorderNode, executor) -> None:
-    """Spin until a signal or the drained end of the run; the bag is closed on the way out."""
+    """
+    Spin until the drained end of the run or a signal; the bag is closed on the way out.
+
+    A stop signal sent to every node at once (Ctrl-C of a launch, the scenario runner) reaches
+    the recorder while the plant's last steps are still on their way: the recorder then keeps
+    taking messages until the plant's end announcement is drained, for at most
+    :data:`SIGNAL_GRACE` s without an announcement.
+    """
     try:
         while rclpy.ok() and not node.done() and not shutdown.requested():
             executor.spin_once(timeout_sec=0.05)
+        if shutdown.requested() and rclpy.ok() and node.params.stop_at_run_end:
+            give_up = time.monotonic() + SIGNAL_GRACE
+            while rclpy.ok() and not node.done() and (node.end is not None
+                                                       or time.monotonic() < give_up):
+                executor.spin_once(timeout_sec=0.05)
     finally:
         node.close()
 
