@@ -60,6 +60,13 @@ def test_instability_raises_run_error():
             plant.advance(np.array([+200.0 * plant.outputs()[1]]))
 
 
+@pytest.mark.parametrize('bound', [0.0, -1.0, float('nan'), float('inf'), 1e300])
+def test_a_state_bound_whose_square_overflows_is_refused(bound):
+    """The bound is compared squared: above 1e150 its square is inf (no traceback, a name)."""
+    with pytest.raises(ConfigError, match='max_state_norm'):
+        DiscretePlant(one_mode(2 * np.pi * 20, 1.0).discretize(1e-3), max_state_norm=bound)
+
+
 def test_rejects_continuous_system():
     with pytest.raises(ConfigError, match='discrete'):
         DiscretePlant(one_mode(1.0, 1.0).to_statespace())

@@ -56,7 +56,7 @@ PLANT = ParameterTable('plant', [
     Param('resend_period', 'float', 0.2, 'lockstep: re-publish y_k after this wall time '
           'without all answers', 's', 1e-3, 60.0),
     Param('max_state_norm', 'float', DEFAULT_MAX_STATE_NORM, 'instability bound on the norm '
-          'of the modal state ||x||; larger or NaN stops the run', '', 1e-12, 1e300),
+          'of the modal state ||x||; larger or NaN stops the run', '', 1e-12, 1e150),
     Param('report_period', 'float', 2.0, 'realtime: log timing every this wall time', 's',
           0.1, 3600.0),
     Param('output_file', 'str', '', 'write y_k, u_k of every step to this .npz at the end '

@@ -66,8 +66,8 @@ class DiscretePlant:
     def __init__(self, sys: control.StateSpace, max_state_norm: float = DEFAULT_MAX_STATE_NORM):
         if not sys.isdtime(strict=True) or not np.isfinite(float(sys.dt)) or sys.dt <= 0:
             raise ConfigError(f'plant system must be discrete with dt > 0 s, got dt={sys.dt!r}')
-        if not np.isfinite(max_state_norm) or max_state_norm <= 0:
-            raise ConfigError(f'max_state_norm must be > 0, got {max_state_norm!r}')
+        if not 0 < max_state_norm <= 1e150:     # its square must stay a finite float
+            raise ConfigError(f'max_state_norm must lie in (0, 1e150], got {max_state_norm!r}')
         self.dt = float(sys.dt)
         # contiguous float64 copies (dense A_d is kept for the closed-loop matrices)
         self.a = np.ascontiguousarray(sys.A, dtype=float)
