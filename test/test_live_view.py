@@ -30,6 +30,7 @@ from pentapod_sim import interface
 from pentapod_sim.analysis.bag_reader import open_bag
 from pentapod_sim.live.layout import build_layout, message_paths
 from pentapod_sim.live.status import STATUS_NAMES
+from pentapod_sim.scenario.files import dump_params
 
 RATE = 5000.0
 STEPS = 2000
@@ -368,3 +369,37 @@ def _decoded(client, topic: str) -> list:
         return []
     decode = decoder(client.channels[client.topic_ids()[topic]])
     return [decode(payload) for _, payload in client.of_topic(topic)]
+
+
+def test_a_composed_run_serves_the_live_view(tmp_path):
+    """A live_view section of a composed run starts its server and streams the run."""
+    model_file = demo_model(6, seed=5).save(tmp_path / 'model.npz')
+    path = tmp_path / 'scenario.yaml'
+    path.write_text(dump_params({
+        '/**': {'ros__parameters': {'sample_rate': 1000.0}},
+        'plant': {'ros__parameters': {'model_file': str(model_file), 'steps': 2_000_000,
+                                      'sources': ['exciter'], 'loop_check': 'off'}},
+        'exciter': {'ros__parameters': {'kind': 'sine', 'amplitude': 10.0, 'frequency': 7.0}},
+        'live_view': {'ros__parameters': {'port': 0, 'discovery_period': 0.1}}}))
+    log = tmp_path / 'composed.log'
+    proc = subprocess.Popen([sys.executable, '-m', 'pentapod_sim.nodes.composed', str(path)],
+                            stdout=open(log, 'w'), stderr=subprocess.STDOUT)
+    try:
+        end = time.monotonic() + 60.0
+        while not (found := re.search(r'server on ws://127\.0\.0\.1:(\d+)', log.read_text())):
+            assert proc.poll() is None and time.monotonic() < end, log.read_text()
+            time.sleep(0.1)
+        client = FoxgloveClient(f'ws://127.0.0.1:{found.group(1)}').start()
+        client.wait_for_topics([interface.TCP_STATE], timeout=60.0)
+        end = time.monotonic() + 60.0
+        while len(client.of_topic(interface.TCP_STATE)) < 3 and time.monotonic() < end:
+            time.sleep(0.1)
+        client.stop()
+        assert len(client.of_topic(interface.TCP_STATE)) >= 3
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(timeout=60) == 130, log.read_text()
+        assert 'Traceback' not in log.read_text()
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()

@@ -55,9 +55,11 @@ class Composition:
                                                                f'__node:={name}']))
 
     def add_to(self, executor) -> None:
-        """Add every node of the composition to ``executor``."""
+        """Add every node of the composition to ``executor``; start those that serve."""
         for node in self.nodes:
             executor.add_node(node)
+            if hasattr(node, 'start_component'):      # the live view's WebSocket server
+                node.start_component()
 
     def destroy_node(self) -> None:
         """Close what needs closing (a recorder's bag), then destroy every node."""

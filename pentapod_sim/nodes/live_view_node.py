@@ -142,12 +142,31 @@ class LiveViewNode(Node):
                     stream.offer(data, info.get('publication_sequence_number'))
 
 
+    def start(self, nice: int) -> None:
+        """Start the WebSocket server; add ``nice`` to this process's threads' niceness."""
+        port = self.hub.start()
+        threads = lower_priority(nice)
+        self.get_logger().info(f'Foxglove WebSocket server on ws://{self.params.host}:{port} '
+                               f'(niceness +{nice} on {threads} threads)')
+
+    def start_component(self) -> None:
+        """
+        Start inside a composed run (:mod:`pentapod_sim.nodes.composed`).
+
+        The server starts without renicing (the plant shares the process) and a timer on the
+        composition's executor looks for new topics; ``close`` stops the server.
+        """
+        self.start(0)
+        self.create_timer(self.params.discovery_period, self.discover)
+
+    def close(self) -> None:
+        """Stop the worker and the WebSocket server."""
+        self.hub.stop()
+
+
 def serve(node: LiveViewNode, executor) -> None:
     """Start the WebSocket server, spin (discovering topics) until SIGINT/SIGTERM."""
-    port = node.hub.start()
-    threads = lower_priority(node.params.nice)
-    node.get_logger().info(f'Foxglove WebSocket server on ws://{node.params.host}:{port} '
-                           f'(niceness +{node.params.nice} on {threads} threads)')
+    node.start(node.params.nice)
     try:
         next_look = time.monotonic() + node.params.discovery_period
         while rclpy.ok() and not shutdown.requested():
