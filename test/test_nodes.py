@@ -104,7 +104,10 @@ def test_lockstep_reproduces_offline_closed_loop(procs, tmp_path):
     assert np.all(scale > 0)
     assert np.max(np.abs(run['y'] - ref.y) / scale) < 1e-12
     assert np.max(np.abs(run['u'] - ref.u)) <= 1e-12 * np.abs(ref.u).max()
-    assert list(run['rejected']) == []
+    # answers to a step the plant re-published after resend_period (a loaded machine) arrive
+    # twice: the plant drops the late copy as stale or duplicate, by design; nothing else
+    assert [r for r in run['rejected'] if r.split('/')[1].split('=')[0]
+            not in ('stale', 'duplicate')] == []
 
 
 def test_damper_node_with_filter_and_delay_reproduces_offline_loop(procs, tmp_path):
