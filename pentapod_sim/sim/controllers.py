@@ -127,6 +127,40 @@ def _index(names: Sequence[str], ports: Sequence[str], what: str) -> np.ndarray:
         raise PortError(f'{what} port {err.args[0]!r} is not in the plant model') from None
 
 
+class ControllerBlocks(NamedTuple):
+    """
+    Controllers stacked on a plant's ports: ``xc' = a xc + b y``, ``u = c xc + gain y``.
+
+    ``gain`` (n_in, n_out), ``a`` (n_c, n_c), ``b`` (n_c, n_out), ``c`` (n_in, n_c), with the
+    states of the controllers one after the other and their efforts summed per input port.
+    """
+
+    gain: np.ndarray
+    a: np.ndarray
+    b: np.ndarray
+    c: np.ndarray
+
+
+def controller_blocks(controllers: Sequence[DiscreteController], input_names: Sequence[str],
+                      output_names: Sequence[str]) -> ControllerBlocks:
+    """Stack ``controllers`` on the ports ``input_names`` / ``output_names`` (PortError)."""
+    n_in, n_out = len(input_names), len(output_names)
+    n_c = sum(k.n_states for k in controllers)
+    gain, c_full = np.zeros((n_in, n_out)), np.zeros((n_in, n_c))
+    b_full, a_c = np.zeros((n_c, n_out)), np.zeros((n_c, n_c))
+    start = 0
+    for ctrl in controllers:
+        rows = _index(input_names, ctrl.actuator_ports, 'actuator')
+        cols = _index(output_names, ctrl.sensor_ports, 'sensor')
+        span = slice(start, start + ctrl.n_states)
+        gain[np.ix_(rows, cols)] += ctrl.d
+        c_full[rows, span] += ctrl.c
+        b_full[span, cols] += ctrl.b
+        a_c[span, span] = ctrl.a
+        start += ctrl.n_states
+    return ControllerBlocks(gain, a_c, b_full, c_full)
+
+
 class LoopSystem(NamedTuple):
     """
     Closed sampled loop ``z_{k+1} = a z_k + b e_k``, ``u_k = c_u z_k + e_k``, ``y_k = c_y z_k``.
@@ -153,21 +187,8 @@ def loop_system(a: np.ndarray, b: np.ndarray, c: np.ndarray, d: np.ndarray,
     efforts add up on the input ports, together with the external input ``e_k``.
     """
     n_in, n_out = len(input_names), len(output_names)
-    n_c = sum(k.n_states for k in controllers)
-    gain = np.zeros((n_in, n_out))
-    c_full = np.zeros((n_in, n_c))
-    b_full = np.zeros((n_c, n_out))
-    a_c = np.zeros((n_c, n_c))
-    start = 0
-    for ctrl in controllers:
-        rows = _index(input_names, ctrl.actuator_ports, 'actuator')
-        cols = _index(output_names, ctrl.sensor_ports, 'sensor')
-        span = slice(start, start + ctrl.n_states)
-        gain[np.ix_(rows, cols)] += ctrl.d
-        c_full[rows, span] += ctrl.c
-        b_full[span, cols] += ctrl.b
-        a_c[span, span] = ctrl.a
-        start += ctrl.n_states
+    gain, a_c, b_full, c_full = controller_blocks(controllers, input_names, output_names)
+    n_c = a_c.shape[0]
     kc = gain @ c
     kd, bd = gain @ d, b_full @ d
     if not (np.any(kd) or np.any(bd)):

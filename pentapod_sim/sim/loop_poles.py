@@ -33,7 +33,7 @@ from scipy.optimize import linear_sum_assignment
 
 from pentapod_sim.errors import ConfigError
 from pentapod_sim.plant.model import PlantModel
-from pentapod_sim.sim.controllers import _index, DiscreteController, loop_system
+from pentapod_sim.sim.controllers import controller_blocks, DiscreteController, loop_system
 
 #: Uniform gain steps of the pole following (refined where ambiguous).
 FOLLOW_STEPS = 16
@@ -76,19 +76,9 @@ def continuous_loop_system(plant: PlantModel, controllers: Sequence[DiscreteCont
     """
     a, b, c, d = plant.state_matrices()
     n_in, n_out = len(plant.input_names), len(plant.output_names)
-    n_c = sum(k.n_states for k in controllers)
-    gain, c_full = np.zeros((n_in, n_out)), np.zeros((n_in, n_c))
-    b_full, a_c = np.zeros((n_c, n_out)), np.zeros((n_c, n_c))
-    start = 0
-    for ctrl in controllers:
-        rows = _index(plant.input_names, ctrl.actuator_ports, 'actuator')
-        cols = _index(plant.output_names, ctrl.sensor_ports, 'sensor')
-        span = slice(start, start + ctrl.n_states)
-        gain[np.ix_(rows, cols)] += ctrl.d
-        c_full[rows, span] += ctrl.c
-        b_full[span, cols] += ctrl.b
-        a_c[span, span] = ctrl.a
-        start += ctrl.n_states
+    gain, a_c, b_full, c_full = controller_blocks(controllers, plant.input_names,
+                                                  plant.output_names)
+    n_c = a_c.shape[0]
     loop = np.eye(n_in) - gain @ d
     if np.linalg.cond(loop) > 1e12:
         raise ConfigError('the continuous loop has no solution (I - K D is singular)')
