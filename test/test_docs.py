@@ -21,6 +21,7 @@ import numpy as np
 import pytest
 
 from pentapod_damper.study import readme as study_readme
+from pentapod_damper.study.__main__ import pma_results
 from pentapod_damper.study.config import load_study_config
 from pentapod_damper.study.report import (
     pma_highpass_rows,
@@ -168,12 +169,7 @@ def _analytic_results(out_dir: Path) -> StudyResults:
         res.models[pos] = model = pipeline.prepare_model(pos, out_dir, lambda msg: None)
         for scn in cfg.scenarios:
             res.analytic[(pos, scn)] = pipeline.scenario_analytic(model, scn, cfg, res.freq)
-    for scn in cfg.scenarios:
-        ana = res.analytic[(cfg.step_position, scn)]
-        if ana.pma:
-            model = res.models[cfg.step_position]
-            res.pma[scn] = pipeline.pma_curves(model, ana, cfg, res.freq)
-            res.pma_designs[scn] = pipeline.pma_designs(model, ana, cfg)
+    pma_results(res, cfg)
     return res
 
 

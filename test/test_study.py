@@ -180,3 +180,12 @@ def test_report_rows_use_exact_peaks_and_the_truncation_check(tmp_path):
     assert share == pytest.approx((base - part) / (base - full), rel=1e-5)
     grid = {r['scenario']: r['grid_peak_um_per_N'] for r in peak_rows(res)}
     assert all(grid[s] <= rows[s]['peak_um_per_N'] * (1 + 1e-12) for s in scenarios)
+
+
+def test_positions_without_the_step_position_are_a_named_error(tmp_path, capsys):
+    """--positions P1 while the PMA step runs are at P2: one line naming both, exit 1."""
+    from pentapod_damper.study.__main__ import main
+    assert main(['--analytic-only', '--positions', 'P1', '--out', str(tmp_path)]) == 1
+    err = capsys.readouterr().err
+    assert 'step_response.position = P2 is not among the positions P1' in err
+    assert 'Traceback' not in err

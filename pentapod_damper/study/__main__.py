@@ -46,12 +46,7 @@ def _analytic(res: StudyResults, cfg: StudyConfig) -> None:
         _say(f'{pos}: plant with {model.plant.n_modes} modes, check model with '
              f'{model.check_plant.n_modes} modes, analytic FRFs and checks of '
              f'{len(cfg.scenarios)} scenarios in {time.perf_counter() - t0:.1f} s')
-    for scn in cfg.scenarios:
-        ana = res.analytic[(cfg.step_position, scn)]
-        if ana.pma:
-            model = res.models[cfg.step_position]
-            res.pma[scn] = pipeline.pma_curves(model, ana, cfg, res.freq)
-            res.pma_designs[scn] = pipeline.pma_designs(model, ana, cfg)
+    pma_results(res, cfg)
     for model_name, scn in (('rotational', 'strut_damping_all'),
                             ('chord', 'strut_chord_damping_all')):
         if (cfg.positions[0], scn) in res.analytic:
@@ -65,6 +60,16 @@ def _analytic(res: StudyResults, cfg: StudyConfig) -> None:
         res.bending_curves.update(curves)
         _say(f'{pos}: both bending damper models, gain sweeps and optimal gains in '
              f'{time.perf_counter() - t0:.1f} s')
+
+
+def pma_results(res: StudyResults, cfg: StudyConfig) -> None:
+    """Analytic stroke and force curves and the designs of every PMA scenario."""
+    model = res.models[cfg.step_position]
+    for scn in cfg.scenarios:
+        ana = res.analytic[(cfg.step_position, scn)]
+        if ana.pma:
+            res.pma[scn] = pipeline.pma_curves(model, ana, cfg, res.freq)
+            res.pma_designs[scn] = pipeline.pma_designs(model, ana, cfg)
 
 
 def _testbed(res: StudyResults, cfg: StudyConfig) -> dict:
@@ -219,6 +224,10 @@ def main(argv: list[str] | None = None) -> int:
     try:
         positions = tuple(args.positions.split(',')) if args.positions else None
         cfg = load_study_config(args.config, duration=args.duration, positions=positions)
+        if cfg.step_position not in cfg.positions:
+            raise ConfigError(f'step_response.position = {cfg.step_position} is not among the '
+                              f'positions {", ".join(cfg.positions)}: add it (--positions) or '
+                              'set step_response.position in the study file')
         res = StudyResults(cfg, np.linspace(*cfg.freq_grid[:2], int(cfg.freq_grid[2])))
         res.out_dir = Path(args.out)
         res.out_dir.mkdir(parents=True, exist_ok=True)
