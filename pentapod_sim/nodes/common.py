@@ -20,6 +20,7 @@ from typing import Callable
 from builtin_interfaces.msg import Time
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType
 import rclpy
+from rclpy.duration import Duration
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.impl.implementation_singleton import rclpy_implementation
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -228,6 +229,25 @@ def spin_until(executor, done: Callable[[], bool], timeout: float,
             return done()
         executor.spin_once(timeout_sec=min(poll, left))
     return True
+
+
+def wait_for_acks(node, publishers, timeout: float) -> None:
+    """
+    Wait until every subscriber acknowledged every message of ``publishers`` (reliable QoS).
+
+    Waits in slices of 0.1 s and ends early when a topic has no subscriber left (a
+    subscriber that died), or after ``timeout`` [s] in all (warning, parameter ack_timeout).
+    """
+    end = time.monotonic() + timeout
+    for pub in publishers:
+        while pub.get_subscription_count():
+            if pub.wait_for_all_acked(Duration(seconds=0.1)):
+                break
+            if time.monotonic() > end:
+                node.get_logger().warning(
+                    f'{pub.topic_name}: not every message acknowledged within '
+                    f'ack_timeout = {timeout} s')
+                return
 
 
 def wants_help(args) -> bool:

@@ -5,10 +5,12 @@ rclpy has no component container, so this module is one: it builds the same node
 run as separate processes (:data:`pentapod_sim.executables.COMPONENTS`, plus a user's
 controller given as ``--component NAME=module:Class``), each with the scenario file as its
 parameter file and its section's name, adds them all to one executor and runs the plant's
-loop. The sources answer inside the plant's ``spin_once`` calls, so no process boundary and no
-second executor is crossed per step; the arithmetic is the same, so the traces equal those of
-the separate-process run bit for bit. Stop signals, exit codes and errors behave as for a
-single node (:func:`pentapod_sim.nodes.common.run_node`)::
+loop. The plant and its in-process lockstep sources hand their per-step messages to each other
+directly, without DDS (:mod:`pentapod_sim.nodes.local_bus`): the sources answer inside the
+plant's publish, and DDS carries a message only to subscribers outside that hand-off (a
+recorder, the live view, other processes). The arithmetic and the values are the same, so the
+traces equal those of the separate-process run bit for bit. Stop signals, exit codes and
+errors behave as for a single node (:func:`pentapod_sim.nodes.common.run_node`)::
 
     python -m pentapod_sim.nodes.composed SCENARIO [--component NAME=module:Class ...]
 """
@@ -21,7 +23,7 @@ import sys
 from pentapod_sim import shutdown
 from pentapod_sim.errors import ConfigError
 from pentapod_sim.executables import COMPONENTS
-from pentapod_sim.nodes import plant_node
+from pentapod_sim.nodes import local_bus, plant_node
 from pentapod_sim.nodes.common import run_node, spin_until
 from pentapod_sim.scenario.files import read_scenario, resolve
 
@@ -53,6 +55,7 @@ class Composition:
             if name not in {n.name for n in scenario.nodes}:
                 self.nodes.append(load_class(target)(cli_args=['--ros-args', '-r',
                                                                f'__node:={name}']))
+        self.bus = local_bus.connect(self.plant, self.nodes) if self.plant else None
 
     def add_to(self, executor) -> None:
         """Add every node of the composition to ``executor``; start those that serve."""
@@ -69,9 +72,19 @@ class Composition:
             node.destroy_node()
 
 
+#: Wall time [s] the in-process deliveries queued at the end of a run may take (also after a
+#: stop signal: a recorder in the composition then still gets every step the plant ran).
+FINAL_DRAIN = 2.0
+
+
 def run(composition: Composition, executor) -> None:
     """Run the plant's loop on the executor holding every node, then let the others drain."""
-    plant_node.run(composition.plant, executor)
+    plant = composition.plant
+    try:
+        plant_node.run(plant, executor)
+    finally:
+        if plant.drain is not None and plant.context.ok():
+            plant.drain.flush(executor, FINAL_DRAIN)
     if not shutdown.requested():
         spin_until(executor, lambda: False, 0.5)      # deliveries still queued in-process
 

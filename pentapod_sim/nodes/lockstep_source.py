@@ -8,7 +8,9 @@ same stamp. It publishes the linear model of its law once on
 /pentapod/controller_models/<source_name> for the plant's truncation check
 (:meth:`LockstepSource.linear_model`, :mod:`pentapod_sim.nodes.loop_check`). A re-published
 step (same stamp again) gets the cached answer, so stateful laws advance exactly once per step.
-Messages with NaN/Inf or a missing joint are rejected, counted and warned about.
+Messages with NaN/Inf or a missing joint are rejected, counted and warned about. In a composed
+run the plant's messages and the answers pass in-process (:meth:`LockstepSource.use_bus`,
+:mod:`pentapod_sim.nodes.local_bus`).
 """
 from __future__ import annotations
 
@@ -32,6 +34,7 @@ from pentapod_sim.nodes.common import (
     STATE_QOS,
     subscribers_of,
 )
+from pentapod_sim.nodes.local_bus import LocalBus, Outlet
 from pentapod_sim.nodes.loop_check import model_text, publish_model
 from pentapod_sim.parameters import ParameterTable
 
@@ -70,11 +73,29 @@ class LockstepSource(Node):
         self._last = (-1, None)   # (stamp ns, published message)
         self.force_pub = self.create_publisher(JointState, force_topic(self.source_name),
                                                FORCE_QOS)
-        topics = list(self.needs) or [CLOCK]
+        self.force_out = Outlet(self.force_pub, always_remote=True)
         self.subs = [self.create_subscription(
             Clock if t == CLOCK else JointState, t,
-            lambda msg, t=t: self._on_state(t, msg), STATE_QOS) for t in topics]
+            lambda msg, t=t: self._on_state(t, msg), STATE_QOS) for t in self.state_topics()]
         self.model_pub = publish_model(self, self.source_name, self.model_text())
+
+    def state_topics(self) -> list[str]:
+        """The plant's topics this source answers: those of its sensors, else /clock."""
+        return list(self.needs) or [CLOCK]
+
+    def use_bus(self, bus: LocalBus) -> None:
+        """
+        Take the plant's messages from ``bus`` instead of DDS, answer through it too.
+
+        A composed run's hand-off (:func:`pentapod_sim.nodes.local_bus.connect`): the state
+        subscriptions go, the answers still go out on DDS while someone subscribes there.
+        """
+        for sub in self.subs:
+            self.destroy_subscription(sub)
+        self.subs = []
+        for topic in self.state_topics():
+            bus.subscribe(topic, lambda msg, t=topic: self._on_state(t, msg))
+        self.force_out = Outlet(self.force_pub, bus, always_remote=True)
 
     def linear_model(self):
         """
@@ -128,7 +149,7 @@ class LockstepSource(Node):
         stamp = msg.clock if topic == CLOCK else msg.header.stamp
         ns = stamp_to_ns(stamp)
         if ns == self._last[0]:
-            self.force_pub.publish(self._last[1])   # a re-published step: same answer
+            self.force_out.publish(self._last[1])   # a re-published step: same answer
             return
         if ns < self._last[0]:
             # the plant only re-sends its current step, so time going back means a new run
@@ -152,7 +173,7 @@ class LockstepSource(Node):
         efforts = np.asarray(self.compute(ns, sensors), dtype=float)
         out = JointState(name=self.actuator_ports, effort=efforts.tolist())
         out.header.stamp = stamp_msg(ns)
-        self.force_pub.publish(out)
+        self.force_out.publish(out)
         self._last = (ns, out)
         self.answered += 1
         self.after_publish(out.header.stamp, efforts)

@@ -16,7 +16,6 @@ from __future__ import annotations
 import time
 
 import numpy as np
-from rclpy.duration import Duration
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
@@ -37,8 +36,10 @@ from pentapod_sim.nodes.common import (
     stamp_to_ns,
     STATE_QOS,
     subscribers_of,
+    wait_for_acks,
 )
 from pentapod_sim.nodes.fullrate import FullRateOutputs
+from pentapod_sim.nodes.local_bus import Outlet
 from pentapod_sim.nodes.parameter_tables import PLANT
 from pentapod_sim.nodes.realtime_stats import fault_in, LatenessStats, POLL_AHEAD
 from pentapod_sim.nodes.run_status import RunStatusPublisher
@@ -76,11 +77,15 @@ class PlantNode(Node):
         self.layouts = state_layouts(self.core.output_names)
         self.state_pubs = [(self.create_publisher(JointState, lay.topic, STATE_QOS), lay)
                            for lay in self.layouts]
+        # in a composition in-process sources get their messages directly (.local_bus)
+        self.clock_out = Outlet(self.clock_pub)
+        self.state_outs = [(Outlet(pub), lay) for pub, lay in self.state_pubs]
+        self.drain = None                 # local_bus.Drain of a composed plant
         self.fullrate = FullRateOutputs(self, self.core)
-        self.force_subs = [self.create_subscription(
+        self.force_subs = {name: self.create_subscription(
             JointState, force_topic(name),
             lambda msg, name=name: self._on_force(name, msg), FORCE_QOS)
-            for name in self.mixer.sources]
+            for name in self.mixer.sources}
         self.status = RunStatusPublisher(self, self.params.status_period)
         self.loop_models = loop_check.ModelCollector(self, self.mixer.sources)
         self._last_warn = {}
@@ -109,11 +114,14 @@ class PlantNode(Node):
         return n
 
     # -- communication ---------------------------------------------------------------------
+    def outlets(self) -> list[Outlet]:
+        """The per-step outputs with in-process hand-off (/clock, the state topics)."""
+        return [self.clock_out] + [out for out, _ in self.state_outs]
+
     def refresh_subscribers(self) -> None:
         """Note which output topics have subscribers (publishing costs ~80 us each here)."""
-        self._active = [(pub, lay) for pub, lay in self.state_pubs
-                        if pub.get_subscription_count() > 0]
-        self._clock_active = self.clock_pub.get_subscription_count() > 0
+        self._active = [(out, lay) for out, lay in self.state_outs if out.refresh()]
+        self._clock_active = self.clock_out.refresh()
         self.fullrate.refresh()
         self._next_refresh = time.monotonic() + 0.25
 
@@ -123,12 +131,12 @@ class PlantNode(Node):
             self.refresh_subscribers()
         stamp = stamp_msg(stamp_ns(self.core.k, self.dt))
         if self._clock_active:
-            self.clock_pub.publish(Clock(clock=stamp))
-        for pub, lay in self._active:
+            self.clock_out.publish(Clock(clock=stamp))
+        for out, lay in self._active:
             pos, vel = lay.values(y)
             msg = JointState(name=lay.joints, position=pos.tolist(), velocity=vel.tolist())
             msg.header.stamp = stamp
-            pub.publish(msg)
+            out.publish(msg)
 
     def _on_force(self, source: str, msg: JointState) -> None:
         """Validate a force message; warn (throttled) and count rejects."""
@@ -222,22 +230,9 @@ class PlantNode(Node):
         self.refresh_subscribers()
 
     def wait_for_acks(self) -> None:
-        """
-        Wait until every subscriber acknowledged every message (reliable QoS).
-
-        Waits in slices of 0.1 s and ends early when a topic has no subscriber left (a
-        subscriber that died), or after ``ack_timeout`` in all.
-        """
-        end = time.monotonic() + self.params.ack_timeout
-        for pub in [self.clock_pub, *(p for p, _ in self.state_pubs), *self.fullrate.publishers]:
-            while pub.get_subscription_count():
-                if pub.wait_for_all_acked(Duration(seconds=0.1)):
-                    break
-                if time.monotonic() > end:
-                    self.get_logger().warning(
-                        f'{pub.topic_name}: not every message acknowledged within '
-                        f'ack_timeout = {self.params.ack_timeout} s')
-                    return
+        """Wait until every subscriber acknowledged every output (``ack_timeout``)."""
+        wait_for_acks(self, [self.clock_pub, *(p for p, _ in self.state_pubs),
+                             *self.fullrate.publishers], self.params.ack_timeout)
 
     def run_lockstep(self, executor, trace, n_steps: int | None = None) -> None:
         """
@@ -280,6 +275,8 @@ class PlantNode(Node):
             u = mixer.total()
             self.fullrate.record(k, y, u, trace)
             core.advance(u)
+            if self.drain is not None:
+                self.drain.tick(executor)
 
     def run_realtime(self, executor, trace) -> LatenessStats:
         """
@@ -322,6 +319,8 @@ class PlantNode(Node):
             u = mixer.total()
             self.fullrate.record(k, y, u, trace)
             core.advance(u)
+            if self.drain is not None:
+                self.drain.tick(executor)
             if now > next_check:
                 self._watch_lost_sources()
                 next_check = now + GRAPH_CHECK_PERIOD

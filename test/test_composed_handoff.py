@@ -1,0 +1,205 @@
+"""
+The in-process hand-off of a composed run (pentapod_sim/nodes/local_bus.py).
+
+A composed run (``python -m pentapod_sim.nodes.composed``) passes the plant's per-step messages
+to its in-process sources and their answers back without DDS, and publishes on DDS only what an
+outside subscriber takes. The runs here count every rclpy ``Publisher.publish`` call per topic
+(a wrapper installed before the composition starts, independent of the hand-off's own
+counters), compare the trace with the offline closed loop bit for bit, and check that a recorder
+in the same composition still records every step of every per-step topic, and records the
+plant's periodic run status *during* the run (the plant loop no longer waits in the executor,
+so timers and in-process DDS deliveries depend on its drains).
+"""
+import json
+import os
+from pathlib import Path
+import signal
+import subprocess
+import sys
+import time
+
+from diagnostic_msgs.msg import DiagnosticStatus
+import numpy as np
+import pytest
+from rclpy.serialization import deserialize_message
+
+from fixtures.demo_model import demo_model
+from pentapod_damper.scenario_laws import scenario_laws
+from pentapod_sim import interface
+from pentapod_sim.analysis.bag_reader import open_bag
+from pentapod_sim.interface import force_topic
+from pentapod_sim.scenario.files import dump_params, read_scenario
+from pentapod_sim.sim.closed_loop import excitation_matrix, simulate
+from pentapod_sim.sim.excitation import Excitation, ExcitationSpec
+from pentapod_sim.sim.multirate import MultiRatePlant
+
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
+
+ROOT = Path(__file__).resolve().parents[1]
+RATE = 2000.0
+TCP = ['tcp_force_x', 'tcp_force_y', 'tcp_force_z']
+EXCITER = {'kind': 'random', 'amplitude': 20.0, 'direction': [1.0, 0.5, 0.0],
+           'f_start': 5.0, 'f_end': 300.0, 'duration': 2.0, 'seed': 3}
+SOURCES = ['exciter', 'damper', 'pma']
+STEP_TOPICS = [interface.CLOCK, *interface.STATE_TOPICS, *map(force_topic, SOURCES)]
+
+#: A composed run with every rclpy publish counted per topic (JSON file, argv[2]).
+COUNTING = r"""
+import json, sys
+from rclpy.publisher import Publisher
+from pentapod_sim.nodes import composed
+counts = {}
+publish = Publisher.publish
+def counting(self, msg):
+    counts[self.topic_name] = counts.get(self.topic_name, 0) + 1
+    return publish(self, msg)
+Publisher.publish = counting
+code = composed.main(['composed', sys.argv[1]])
+open(sys.argv[2], 'w').write(json.dumps(counts))
+raise SystemExit(code)
+"""
+
+
+def _scenario(tmp_path: Path, steps: int, record: bool) -> Path:
+    """Plant + exciter + TCP/strut damper + PMA (+ recorder), status every 0.05 s."""
+    model_file = demo_model(6, seed=4).save(tmp_path / 'model.npz')
+    doc = {'/**': {'ros__parameters': {'sample_rate': RATE}},
+           'exciter': {'ros__parameters': dict(EXCITER)},
+           'damper': {'ros__parameters': {'tcp_directions': ['x', 'y'], 'tcp_gain': 2000.0,
+                                          'bending_struts': [1], 'bending_gain': 100.0}},
+           'pma': {'ros__parameters': {'directions': ['x'], 'proof_mass': 2.0,
+                                       'gain': 1000.0}},
+           'plant': {'ros__parameters': {
+               'model_file': str(model_file), 'steps': steps, 'sources': SOURCES,
+               'output_file': str(tmp_path / 'trace.npz'), 'startup_timeout': 60.0,
+               'status_period': 0.05}}}
+    if record:
+        doc['recorder'] = {'ros__parameters': {'output_dir': str(tmp_path / 'bags'),
+                                               'bag_name': 'run'}}
+        doc['plant']['ros__parameters']['wait_for_subscribers'] = ['recorder']
+    path = tmp_path / 'scenario.yaml'
+    path.write_text(dump_params(doc))
+    return path
+
+
+def _composed(tmp_path: Path, path: Path) -> tuple[dict, dict]:
+    """Run the composition; return the trace and the publish count per topic."""
+    counts = tmp_path / 'counts.json'
+    proc = subprocess.run([sys.executable, '-c', COUNTING, str(path), str(counts)],
+                          env=dict(os.environ), capture_output=True, text=True, timeout=300,
+                          cwd=ROOT)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    return dict(np.load(tmp_path / 'trace.npz')), json.loads(counts.read_text())
+
+
+def _assert_offline_loop(path: Path, run: dict, steps: int) -> None:
+    """The trace is the offline closed loop's, bit for bit."""
+    plant = MultiRatePlant.from_model(demo_model(6, seed=4), RATE, 1)
+    laws = scenario_laws(read_scenario(path).sections, 1 / RATE)
+    exc = Excitation(ExcitationSpec(**EXCITER), 1 / RATE).series(steps)
+    ref = simulate(plant, laws, excitation_matrix(plant, TCP, exc, steps))
+    assert int(run['steps_run']) == steps
+    for port in ('tcp_force_x', 'pma_force_x', 'strut1_bending_moment_2'):
+        if port in plant.input_index:
+            assert np.any(ref.u[:, plant.input_index[port]]), port
+    assert np.array_equal(run['u'], ref.u)
+    assert np.array_equal(run['y'], ref.y)
+    assert np.array_equal(run['x_final'], plant.x)
+
+
+def _periodic(counts_or_values, wall: float, period: float = 0.05) -> None:
+    """At least half the run-status periods of the run's wall time fired (at least 3)."""
+    assert counts_or_values >= max(3, int(0.5 * wall / period)), (counts_or_values, wall)
+
+
+def test_composed_sources_take_the_plants_messages_without_dds(tmp_path):
+    """
+    No outside subscriber: no per-step message goes through DDS, the trace is the offline one.
+
+    Without the hand-off every step would publish /clock (the exciter), the state topics (the
+    damper, the PMA) and three force topics on DDS. The status timer keeps firing although the
+    loop no longer waits in the executor.
+    """
+    steps = 20000
+    path = _scenario(tmp_path, steps, record=False)
+    run, counts = _composed(tmp_path, path)
+    assert {t: counts.get(t, 0) for t in STEP_TOPICS} == dict.fromkeys(STEP_TOPICS, 0), counts
+    # the counter sees what does go through DDS: each source's model, the run status
+    for source in SOURCES:
+        assert counts[interface.controller_model_topic(source)] >= 1, counts
+    _periodic(counts[interface.RUN_STATUS] - 2, float(run['wall_time']))
+    assert run['rejected'].size == 0, run['rejected']
+    _assert_offline_loop(path, run, steps)
+
+
+def test_a_recorder_in_the_composition_records_every_step(tmp_path):
+    """
+    A recorder in the composition is an outside subscriber: DDS carries every step to it.
+
+    The bag holds every step of every per-step topic, its forces are the ones the plant
+    applied (no copy reached the plant twice: nothing rejected), and the plant's periodic run
+    status was recorded during the run, with progress between the messages.
+    """
+    steps = 4000
+    path = _scenario(tmp_path, steps, record=True)
+    run, counts = _composed(tmp_path, path)
+    for source in SOURCES:
+        assert counts[force_topic(source)] == steps, counts
+    assert run['rejected'].size == 0, run['rejected']
+    _assert_offline_loop(path, run, steps)
+
+    bag = open_bag(tmp_path / 'bags' / 'run')
+    for topic in STEP_TOPICS + [interface.EXCITATION, interface.PMA_STATE]:
+        assert bag.topic(topic).count == steps, topic
+    names, inputs = list(run['output_names']), list(run['input_names'])
+    assert np.array_equal(bag.series(f'{interface.TCP_STATE}.position.tcp_x').values,
+                          run['y'][:, names.index('tcp_displacement_x')])
+    assert np.array_equal(bag.series(f'{force_topic("pma")}.effort.pma_force_x').values,
+                          run['u'][:, inputs.index('pma_force_x')])
+    applied = sum(bag.series(f'{force_topic(s)}.effort.tcp_force_x').values
+                  for s in ('exciter', 'damper'))
+    assert np.array_equal(applied, run['u'][:, inputs.index('tcp_force_x')])
+
+    status = [deserialize_message(p, DiagnosticStatus)
+              for p in bag.topic(interface.RUN_STATUS).payloads]
+    values = [{kv.key: kv.value for kv in m.values} for m in status]
+    during = sorted({int(v['steps']) for v in values
+                     if v['state'] == 'running' and 0 < int(v['steps']) < steps})
+    _periodic(len(during), float(run['wall_time']))
+    assert values[-1]['state'] == 'finished' and values[-1]['steps'] == str(steps)
+
+
+def test_a_stop_signal_ends_a_composed_run_cleanly_with_everything_recorded(tmp_path):
+    """
+    SIGINT mid-run: the plant ends its step, saves its trace; the recorder keeps every step.
+
+    The loop no longer waits in the executor, so the signal is seen between steps, and the
+    recorder (in the composition) holds every step the plant ran on every per-step topic.
+    """
+    long = 2_000_000
+    path = _scenario(tmp_path, long, record=True)
+    log = tmp_path / 'composed.log'
+    proc = subprocess.Popen([sys.executable, '-m', 'pentapod_sim.nodes.composed', str(path)],
+                            stdout=open(log, 'w'), stderr=subprocess.STDOUT,
+                            env=dict(os.environ, PYTHONUNBUFFERED='1',
+                                     RCUTILS_LOGGING_BUFFERED_STREAM='0'),
+                            start_new_session=True, cwd=ROOT)
+    try:
+        end = time.monotonic() + 120
+        while 'lockstep run of' not in log.read_text():
+            assert proc.poll() is None and time.monotonic() < end, log.read_text()
+            time.sleep(0.1)
+        time.sleep(1.5)
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(timeout=60) == 128 + signal.SIGINT, log.read_text()
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    out = log.read_text()
+    assert 'Traceback' not in out and 'stopped by SIGINT: ran ' in out, out
+    run = np.load(tmp_path / 'trace.npz')
+    n = int(run['steps_run'])
+    assert 0 < n < long and str(run['end']) == 'stopped by SIGINT'
+    bag = open_bag(tmp_path / 'bags' / 'run')
+    for topic in STEP_TOPICS:
+        assert bag.topic(topic).count == n, (topic, n)
