@@ -11,7 +11,8 @@ outlet hands the message object itself to the in-process callbacks, synchronousl
 live view, in this process or another, ``ros2 topic echo``), so those get every message as
 before. The message objects carry the values a DDS round trip would give (JointState arrays
 are ``array('d')`` either way, stamps are integers), so the traces stay bit-identical to
-separate processes and to the offline loop.
+separate processes and to the offline loop. Every callback of a topic gets the same object, as
+rclcpp hands out const messages: a callback must not change it.
 
 Answers thus arrive while the plant publishes, and the plant's loop no longer waits in the
 executor. :class:`Drain` spins the executor from the loop every :data:`DRAIN_PERIOD` s of wall
