@@ -4,6 +4,7 @@ The study's pieces side by side: order, overlap, lanes, failure and Ctrl-C; shar
 The races are made to happen: pieces that must overlap wait on a barrier only two running
 pieces can pass; a stop arrives while pieces are running.
 """
+import dataclasses
 import os
 from pathlib import Path
 import signal
@@ -17,12 +18,13 @@ import pytest
 
 from fixtures.demo_model import demo_model
 from pentapod_damper.scenario_laws import scenario_laws
-from pentapod_damper.study import damping, measured_damping
+from pentapod_damper.study import damping, measured_damping, pipeline
 from pentapod_damper.study.analytic import discrete_frf, sampled_loop, SampledPairFrf
 from pentapod_damper.study.schedule import Interrupted, Piece, run_pieces
 from pentapod_sim import shutdown
 from pentapod_sim.errors import RunError
 from pentapod_sim.scenario.files import read_scenario
+from pentapod_sim.sim.stability import check_loop, controller_of
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -172,3 +174,25 @@ def test_shared_loop_gives_the_same_frfs_and_poles_bit_for_bit():
             == damping.scenario_rows(plant, 'demo', 'tcp_damping', dt))
     assert (measured_damping.settle_rows(plant, laws, dt, 'x', poles)
             == measured_damping.settle_rows(plant, laws, dt, 'x'))
+
+
+def test_truncation_check_is_kept_per_loop_and_read_back_exactly(tmp_path, monkeypatch):
+    plant = demo_model(n_modes=4, f_min=30.0, f_max=200.0, zeta=0.01, seed=3)
+    check = demo_model(n_modes=12, f_min=30.0, f_max=2000.0, zeta=0.01, seed=3)
+    model = pipeline.PositionModel('demo', plant, tmp_path / 'p.npz', plant.content_hash(),
+                                   check)
+    monkeypatch.setattr(pipeline, 'CHECK_CACHE', tmp_path / 'cache')
+    dt = 1.0 / 3000.0
+    laws = scenario_laws(read_scenario('tcp_damping').sections, dt)
+    controllers = [controller_of(law) for law in laws]
+    direct = check_loop(plant, check, controllers, dt, 'warn', 'first')
+    first = pipeline.checked_loop(model, controllers, dt, 'warn', 'first')
+    assert first == direct and len(list((tmp_path / 'cache').glob('*.json'))) == 1
+
+    def no_solve(*args, **kwargs):
+        raise AssertionError('the check was solved again')
+    monkeypatch.setattr(pipeline, 'check_loop', no_solve)
+    again = pipeline.checked_loop(model, controllers, dt, 'warn', 'again')
+    assert again == dataclasses.replace(direct, label='again')     # every digit kept
+    with pytest.raises(AssertionError, match='solved again'):       # another loop: solved
+        pipeline.checked_loop(model, controllers, dt / 2, 'warn', 'faster')

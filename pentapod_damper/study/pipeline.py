@@ -6,9 +6,14 @@ processes; everything here reads and computes plain arrays.
 """
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
+import hashlib
+import json
 import logging
+import os
 from pathlib import Path
+import threading
 from typing import Callable
 
 import numpy as np
@@ -35,7 +40,7 @@ from pentapod_sim.plant.check_model import check_f_max, load_or_build_check_mode
 from pentapod_sim.plant.frf_peaks import exact_peak, Peak, plant_pair_frf, PoleResidueFrf
 from pentapod_sim.plant.model import PlantModel
 from pentapod_sim.scenario.files import read_scenario
-from pentapod_sim.sim.stability import check_loop, controller_of, LoopCheck
+from pentapod_sim.sim.stability import apply_policy, check_loop, controller_of, LoopCheck
 
 LOG = logging.getLogger(__name__)
 
@@ -130,8 +135,8 @@ def scenario_analytic(model: PositionModel, scenario: str, cfg: StudyConfig,
     sections = read_scenario(scenario).sections
     laws = scenario_laws(sections, dt)
     dampers = continuous_dampers(laws)
-    loop = check_loop(model.plant, model.check_plant, [controller_of(law) for law in laws], dt,
-                      cfg.check_policy, label=f'scenario {scenario} at {model.position}')
+    loop = checked_loop(model, [controller_of(law) for law in laws], dt, cfg.check_policy,
+                        f'scenario {scenario} at {model.position}')
     if loop.plant_radius >= 1.0:       # whatever the policy: the run itself would diverge
         raise ConfigError(f'{loop.summary()}; lower its gains or raise the sample rate')
     sampled = sampled_loop(model.plant, laws, dt)
@@ -147,6 +152,40 @@ def scenario_analytic(model: PositionModel, scenario: str, cfg: StudyConfig,
             pma = {'mass': values.proof_mass, 'gain': values.gain,
                    'directions': values.directions}
     return ScenarioAnalytic(scenario, laws, dampers, cont, disc, pma, frf, peak, loop, sampled)
+
+
+def checked_loop(model: PositionModel, controllers: list, dt: float, policy: str,
+                 label: str) -> LoopCheck:
+    """
+    :func:`pentapod_sim.sim.stability.check_loop` of a position's sampled loop, kept on disk.
+
+    The check model's eigenvalue problem (about 1,800 states) is most of a scenario's analytic
+    work, so its result is kept in :data:`CHECK_CACHE` as ``study_loop_check_<key>.json``,
+    keyed by the content of plant and check model, ``dt`` and the controllers; a study run
+    again reads it (the radii exactly: JSON keeps every digit) and applies ``policy`` as
+    check_loop does. Without a check model nothing is kept (the check is quick).
+    """
+    if model.check_plant is None:
+        return check_loop(model.plant, None, controllers, dt, policy, label)
+    doc = [model.plant.content_hash(), model.check_plant.content_hash(), repr(dt),
+           [c.to_json() for c in controllers]]
+    key = hashlib.sha256(json.dumps(doc).encode()).hexdigest()[:16]
+    path = CHECK_CACHE / f'study_loop_check_{key}.json'
+    try:
+        kept = LoopCheck(**dict(json.loads(path.read_text()), label=label))
+    except (OSError, ValueError, TypeError):
+        kept = None                 # none yet, or unreadable: computed (and written) again
+    if kept is not None:
+        return apply_policy(kept, policy)
+    result = check_loop(model.plant, model.check_plant, controllers, dt, policy, label)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        part = path.with_name(f'{path.name}.{os.getpid()}.{threading.get_ident()}.part')
+        part.write_text(json.dumps(dataclasses.asdict(result)))
+        part.replace(path)          # whole or not at all, for a study running beside
+    except OSError as err:
+        LOG.warning('truncation check result not kept: %s', err)
+    return result
 
 
 def pma_curves(model: PositionModel, ana: ScenarioAnalytic, cfg: StudyConfig,
