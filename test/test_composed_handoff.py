@@ -6,9 +6,11 @@ to its in-process sources and their answers back without DDS, and publishes on D
 outside subscriber takes. The runs here count every rclpy ``Publisher.publish`` call per topic
 (a wrapper installed before the composition starts, independent of the hand-off's own
 counters), compare the trace with the offline closed loop bit for bit, and check that a recorder
-in the same composition still records every step of every per-step topic, and records the
-plant's periodic run status *during* the run (the plant loop no longer waits in the executor,
-so timers and in-process DDS deliveries depend on its drains).
+in the same composition (which takes the per-step topics from the hand-off too and serialises
+them itself) records every step of every per-step topic, with the bytes a recorder in another
+process gets over DDS, and records the plant's periodic run status *during* the run (the plant
+loop no longer waits in the executor, so timers and in-process DDS deliveries depend on its
+drains).
 """
 import json
 import os
@@ -60,8 +62,13 @@ raise SystemExit(code)
 """
 
 
-def _scenario(tmp_path: Path, steps: int, record: bool) -> Path:
-    """Plant + exciter + TCP/strut damper + PMA (+ recorder), status every 0.05 s."""
+def _scenario(tmp_path: Path, steps: int, record: bool, wait_for_recorder: bool = False) -> Path:
+    """
+    Plant + exciter + TCP/strut damper + PMA (+ recorder), status every 0.05 s.
+
+    ``wait_for_recorder``: no recorder in the scenario, but the plant waits for a node named
+    ``recorder`` (one in another process).
+    """
     model_file = demo_model(6, seed=4).save(tmp_path / 'model.npz')
     doc = {'/**': {'ros__parameters': {'sample_rate': RATE}},
            'exciter': {'ros__parameters': dict(EXCITER)},
@@ -76,6 +83,7 @@ def _scenario(tmp_path: Path, steps: int, record: bool) -> Path:
     if record:
         doc['recorder'] = {'ros__parameters': {'output_dir': str(tmp_path / 'bags'),
                                                'bag_name': 'run'}}
+    if record or wait_for_recorder:
         doc['plant']['ros__parameters']['wait_for_subscribers'] = ['recorder']
     path = tmp_path / 'scenario.yaml'
     path.write_text(dump_params(doc))
@@ -139,23 +147,26 @@ def test_composed_sources_take_the_plants_messages_without_dds(tmp_path, executo
 
 def test_a_recorder_in_the_composition_records_every_step(tmp_path):
     """
-    A recorder in the composition is an outside subscriber: DDS carries every step to it.
+    A recorder in the composition takes the per-step topics in-process: no DDS publish of them.
 
-    The bag holds every step of every per-step topic, its forces are the ones the plant
-    applied (no copy reached the plant twice: nothing rejected), and the plant's periodic run
-    status was recorded during the run, with progress between the messages.
+    The bag holds every step of every per-step topic (stamps 0, dt, 2 dt, ... each once), its
+    forces are the ones the plant applied (no copy reached the plant twice: nothing rejected),
+    and the plant's periodic run status was recorded during the run, with progress between
+    the messages.
     """
     steps = 4000
     path = _scenario(tmp_path, steps, record=True)
     run, counts = _composed(tmp_path, path, 'events')
-    for source in SOURCES:
-        assert counts[force_topic(source)] == steps, counts
+    assert {t: counts.get(t, 0) for t in STEP_TOPICS} == dict.fromkeys(STEP_TOPICS, 0), counts
     assert run['rejected'].size == 0, run['rejected']
     _assert_offline_loop(path, run, steps)
 
     bag = open_bag(tmp_path / 'bags' / 'run')
     for topic in STEP_TOPICS + [interface.EXCITATION, interface.PMA_STATE]:
         assert bag.topic(topic).count == steps, topic
+    every_step = np.arange(steps) * round(1e9 / RATE)
+    for topic in STEP_TOPICS:
+        assert np.array_equal(bag.topic(topic).log_time_ns, every_step), topic
     names, inputs = list(run['output_names']), list(run['input_names'])
     assert np.array_equal(bag.series(f'{interface.TCP_STATE}.position.tcp_x').values,
                           run['y'][:, names.index('tcp_displacement_x')])
@@ -208,3 +219,60 @@ def test_a_stop_signal_ends_a_composed_run_cleanly_with_everything_recorded(tmp_
     bag = open_bag(tmp_path / 'bags' / 'run')
     for topic in STEP_TOPICS:
         assert bag.topic(topic).count == n, (topic, n)
+
+
+def _bag_bytes(folder: Path) -> dict:
+    """Per topic: channel type, schema, and the CDR bytes of each message by log time."""
+    bag = open_bag(folder)
+    out = {}
+    for name, data in bag.topics.items():
+        order = np.argsort(data.log_time_ns, kind='stable')
+        payloads = [bytes(p) for p in data.payloads]
+        out[name] = (data.msg_type, data.schema_text, [payloads[i] for i in order],
+                     data.log_time_ns[order].tolist())
+    return out
+
+
+def test_the_in_process_recorder_writes_the_bytes_dds_delivers(tmp_path):
+    """
+    The bag of the in-process recorder equals that of a recorder in another process (DDS).
+
+    The same composed run is recorded twice: once by a recorder in the composition (bus path,
+    nothing published on DDS), once without it by a recorder process (the plant's outlets
+    then publish on DDS). Per topic the type, schema, message bytes and log times are the
+    same, step by step, and every per-step topic holds every step.
+    """
+    steps = 3000
+    inside = tmp_path / 'inside'
+    outside = tmp_path / 'outside'
+    inside.mkdir()
+    outside.mkdir()
+    _, counts = _composed(inside, _scenario(inside, steps, record=True), 'events')
+    assert {t: counts.get(t, 0) for t in STEP_TOPICS} == dict.fromkeys(STEP_TOPICS, 0)
+
+    recorder = subprocess.Popen(
+        [sys.executable, '-m', 'pentapod_sim.nodes.recorder_node', '--ros-args',
+         '-p', f'output_dir:={outside / "bags"}', '-p', 'bag_name:=run',
+         '-p', 'discovery_period:=0.1'],
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=ROOT)
+    try:
+        _, counts = _composed(outside, _scenario(outside, steps, record=False,
+                                                 wait_for_recorder=True), 'events')
+        out, _ = recorder.communicate(timeout=120)
+    finally:
+        if recorder.poll() is None:
+            recorder.kill()
+    assert recorder.returncode == 0, out
+    assert 'none missing' in out, out
+    assert all(counts[t] >= steps for t in STEP_TOPICS), counts     # DDS carried them
+
+    dds, bus = _bag_bytes(outside / 'bags' / 'run'), _bag_bytes(inside / 'bags' / 'run')
+    stamps = (np.arange(steps) * round(1e9 / RATE)).tolist()
+    for topic in STEP_TOPICS + [interface.EXCITATION, interface.PMA_STATE]:
+        assert bus[topic][3] == stamps, topic
+        assert bus[topic][:2] == dds[topic][:2], topic
+        assert len(bus[topic][2]) == len(dds[topic][2]) == steps, topic
+        differ = [k for k, (a, b) in enumerate(zip(bus[topic][2], dds[topic][2])) if a != b]
+        assert not differ, (topic, differ[:5])
+    # the forces in the bag are the DDS bytes of what the plant applied: not all zero
+    assert len(set(bus[force_topic('damper')][2])) > steps // 2

@@ -7,10 +7,12 @@ controller given as ``--component NAME=module:Class``), each with the scenario f
 parameter file and its section's name, adds them all to one executor and runs the plant's
 loop. The plant and its in-process lockstep sources hand their per-step messages to each other
 directly, without DDS (:mod:`pentapod_sim.nodes.local_bus`): the sources answer inside the
-plant's publish, and DDS carries a message only to subscribers outside that hand-off (a
-recorder, the live view, other processes). The arithmetic and the values are the same, so the
-traces equal those of the separate-process run bit for bit. Stop signals, exit codes and
-errors behave as for a single node (:func:`pentapod_sim.nodes.common.run_node`)::
+plant's publish, a recorder in the composition takes these topics from the hand-off too
+(and writes the bytes DDS would have delivered), and DDS carries a message only to subscribers
+outside that hand-off (the live view, other processes). The arithmetic and the values are the
+same, so the traces and bags equal those of the separate-process run bit for bit. Stop
+signals, exit codes and errors behave as for a single node
+(:func:`pentapod_sim.nodes.common.run_node`)::
 
     python -m pentapod_sim.nodes.composed SCENARIO [--component NAME=module:Class ...]
 """

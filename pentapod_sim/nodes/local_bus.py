@@ -14,6 +14,13 @@ are ``array('d')`` either way, stamps are integers), so the traces stay bit-iden
 separate processes and to the offline loop. Every callback of a topic gets the same object, as
 rclcpp hands out const messages: a callback must not change it.
 
+A recorder in the composition (:class:`pentapod_sim.nodes.recorder_node.RecorderNode`) takes
+the topics of these outlets from the bus too (:meth:`RecorderNode.take_from_bus`): it
+serialises the message objects itself and ignores its DDS subscriptions of those topics, which
+it keeps (the plant's ``wait_for_subscribers`` and acknowledgement waits see it as before). The
+bus knows them as *served* (:meth:`LocalBus.subscribe` with ``node``), so an outlet publishes on
+DDS only while a subscriber of another node exists (:meth:`LocalBus.outside`).
+
 Answers thus arrive while the plant publishes, and the plant's loop no longer waits in the
 executor. :class:`Drain` spins the executor from the loop every :data:`DRAIN_PERIOD` s of wall
 time instead, so timers (run status), graph events and in-process DDS deliveries (a recorder's
@@ -23,7 +30,8 @@ per per-step stream) hold many seconds of steps, far more than a period.
 What stays on DDS: the sources' force publishers (the plant's start-up and graph checks count
 them; a force topic of an in-process source is served by the hand-off only), the controller
 models, diagnostics (PMA state, excitation), run status, and everything of nodes that are no
-lockstep source of the plant in this process. A composition on rclpy's own executors
+lockstep source of the plant in this process (an in-process recorder takes those over DDS).
+A composition on rclpy's own executors
 (``PENTAPOD_EXECUTOR=single``) stays on DDS altogether (:func:`connect`).
 """
 from __future__ import annotations
@@ -50,14 +58,31 @@ class LocalBus:
 
     def __init__(self):
         self._callbacks: dict[str, list[Callable]] = {}
+        self._served: dict[str, list] = {}
 
     def callbacks(self, topic: str) -> list[Callable]:
         """The (live) list of in-process callbacks of ``topic``."""
         return self._callbacks.setdefault(topic, [])
 
-    def subscribe(self, topic: str, callback: Callable) -> None:
-        """Deliver every message an outlet of ``topic`` publishes to ``callback``."""
+    def subscribe(self, topic: str, callback: Callable, node=None) -> None:
+        """
+        Deliver every message an outlet of ``topic`` publishes to ``callback``.
+
+        ``node``: a node whose DDS subscriptions of ``topic`` this callback serves (they get
+        nothing the callback does not get already; :meth:`outside` does not count them).
+        """
         self.callbacks(topic).append(callback)
+        if node is not None:
+            self._served.setdefault(topic, []).append(node)
+
+    def outside(self, topic: str) -> bool:
+        """True if a DDS subscription of ``topic`` belongs to a node the bus does not serve."""
+        served = self._served.get(topic)
+        if not served:
+            return True
+        names = {(n.get_name(), n.get_namespace()) for n in served}
+        return any((info.node_name, info.node_namespace) not in names
+                   for info in served[0].get_subscriptions_info_by_topic(topic))
 
 
 class Outlet:
@@ -69,19 +94,22 @@ class Outlet:
     pub : rclpy.publisher.Publisher
         The DDS publisher of the topic.
     bus : LocalBus, optional
-        The composition's bus; without one the outlet is the plain publisher.
+        The composition's bus; without one the outlet is the plain publisher. DDS
+        subscriptions the bus serves (a recorder in the composition) do not count.
     always_remote : bool
         Without a bus: publish on DDS every time (True) or only while :meth:`refresh` saw a
         DDS subscriber (False, the plant's outputs). With a bus the outlet refreshes itself
         every :data:`REFRESH_PERIOD` s if nobody calls :meth:`refresh`.
     """
 
-    __slots__ = ('pub', 'topic_name', 'local', 'remote', 'dds_published', '_auto', '_next')
+    __slots__ = ('pub', 'topic_name', 'local', 'bus', 'remote', 'dds_published', '_auto',
+                 '_next')
 
     def __init__(self, pub, bus: LocalBus | None = None, always_remote: bool = False):
         self.pub = pub
         self.topic_name = pub.topic_name
         self.local = bus.callbacks(pub.topic_name) if bus is not None else []
+        self.bus = bus
         self.remote = always_remote and bus is None
         self._auto = always_remote and bus is not None
         self._next = 0.0
@@ -89,7 +117,8 @@ class Outlet:
 
     def refresh(self) -> bool:
         """Note whether DDS has subscribers; True if anyone (DDS or in-process) listens."""
-        self.remote = self.pub.get_subscription_count() > 0
+        self.remote = self.pub.get_subscription_count() > 0 and (
+            self.bus is None or self.bus.outside(self.topic_name))
         self._next = time.monotonic() + REFRESH_PERIOD
         return self.remote or bool(self.local)
 
@@ -170,10 +199,11 @@ def connect(plant, nodes, executor) -> LocalBus | None:
     Hand the plant's outputs to its in-process sources and their answers to the plant.
 
     ``nodes`` are the nodes of the composition; those with ``use_bus`` whose ``source_name``
-    is one of the plant's ``sources`` are connected. Call before the nodes spin. Returns the
-    bus, or None if no source is in-process or ``executor`` is one of rclpy's own executors
-    (``PENTAPOD_EXECUTOR=single``): those take one message per subscription per wait, so a
-    drain could not keep up with a recorder; such a composition stays on DDS.
+    is one of the plant's ``sources`` are connected, and those with ``take_from_bus`` (a
+    recorder) take the topics of the outlets from the bus. Call before the nodes spin.
+    Returns the bus, or None if no source is in-process or ``executor`` is one of rclpy's own
+    executors (``PENTAPOD_EXECUTOR=single``): those take one message per subscription per
+    wait, so a drain could not keep up with a recorder; such a composition stays on DDS.
     """
     sources = [n for n in nodes if n is not plant and hasattr(n, 'use_bus')
                and n.source_name in plant.mixer.sources]
@@ -188,7 +218,13 @@ def connect(plant, nodes, executor) -> LocalBus | None:
             bus.subscribe(force_topic(name), lambda msg, name=name: plant._on_force(name, msg))
     for outlet in plant.outlets():
         outlet.local = bus.callbacks(outlet.topic_name)
+        outlet.bus = bus
     for source in sources:
         source.use_bus(bus)
+    topics = {o.topic_name: o.pub.msg_type
+              for o in plant.outlets() + [s.force_out for s in sources]}
+    for node in nodes:
+        if hasattr(node, 'take_from_bus'):
+            node.take_from_bus(bus, topics)
     plant.drain = Drain(plant)
     return bus

@@ -13,6 +13,13 @@ expected vs recorded messages per topic and stores them in the bag
 completely; after a SIGKILL the bag is readable up to the last periodic flush. The node
 publishes nothing.
 
+In a composed run the recorder takes the plant's and the in-process sources' per-step topics
+from the composition's bus as message objects (:meth:`RecorderNode.take_from_bus`,
+:mod:`pentapod_sim.nodes.local_bus`) and serialises them itself to the bytes DDS delivers
+(:mod:`pentapod_sim.nodes.wire_cdr`); they are written as the DDS messages are (same channels,
+log times, duplicate skipping, counts), and its DDS subscriptions of those topics record
+nothing.
+
 Parameters: :data:`pentapod_sim.nodes.parameter_tables.RECORDER` (docs/parameters.md).
 """
 import datetime
@@ -33,6 +40,7 @@ from pentapod_sim import interface, shutdown
 from pentapod_sim.errors import BagError, ConfigError
 from pentapod_sim.nodes.common import declare_table, node_args, run_node
 from pentapod_sim.nodes.parameter_tables import RECORDER
+from pentapod_sim.nodes.wire_cdr import type_name, WireCdr
 from pentapod_sim.recording import BagWriter, qos_profile
 from pentapod_sim.recording.msgdefs import has_header_stamp
 from pentapod_sim.recording.run_end import RunStatus, shortfalls, StepLedger
@@ -78,6 +86,8 @@ class RecorderNode(Node):
         self.writer = BagWriter(Path(params.output_dir) / name, run_info=run_info,
                                 flush_period_s=0.0)
         self.subs = {}  # topic -> (subscription or None, msg_type, best_effort)
+        self.from_bus = set()    # topics taken from a composition's bus (take_from_bus)
+        self._records = {}       # topic -> callback writing one message's CDR bytes
         for topic, msg_type in KNOWN_TOPICS.items():
             if self._selected(topic) or topic == interface.RUN_STATUS:
                 self._subscribe(topic, msg_type, [])
@@ -122,10 +132,11 @@ class RecorderNode(Node):
                          durability=(DurabilityPolicy.TRANSIENT_LOCAL
                                      if interface.is_latched(topic)
                                      else DurabilityPolicy.VOLATILE))
-        stamped = has_header_stamp(msg_type)
-        callback = self._callback(topic, msg_type, stamped, self._selected(topic))
+        callback = self._record(topic, msg_type)
         if status:
             callback = self._status_callback(callback)
+        else:
+            callback = self._from_dds(topic, callback)
         sub = self.create_subscription(message_class(msg_type), topic, callback, qos, raw=True)
         self.subs[topic] = (sub, msg_type, best_effort)
         self.get_logger().info(f'subscribed {topic} [{msg_type}]'
@@ -136,6 +147,48 @@ class RecorderNode(Node):
         offered = [offered_qos(topic, p.qos_profile)
                    for p in self.get_publishers_info_by_topic(topic)]
         self.writer.add_topic(topic, msg_type, offered or None)
+
+    def _record(self, topic: str, msg_type: str):
+        """The one callback that writes the CDR bytes of ``topic`` (DDS and bus share it)."""
+        if topic not in self._records:
+            self._records[topic] = self._callback(topic, msg_type, has_header_stamp(msg_type),
+                                                  self._selected(topic))
+        return self._records[topic]
+
+    def _from_dds(self, topic: str, record):
+        """DDS callback of ``topic``: records unless the topic comes from the bus."""
+        from_bus = self.from_bus
+
+        def on_dds(data: bytes) -> None:
+            if topic not in from_bus:
+                record(data)
+        return on_dds
+
+    def take_from_bus(self, bus, topics: dict) -> list[str]:
+        """
+        Record the selected ones of ``topics`` (name -> message class) from ``bus``.
+
+        Called by :func:`pentapod_sim.nodes.local_bus.connect` before the composition spins.
+        The DDS subscriptions of these topics stay (the plant's subscriber waits see them) but
+        record nothing; the bus does not count them as DDS subscribers. Returns the topics
+        taken.
+        """
+        taken = []
+        for topic, cls in topics.items():
+            if not self._selected(topic) or topic == interface.RUN_STATUS:
+                continue
+            try:
+                cdr = WireCdr(cls)
+            except KeyError:
+                continue    # a type rosbags does not know: stays on DDS
+            record = self._record(topic, type_name(cls))
+            self.from_bus.add(topic)
+            bus.subscribe(topic, lambda msg, record=record, cdr=cdr: record(cdr(msg)),
+                          node=self)
+            taken.append(topic)
+        if taken:
+            self.get_logger().info(f'in-process: {", ".join(taken)}')
+        return taken
 
     def _status_callback(self, record):
         """Callback of the run status: record it, then note the end of the run."""
