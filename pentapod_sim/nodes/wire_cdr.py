@@ -10,12 +10,19 @@ zeroed padding, the whole padded with zeros to a multiple of 4 bytes. rosbags' C
 writes the same (little-endian XCDR1, encapsulation header ``00 01 00 00``, zero padding);
 :class:`WireCdr` converts an rclpy object to the rosbags message class of its type,
 serialises it and pads the end.
+
+The per-step types of a run, sensor_msgs/JointState and rosgraph_msgs/Clock, take a direct path
+(:class:`JointStateCdr`, :func:`clock_cdr`, about 4x faster here): the same layout written with
+``struct``, the header and names block cached per name list. test/test_wire_cdr.py checks them
+against rosbags' serialiser, test/test_composed_handoff.py against a DDS recorder's bag.
 """
 from __future__ import annotations
 
 import array
 import functools
 import importlib
+import struct
+import sys
 
 import numpy as np
 from rosbags.typesys import get_typestore, Stores
@@ -42,15 +49,84 @@ class WireCdr:
         If rosbags' Jazzy type store lacks the type (or a nested one).
     """
 
-    def __init__(self, cls):
+    def __init__(self, cls, direct: bool = True):
         self.name = type_name(cls)
         self._store = typestore()
         self._convert = _converter(cls, self._store)
+        fast = DIRECT.get(self.name) if direct and sys.byteorder == 'little' else None
+        self._direct = fast() if fast is not None else None
 
     def __call__(self, msg) -> bytes:
         """The CDR bytes (with encapsulation header) of ``msg``."""
+        if self._direct is not None:
+            return self._direct(msg)
         data = self._store.serialize_cdr(self._convert(msg), self.name).tobytes()
         return data + bytes(-len(data) % 4)
+
+
+#: CDR encapsulation header: little-endian plain CDR, no options.
+ENCAPSULATION = b'\x00\x01\x00\x00'
+_STAMP = struct.Struct('<iI')
+_COUNT = struct.Struct('<I')
+
+
+class JointStateCdr:
+    """Wire CDR of sensor_msgs/JointState (little-endian machine)."""
+
+    MAX_BLOCKS = 64     # distinct (frame_id, names) kept
+
+    def __init__(self):
+        self._blocks: dict[tuple, bytes] = {}
+
+    def __call__(self, msg) -> bytes:
+        header = msg.header
+        key = (header.frame_id, tuple(msg.name))
+        block = self._blocks.get(key)
+        if block is None:
+            if len(self._blocks) >= self.MAX_BLOCKS:
+                self._blocks.clear()
+            block = self._blocks[key] = _strings_block(*key)
+        parts = [ENCAPSULATION, _STAMP.pack(header.stamp.sec, header.stamp.nanosec), block]
+        size = 8 + len(block)                       # body bytes so far (alignment origin)
+        for values in (msg.position, msg.velocity, msg.effort):
+            pad = -size % 4
+            parts.append(bytes(pad) + _COUNT.pack(len(values)))
+            size += pad + 4
+            if len(values):
+                data = (values if isinstance(values, array.array)
+                        else array.array('d', values)).tobytes()
+                pad = -size % 8
+                parts.append(bytes(pad) + data)
+                size += pad + len(data)
+        parts.append(bytes(-size % 4))              # DDS pads the sample to 4 bytes
+        return b''.join(parts)
+
+
+def _strings_block(frame_id: str, names: tuple) -> bytes:
+    """The frame_id and name fields of a JointState (they start at body offset 8)."""
+    out = bytearray()
+
+    def string(text: str) -> None:
+        data = text.encode()
+        out.extend(_COUNT.pack(len(data) + 1) + data + b'\x00')
+
+    string(frame_id)
+    out.extend(bytes(-(8 + len(out)) % 4))
+    out.extend(_COUNT.pack(len(names)))
+    for name in names:
+        out.extend(bytes(-(8 + len(out)) % 4))
+        string(name)
+    return bytes(out)
+
+
+def clock_cdr(msg) -> bytes:
+    """Wire CDR of rosgraph_msgs/Clock."""
+    return ENCAPSULATION + _STAMP.pack(msg.clock.sec, msg.clock.nanosec)
+
+
+#: Types with a direct path: type name -> factory of the serialiser.
+DIRECT = {'sensor_msgs/msg/JointState': JointStateCdr,
+          'rosgraph_msgs/msg/Clock': lambda: clock_cdr}
 
 
 def _converter(cls, store):
