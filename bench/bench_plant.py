@@ -16,7 +16,8 @@ Benchmarks of the plant core and the lockstep / real-time ROS runs.
 
 Full: 100k offline steps, 20k lockstep steps, 5 s real time (60 s at machine rates); quick:
 20k, 3k, 1 s (5 s).
-``python bench/bench_plant.py --offline [--quick]`` prints the offline rows only;
+``python bench/bench_plant.py --offline [--quick]`` prints the offline rows only,
+``--composed [--quick]`` the ping-pong and the lockstep composed rows only;
 ``python bench/run_all.py --only plant`` runs all and saves bench/results/plant.json.
 """
 from __future__ import annotations
@@ -418,6 +419,33 @@ def multirate_realtime_rows(folder: Path, model_file: Path, seconds: float,
     return rows
 
 
+def composed_rows(folder: Path, model_file: Path, steps: int, base: float) -> list[dict]:
+    """Lockstep composed runs (plant + 1 controller; + 3 and a recorder) against ``base``."""
+    rows = []
+    for n_ctrl, rec in ((1, False), (3, True)):
+        res = composed_run(folder, model_file, n_ctrl, steps, rec)
+        extra = ' + recorder' if rec else ''
+        rows.append(_row(f'lockstep composed, plant + {n_ctrl} controller{extra}',
+                         steps / res['wall_time'], 'steps/s',
+                         'rclpy ping-pong, 2 processes, default executor', base,
+                         note=f'{steps} steps, 200 states; every node in one process on one '
+                              'EventsExecutor (scenario --composed), plant and controllers '
+                              'hand over in-process (no DDS)' + (
+                                  '; the recorder takes every per-step message over DDS'
+                                  if rec else '')))
+    return rows
+
+
+def composed_only(quick: bool) -> list[dict]:
+    """The ping-pong and the composed rows alone (``--composed``; saves nothing)."""
+    steps = 3000 if quick else 20000
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp)
+        model_file = demo_model(100, seed=1).save(folder / 'model.npz')
+        base, _ = pingpong(folder, steps)
+        return composed_rows(folder, model_file, steps, base)
+
+
 def ros_rows(quick: bool) -> list[dict]:
     """Lockstep steps/s and real-time figures."""
     steps = 3000 if quick else 20000
@@ -438,14 +466,7 @@ def ros_rows(quick: bool) -> list[dict]:
                              'rclpy ping-pong, 2 processes, default executor', base,
                              note=f'{steps} steps, 200 states; each step: strut_states out '
                                   f'(the only subscribed topic), {n_ctrl} answer(s) in'))
-        for n_ctrl, rec in ((1, False), (3, True)):
-            res = composed_run(folder, model_file, n_ctrl, steps, rec)
-            extra = ' + recorder' if rec else ''
-            rows.append(_row(f'lockstep composed, plant + {n_ctrl} controller{extra}',
-                             steps / res['wall_time'], 'steps/s',
-                             'rclpy ping-pong, 2 processes, default executor', base,
-                             note=f'{steps} steps, 200 states; every node in one process on '
-                                  'one EventsExecutor (scenario --composed)'))
+        rows += composed_rows(folder, model_file, steps, base)
         seconds = 1.0 if quick else 5.0
         for rate in (1000.0, 5000.0, 10000.0):
             res = plant_run(folder, model_file, 1, int(seconds * rate), 'realtime', rate)
@@ -472,10 +493,17 @@ if __name__ == '__main__':
     parser.add_argument('--quick', action='store_true', help='short version (about a minute)')
     parser.add_argument('--offline', action='store_true',
                         help='only the offline rows (no ROS); prints them, saves nothing')
+    parser.add_argument('--composed', action='store_true',
+                        help='only the ping-pong and the lockstep composed rows; prints them, '
+                        'saves nothing')
     args = parser.parse_args()
     steps = 20000 if args.quick else 100000
-    rows = (offline_rows(steps) + multirate_rows(steps // 10) if args.offline
-            else run(args.quick))
+    if args.composed:
+        rows = composed_only(args.quick)
+    elif args.offline:
+        rows = offline_rows(steps) + multirate_rows(steps // 10)
+    else:
+        rows = run(args.quick)
     for r in rows:
         print(f'{r["name"]}: {r["value"]:.4g} {r["unit"]} | {r["baseline"]}: '
               f'{r["baseline_value"]:.4g} | ratio {r["ratio"]:.3g} | {r["note"]}')

@@ -61,7 +61,8 @@ def _scenario(tmp_path, kind: str, rate: float, substeps: int, steps: int, recor
 
 @pytest.mark.parametrize('kind,rate,substeps,record,composed', [
     ('damper', 1000.0, 10, True, False), ('pma', 1500.0, 8, False, False),
-    ('damper', 1000.0, 10, True, True)], ids=['damper', 'pma', 'damper-composed'])
+    ('damper', 1000.0, 10, True, True), ('pma', 1500.0, 8, False, True)],
+    ids=['damper', 'pma', 'damper-composed', 'pma-composed'])
 def test_ros_multirate_run_equals_offline_loop_bit_for_bit(tmp_path, kind, rate, substeps,
                                                           record, composed):
     steps = 500

@@ -47,6 +47,35 @@ def continuous_frf(plant: PlantModel, dampers: dict[str, float], freq_hz: npt.Ar
 
 
 @dataclass
+class SampledLoop:
+    """
+    The lockstep sampled loop of a plant and linear laws, and its eigen-decomposition.
+
+    ``a, b, c_y, c_u, augmented`` as :func:`pentapod_sim.sim.closed_loop.closed_loop_system`
+    returns them for the zero-order-hold plant ``core``; ``a = vec diag(lam) vec^-1``. Built
+    once per loop (:func:`sampled_loop`) and shared by :func:`discrete_frf` and
+    :class:`SampledPairFrf`.
+    """
+
+    core: DiscretePlant
+    a: np.ndarray
+    b: np.ndarray
+    c_y: np.ndarray
+    c_u: np.ndarray
+    augmented: bool
+    lam: np.ndarray
+    vec: np.ndarray
+
+
+def sampled_loop(plant: PlantModel, laws: Sequence, dt: float) -> SampledLoop:
+    """The sampled loop of ``plant`` (discretised with zero-order hold at ``dt`` [s]) and laws."""
+    core = DiscretePlant(plant.discretize(dt))
+    a, b, c_y, c_u, augmented = closed_loop_system(core, laws)
+    lam, vec = np.linalg.eig(a)
+    return SampledLoop(core, a, b, c_y, c_u, augmented, lam, vec)
+
+
+@dataclass
 class DiscreteFrf:
     """
     FRFs of the sampled closed loop from one external input.
@@ -81,7 +110,7 @@ def _resolvent_columns(a: np.ndarray, b: np.ndarray, z: np.ndarray,
 
 
 def discrete_frf(plant: PlantModel, laws: Sequence, dt: float, freq_hz: npt.ArrayLike,
-                 input_: str) -> DiscreteFrf:
+                 input_: str, loop: SampledLoop | None = None) -> DiscreteFrf:
     """
     FRFs of the lockstep sampled loop (u_k answers y_k, zero-order hold) from an external input.
 
@@ -99,19 +128,20 @@ def discrete_frf(plant: PlantModel, laws: Sequence, dt: float, freq_hz: npt.Arra
         Frequencies [Hz], below the Nyquist frequency.
     input_ : str
         External input port (e.g. ``tcp_force_x``), added to the controllers' efforts.
+    loop : SampledLoop, optional
+        :func:`sampled_loop` of the same plant, laws and ``dt``, if already built.
     """
     freq = np.asarray(freq_hz, dtype=float)
-    core = DiscretePlant(plant.discretize(dt))
-    a, b, c_y, c_u, augmented = closed_loop_system(core, laws)
+    loop = sampled_loop(plant, laws, dt) if loop is None else loop
+    core, b, c_y, c_u, lam = loop.core, loop.b, loop.c_y, loop.c_u, loop.lam
     j = core.input_names.index(input_)
     z = np.exp(2j * np.pi * freq * dt)
-    lam, vec = np.linalg.eig(a)
-    x = _resolvent_columns(a, b[:, j], z, lam, vec)
+    x = _resolvent_columns(loop.a, b[:, j], z, lam, loop.vec)
     unit = np.zeros(len(core.input_names))
     unit[j] = 1.0
     u = c_u @ x + unit[:, None]
     y = c_y @ x
-    if not augmented and core.has_feedthrough:
+    if not loop.augmented and core.has_feedthrough:
         y = y + (core.d @ u) / z[None, :]
     return DiscreteFrf(freq, dict(zip(core.output_names, y)), dict(zip(core.input_names, u)),
                        float(np.max(np.abs(lam))))
@@ -125,15 +155,16 @@ class SampledPairFrf:
     ``z = exp(j w dt)`` (the second sum: the plant's feed-through acting on ``u_{k-1}``). The
     laws may carry dynamics (:func:`pentapod_sim.sim.closed_loop.closed_loop_system`).
     ``poles`` are the continuous equivalents ``ln(l_i) / dt`` [rad/s], for
-    :func:`pentapod_sim.plant.frf_peaks.maximise_near_poles`.
+    :func:`pentapod_sim.plant.frf_peaks.maximise_near_poles`. ``loop``: the
+    :func:`sampled_loop` of the same plant, laws and ``dt``, if already built.
     """
 
     def __init__(self, plant: PlantModel, laws: Sequence, dt: float, output: str,
-                 input_: str) -> None:
-        core = DiscretePlant(plant.discretize(dt))
-        a, b, c_y, c_u, augmented = closed_loop_system(core, laws)
+                 input_: str, loop: SampledLoop | None = None) -> None:
+        loop = sampled_loop(plant, laws, dt) if loop is None else loop
+        core, b, c_y, c_u, augmented = loop.core, loop.b, loop.c_y, loop.c_u, loop.augmented
         j, o = core.input_names.index(input_), core.output_names.index(output)
-        lam, vec = np.linalg.eig(a)
+        lam, vec = loop.lam, loop.vec
         right = np.linalg.solve(vec, b[:, j].astype(complex))
         self.dt, self.lam = dt, lam
         self.r = (c_y[o] @ vec) * right

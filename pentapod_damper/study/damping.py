@@ -79,7 +79,8 @@ def _pole(poles: LoopPoles, j: int, tag: str) -> dict:
 
 def damping_rows(plant: PlantModel, laws: Sequence, dt: float,
                  band: tuple[float, float] = BAND, directions: str = 'xyz',
-                 count: int = COUNT) -> list[dict]:
+                 count: int = COUNT,
+                 poles: tuple[LoopPoles, LoopPoles] | None = None) -> list[dict]:
     """
     Rows of the dominant modes of TCP aa (a in ``directions``) for one set of laws.
 
@@ -97,6 +98,8 @@ def damping_rows(plant: PlantModel, laws: Sequence, dt: float,
         TCP directions.
     count : int
         Dominant modes per direction.
+    poles : (LoopPoles, LoopPoles), optional
+        :func:`loop_poles` of the same plant, laws and ``dt``, if already computed.
 
     Returns
     -------
@@ -107,7 +110,7 @@ def damping_rows(plant: PlantModel, laws: Sequence, dt: float,
         ``peak_um_per_N`` (the sampled-loop pole's term at its peak) and
         ``decay_time_s`` (1 / (ζ ω) of the sampled-loop pole).
     """
-    sampled, continuous = loop_poles(plant, laws, dt)
+    sampled, continuous = loop_poles(plant, laws, dt) if poles is None else poles
     rows = []
     for a in directions:
         out = plant.output_names.index(f'tcp_displacement_{a}')
@@ -135,9 +138,15 @@ def settling_time(table: Sequence[dict], time_constants: float = 5.0) -> float:
 
 
 def scenario_rows(plant: PlantModel, position: str, scenario: str, dt: float,
-                  **options) -> list[dict]:
-    """:func:`damping_rows` of a scenario file's laws, labelled with position and scenario."""
-    laws = scenario_laws(read_scenario(scenario).sections, dt)
+                  laws: Sequence | None = None, **options) -> list[dict]:
+    """
+    :func:`damping_rows` of a scenario's laws, labelled with position and scenario.
+
+    ``laws``: the scenario file's laws at ``dt`` if already built (else read here);
+    ``options`` go to :func:`damping_rows`.
+    """
+    if laws is None:
+        laws = scenario_laws(read_scenario(scenario).sections, dt)
     return [{'position': position, 'scenario': scenario, **row}
             for row in damping_rows(plant, laws, dt, **options)]
 

@@ -20,7 +20,7 @@ from typing import Sequence
 import numpy as np
 
 from pentapod_damper.study import damping
-from pentapod_damper.study.analytic import SampledPairFrf
+from pentapod_damper.study.analytic import SampledLoop, SampledPairFrf
 from pentapod_sim.analysis import modal_plots
 from pentapod_sim.analysis.modal_ema import identify_modes, ModalModel
 from pentapod_sim.analysis.modal_id import Tolerances
@@ -103,18 +103,20 @@ def _local_band(f0: float, zeta: float) -> tuple[float, float]:
 
 
 def compare(rows: Sequence[dict], ident: Identified, plant: PlantModel, laws: Sequence,
-            dt: float, direction: str) -> list[dict]:
+            dt: float, direction: str, loop: SampledLoop | None = None) -> list[dict]:
     """
     The analytic rows of ``direction`` with the identified frequency, damping ratio and peak.
 
     Adds ``measured_freq_hz``, ``measured_zeta`` (NaN if no identified pole pairs with the
     mode), ``zeta_error`` (relative), ``freq_error`` (relative), ``peak_analytic_um_per_N``
     (sampled-loop FRF maximised near the mode), ``peak_measured_um_per_N`` (identified model's
-    FRF maximised near its pole) and ``peak_error_db``.
+    FRF maximised near its pole) and ``peak_error_db``. ``loop``: the sampled loop of the
+    same plant, laws and ``dt`` (:func:`pentapod_damper.study.analytic.sampled_loop`), if
+    already built.
     """
     model = ident.model
     frf = SampledPairFrf(plant, laws, dt, f'tcp_displacement_{direction}',
-                         f'tcp_force_{direction}')
+                         f'tcp_force_{direction}', loop)
     out = []
     for row in rows:
         if row['direction'] not in (direction, direction * 2):
@@ -152,6 +154,13 @@ def figures(ident: Identified, folder: Path, tag: str) -> tuple[Path, Path]:
                                        title=f'{tag}: measured and identified FRF'))
 
 
-def settle_rows(plant: PlantModel, laws: Sequence, dt: float, direction: str) -> list[dict]:
-    """The :data:`SETTLE_MODES` modes with the largest terms in TCP dd (their decay times)."""
-    return damping.damping_rows(plant, laws, dt, directions=direction, count=SETTLE_MODES)
+def settle_rows(plant: PlantModel, laws: Sequence, dt: float, direction: str,
+                poles: tuple | None = None) -> list[dict]:
+    """
+    The :data:`SETTLE_MODES` modes with the largest terms in TCP dd (their decay times).
+
+    ``poles``: :func:`pentapod_damper.study.damping.loop_poles` of the same loop, if already
+    computed.
+    """
+    return damping.damping_rows(plant, laws, dt, directions=direction, count=SETTLE_MODES,
+                                poles=poles)

@@ -20,6 +20,8 @@ from pentapod_damper.study.analytic import (
     discrete_frf,
     DiscreteFrf,
     pma_requirements,
+    sampled_loop,
+    SampledLoop,
 )
 from pentapod_damper.study.config import StudyConfig
 from pentapod_damper.study.pma import pma_design, PmaDesign
@@ -71,6 +73,7 @@ class ScenarioAnalytic:
     frf: PoleResidueFrf | None = None  # the continuous TCP FRF, exact at any frequency
     peak: Peak | None = None          # its exact peak over the band
     loop: LoopCheck | None = None     # truncation check of the sampled loop
+    sampled: SampledLoop | None = None  # the sampled loop and its eigen-decomposition
 
 
 @dataclass
@@ -131,7 +134,8 @@ def scenario_analytic(model: PositionModel, scenario: str, cfg: StudyConfig,
                       cfg.check_policy, label=f'scenario {scenario} at {model.position}')
     if loop.plant_radius >= 1.0:       # whatever the policy: the run itself would diverge
         raise ConfigError(f'{loop.summary()}; lower its gains or raise the sample rate')
-    disc = discrete_frf(model.plant, laws, dt, welch_freq(cfg), f'tcp_force_{d}')
+    sampled = sampled_loop(model.plant, laws, dt)
+    disc = discrete_frf(model.plant, laws, dt, welch_freq(cfg), f'tcp_force_{d}', sampled)
     cont = continuous_frf(model.plant, dampers, freq, f'tcp_displacement_{d}',
                           f'tcp_force_{d}')
     frf = plant_pair_frf(model.plant, f'tcp_displacement_{d}', f'tcp_force_{d}', dampers)
@@ -142,7 +146,7 @@ def scenario_analytic(model: PositionModel, scenario: str, cfg: StudyConfig,
             values = PMA.values(params, f'node {name!r}')     # the PMA node's defaults
             pma = {'mass': values.proof_mass, 'gain': values.gain,
                    'directions': values.directions}
-    return ScenarioAnalytic(scenario, laws, dampers, cont, disc, pma, frf, peak, loop)
+    return ScenarioAnalytic(scenario, laws, dampers, cont, disc, pma, frf, peak, loop, sampled)
 
 
 def pma_curves(model: PositionModel, ana: ScenarioAnalytic, cfg: StudyConfig,

@@ -55,10 +55,12 @@ class Composition:
             if name not in {n.name for n in scenario.nodes}:
                 self.nodes.append(load_class(target)(cli_args=['--ros-args', '-r',
                                                                f'__node:={name}']))
-        self.bus = local_bus.connect(self.plant, self.nodes) if self.plant else None
+        self.bus = None
 
     def add_to(self, executor) -> None:
-        """Add every node of the composition to ``executor``; start those that serve."""
+        """Hand-off (:func:`.local_bus.connect`), every node to ``executor``, servers started."""
+        if self.plant is not None:
+            self.bus = local_bus.connect(self.plant, self.nodes, executor)
         for node in self.nodes:
             executor.add_node(node)
             if hasattr(node, 'start_component'):      # the live view's WebSocket server

@@ -11,7 +11,8 @@ outlet hands the message object itself to the in-process callbacks, synchronousl
 live view, in this process or another, ``ros2 topic echo``), so those get every message as
 before. The message objects carry the values a DDS round trip would give (JointState arrays
 are ``array('d')`` either way, stamps are integers), so the traces stay bit-identical to
-separate processes and to the offline loop.
+separate processes and to the offline loop. Every callback of a topic gets the same object, as
+rclcpp hands out const messages: a callback must not change it.
 
 Answers thus arrive while the plant publishes, and the plant's loop no longer waits in the
 executor. :class:`Drain` spins the executor from the loop every :data:`DRAIN_PERIOD` s of wall
@@ -22,7 +23,8 @@ per per-step stream) hold many seconds of steps, far more than a period.
 What stays on DDS: the sources' force publishers (the plant's start-up and graph checks count
 them; a force topic of an in-process source is served by the hand-off only), the controller
 models, diagnostics (PMA state, excitation), run status, and everything of nodes that are no
-lockstep source of the plant in this process.
+lockstep source of the plant in this process. A composition on rclpy's own executors
+(``PENTAPOD_EXECUTOR=single``) stays on DDS altogether (:func:`connect`).
 """
 from __future__ import annotations
 
@@ -111,8 +113,8 @@ class Drain:
     the end mark starved the node's other timers. So a drain publishes an empty message to
     itself on a hidden topic of this process (:data:`DRAIN_TOPIC`) and spins until it came
     back: the events queued before it ran first (a round costs about 60 us here); events DDS
-    posts later are taken by the next drain. Other executors are asked for ready work with a
-    zero timeout until none is left.
+    posts later are taken by the next drain (only the EventsExecutor is used so:
+    :func:`connect`).
     """
 
     def __init__(self, node, period: float = DRAIN_PERIOD):
@@ -145,8 +147,6 @@ class Drain:
         Returns the number of other events run (0: the executor had nothing queued).
         """
         self.drains += 1
-        if hasattr(executor, 'wait_for_ready_callbacks'):     # rclpy's Executor classes
-            return _drain_ready(executor, end)
         if self.pub.get_subscription_count() == 0:            # not matched (yet): one event
             executor.spin_once(timeout_sec=0.0)
             return 1
@@ -165,33 +165,19 @@ class Drain:
             pass
 
 
-def _drain_ready(executor, end: float) -> int:
-    """Run the ready callbacks of an rclpy Executor until none is ready or ``end``; count."""
-    from rclpy.executors import TimeoutException
-    done = 0
-    while time.monotonic() < end:
-        try:
-            handler, _, _ = executor.wait_for_ready_callbacks(timeout_sec=0.0)
-        except TimeoutException:
-            break
-        handler()
-        done += 1
-        if handler.exception() is not None:
-            raise handler.exception()
-    return done
-
-
-def connect(plant, nodes) -> LocalBus | None:
+def connect(plant, nodes, executor) -> LocalBus | None:
     """
     Hand the plant's outputs to its in-process sources and their answers to the plant.
 
     ``nodes`` are the nodes of the composition; those with ``use_bus`` whose ``source_name``
     is one of the plant's ``sources`` are connected. Call before the nodes spin. Returns the
-    bus, or None if no source is in-process.
+    bus, or None if no source is in-process or ``executor`` is one of rclpy's own executors
+    (``PENTAPOD_EXECUTOR=single``): those take one message per subscription per wait, so a
+    drain could not keep up with a recorder; such a composition stays on DDS.
     """
     sources = [n for n in nodes if n is not plant and hasattr(n, 'use_bus')
                and n.source_name in plant.mixer.sources]
-    if not sources:
+    if not sources or hasattr(executor, 'wait_for_ready_callbacks'):
         return None
     bus = LocalBus()
     names = {s.source_name for s in sources}
