@@ -11,13 +11,14 @@ Without a recorder, the live view is what makes the plant publish all three stat
 (the damper alone subscribes to strut_states only), so that row includes the plant's cost of
 publishing two more topics per step; with a recorder the plant publishes them anyway.
 
-With a recorder, a third kind of run has the Foxglove client (test/fixtures/foxglove_client.py,
-a stand-in for the user's Foxglove on the same machine) at niceness +10 like the view: on two
-cores a client at normal priority competes with the plant and its controller (measured: 0.73x
-with the client at niceness 0, 0.97x at +10, 1.05x with no client, same machine and load), so
-that row is the cost of the view alone. Kinds of runs alternate, so drifts in the load of a
-shared machine hit all; the figure of each is its best run. Full: 10000 steps, best of 4 runs
-each; quick: 3000 steps, 1 run.
+Four kinds of runs, each without and with a recorder: no live view; the live view with no
+client (its own cost: subscriptions, worker thread, server); the view and the Foxglove client
+(test/fixtures/foxglove_client.py, a stand-in for the user's Foxglove on the same machine) at
+normal priority; and the client at niceness +10 like the view. On two cores a client competes
+for the CPU with the plant and its controller, so the rows with a client measure the machine as
+much as the view. Kinds alternate in rounds, so drifts in the load of a shared machine hit all;
+a row's figure is its best run, and its note lists the per-round ratios, whose spread is the
+noise. Full: 10000 steps, 5 rounds; quick: 3000 steps, 1 round.
 """
 from __future__ import annotations
 
@@ -58,11 +59,12 @@ def _port(log: Path, timeout: float = 120.0) -> int:
 
 
 def lockstep(folder: Path, model_file: Path, steps: int, live: bool, record: bool,
-             tag: str, client_nice: int = 0) -> float:
+             tag: str, client_nice: int | None = 0) -> float:
     """
     One lockstep run of plant + damper (+ recorder) (+ live view and client): steps/s.
 
-    ``client_nice`` is the niceness the Foxglove client process runs at.
+    ``client_nice`` is the niceness the Foxglove client process runs at; None: no client
+    (the view subscribes to the testbed topics all the same).
     """
     session = bench_plant.Session(folder)
     trace = folder / f'trace_{tag}.npz'
@@ -77,10 +79,12 @@ def lockstep(folder: Path, model_file: Path, steps: int, live: bool, record: boo
         if live:
             session.node('pentapod_sim.nodes.live_view_node', 'live_view', 'port:=0')
             port = _port(folder / 'live_view.log')
+        if live and client_nice is not None:
             session.start(['-c', f'import os, runpy, sys; os.nice({client_nice}); '
                            'sys.argv = sys.argv[1:]; runpy.run_path(sys.argv[0], '
                            "run_name='__main__')", str(CLIENT), f'ws://127.0.0.1:{port}'],
                           f'client_{tag}.log')
+        if live:
             waits.append('live_view')
         plant = session.node('pentapod_sim.nodes.plant_node', 'plant',
                              f'model_file:={model_file}', f'steps:={steps}',
@@ -95,9 +99,22 @@ def lockstep(folder: Path, model_file: Path, steps: int, live: bool, record: boo
         return steps / float(data['wall_time'])
 
 
+#: Kinds of runs: (live view, client niceness or None for no client), row label.
+KINDS = [((True, None), 'live view, no client'),
+         ((True, 0), 'live view and 1 Foxglove client'),
+         ((True, CLIENT_NICE), f'live view and 1 Foxglove client at niceness +{CLIENT_NICE}')]
+
+
 def run(quick: bool) -> list[dict]:
-    """Rows: steps/s with the live view against the same run without it."""
-    steps, repeats = (3000, 1) if quick else (10000, 4)
+    """
+    Rows: steps/s with the live view against the same run without it.
+
+    Runs of every kind alternate, ``repeats`` rounds; a row's figure is the best run of its kind
+    against the best run without the view, and its note gives the ratios of the rounds (each
+    run against the run without the view of the same round), whose spread is the noise of
+    the machine.
+    """
+    steps, repeats = (3000, 1) if quick else (10000, 5)
     note = (f'{steps} steps of a 200-state demo model at {RATE:g} Hz, best of {repeats}; live '
             'view defaults (best effort, polled subscriptions, nice +10, 100 Hz envelopes)')
     rows = []
@@ -105,26 +122,21 @@ def run(quick: bool) -> list[dict]:
         folder = Path(tmp)
         model_file = demo_model(100, seed=1).save(folder / 'model.npz')
         for record in (False, True):
-            # (live view, client niceness); with a recorder also a client at niceness +10
-            kinds = [(False, 0), (True, 0)] + ([(True, CLIENT_NICE)] if record else [])
-            best = dict.fromkeys(kinds, 0.0)
+            kinds = [(False, None)] + [kind for kind, _ in KINDS]
+            runs: dict = {kind: [] for kind in kinds}
             for k in range(repeats):
                 for kind in kinds:                 # alternate: drifts in load hit all
                     tag = f'{int(record)}{int(kind[0])}{kind[1]}_{k}'
-                    best[kind] = max(best[kind], lockstep(folder, model_file, steps, kind[0],
-                                                          record, tag, kind[1]))
+                    runs[kind].append(lockstep(folder, model_file, steps, kind[0], record,
+                                               tag, kind[1]))
+            base = max(runs[False, None])
             with_rec = ' + recorder' if record else ''
-            rows.append(_row(
-                f'lockstep plant + 1 controller{with_rec} + live view and 1 Foxglove client',
-                best[True, 0], 'steps/s', 'same run without the live view', best[False, 0],
-                note=note))
-            if record:
+            for kind, label in KINDS:
+                rounds = np.array(runs[kind]) / np.array(runs[False, None])
                 rows.append(_row(
-                    f'lockstep plant + 1 controller{with_rec} + live view and 1 Foxglove '
-                    f'client at niceness +{CLIENT_NICE}', best[True, CLIENT_NICE], 'steps/s',
-                    'same run without the live view', best[False, 0],
-                    note=note + "; the client (a stand-in for the user's Foxglove) yields the "
-                    'CPU too: the cost of the view alone'))
+                    f'lockstep plant + 1 controller{with_rec} + {label}', max(runs[kind]),
+                    'steps/s', 'same run without the live view', base,
+                    note=note + '; ratio per round ' + ' '.join(f'{r:.2f}' for r in rounds)))
     return rows
 
 

@@ -2,16 +2,20 @@
 What the dampers' actuator/sensor dynamics buy (truncation check) and cost (damping).
 
 For every damping scenario with viscous dampers and every position, the sampled loop at the
-study's sample rate is built twice: with the laws as the scenario file configures them
-(low-pass and delay of its damper nodes) and with the same gains but no dynamics (ideal
-sampled feedback with zero-order hold, u_k answers y_k). Each is checked on the plant and on
-the check model (:func:`pentapod_sim.sim.stability.check_loop`), and its exact TCP peak
-reduction is computed (:class:`pentapod_damper.study.analytic.SampledPairFrf`, searched at the
-resonances) against the exact open-loop peak. ``--try order,bandwidth_hz,delay_steps``
-replaces the scenario's dynamics to compare candidates.
+study's sample rate is built twice: as the scenario file configures it (the *buildable*
+default: gain, low-pass and delay of its damper nodes) and as the *ideal* sampled damper (the
+node's default gain, :data:`pentapod_damper.node_parameters.DAMPER`, the paper's or the best
+value of the gain sweep, with no dynamics: u_k answers y_k through a zero-order hold). Each is
+checked on the plant and on the check model (:func:`pentapod_sim.sim.stability.check_loop`),
+and its exact TCP peak reduction is computed
+(:class:`pentapod_damper.study.analytic.SampledPairFrf`, searched at the resonances) against the
+exact open-loop peak. ``--try order,bandwidth_hz,delay_steps`` replaces the scenario's dynamics
+to compare candidates; ``--markdown`` prints the table of
+docs/statespace.md ("Default dynamics per damper type"), which test/test_damping_table.py
+checks against this code.
 
     python -m pentapod_damper.study.dynamics [--positions P1,P2] [--scenarios a,b]
-                                             [--try 1,150,0]
+                                             [--try 1,150,0] [--markdown]
 
 Units: frequencies [Hz], peaks [m/N], gains as the laws'.
 """
@@ -29,7 +33,7 @@ from pentapod_sim.errors import ConfigError
 from pentapod_sim.plant.build import load_or_build_model
 from pentapod_sim.plant.check_model import check_f_max, load_or_build_check_model
 from pentapod_sim.plant.frf_peaks import exact_peak, maximise_near_poles, plant_pair_frf
-from pentapod_sim.scenario.files import read_scenario
+from pentapod_sim.scenario.files import executable_of, read_scenario
 from pentapod_sim.sim.stability import check_loop, controller_of
 
 #: Scenarios with viscous damper nodes that the study runs.
@@ -37,8 +41,17 @@ SCENARIOS = ('strut_damping_all', 'strut_damping_12', 'strut_chord_damping_all',
              'strut_chord_damping_12', 'axial_damping', 'tcp_damping')
 
 
-def _without_dynamics(laws: list) -> list:
-    return [ViscousDamper(law.actuator_ports, law.gains) for law in laws]
+#: Node parameters that set a damper's gains and dynamics; the ideal variant drops them.
+_LAW_KEYS = ('bending_gain', 'chord_gain', 'axial_gain', 'tcp_gain', 'filter_order',
+             'bandwidth_hz', 'filter_damping', 'delay_steps', 'filter_hold')
+
+
+def ideal_laws(scenario: str, dt: float) -> list:
+    """The scenario's viscous dampers with the node's default gains and no dynamics."""
+    sections = {name: {k: v for k, v in params.items() if k not in _LAW_KEYS}
+                if executable_of(name) == 'damper' else params
+                for name, params in read_scenario(scenario).sections.items()}
+    return [law for law in scenario_laws(sections, dt) if isinstance(law, ViscousDamper)]
 
 
 def _with(laws: list, dyn: Dynamics, dt: float) -> list:
@@ -59,7 +72,8 @@ def evaluate(plant, check, laws: list, dt: float, direction: str, band: tuple[fl
     return row
 
 
-def rows(positions, scenarios, candidate: Dynamics | None = None) -> list[dict]:
+def rows(positions, scenarios, candidate: Dynamics | None = None,
+         cache_dir=CHECK_CACHE) -> list[dict]:
     """One row per (position, scenario, variant) with radii, verdict and peak reduction."""
     cfg = load_study_config()
     dt = 1.0 / cfg.sample_rate
@@ -67,23 +81,55 @@ def rows(positions, scenarios, candidate: Dynamics | None = None) -> list[dict]:
     d = cfg.direction
     out = []
     for pos in positions:
-        plant, _ = load_or_build_model(position=pos, cache_dir=CHECK_CACHE)
+        plant, _ = load_or_build_model(position=pos, cache_dir=cache_dir)
         check, _ = load_or_build_check_model(pos, check_f_max(cfg.sample_rate, cfg.check_f_min),
-                                             CHECK_CACHE)
+                                             cache_dir)
         base = exact_peak(plant_pair_frf(plant, f'tcp_displacement_{d}', f'tcp_force_{d}'),
                           *band).value
         for scn in scenarios:
             laws = [law for law in scenario_laws(read_scenario(scn).sections, dt)
                     if isinstance(law, ViscousDamper)]
             shipped = laws if candidate is None else _with(laws, candidate, dt)
-            for variant, variant_laws in (('with dynamics', shipped),
-                                          ('no dynamics', _without_dynamics(laws))):
+            for variant, variant_laws in (('buildable', shipped),
+                                          ('ideal', ideal_laws(scn, dt))):
                 dyn = variant_laws[0].dynamics
                 row = evaluate(plant, check, variant_laws, dt, d, band, base)
                 out.append({'position': pos, 'scenario': scn, 'variant': variant,
+                            'gain': float(max(abs(g) for law in variant_laws
+                                              for g in law.gains)),
+                            'moment': any('moment' in port for law in variant_laws
+                                          for port in law.actuator_ports),
                             'filter_order': dyn.order, 'bandwidth_hz': dyn.bandwidth_hz,
                             'delay_steps': dyn.delay_steps, **row})
     return out
+
+
+def _unit(scenario_rows: list[dict]) -> str:
+    return 'N m s/rad' if scenario_rows[0]['moment'] else 'N s/m'
+
+
+def _law(r: dict) -> str:
+    dyn = (f'order-{r["filter_order"]} low-pass {r["bandwidth_hz"]:g} Hz'
+           if r['filter_order'] else 'no low-pass')
+    delay = f', delay {r["delay_steps"]} step(s)' if r['delay_steps'] else ''
+    return f'{r["gain"]:g}, {dyn}{delay}'
+
+
+def markdown_table(table: list[dict]) -> str:
+    """Per scenario and variant: the law, check radius and peak reduction per position."""
+    positions = list(dict.fromkeys(r['position'] for r in table))
+    lines = ['| scenario | variant | gain [unit], dynamics | check-model radius '
+             + ' / '.join(positions) + ' | TCP peak reduction ' + ' / '.join(positions)
+             + ' | verdict ' + ' / '.join(positions) + ' |', '|---' * 6 + '|']
+    for scn in dict.fromkeys(r['scenario'] for r in table):
+        for variant in ('buildable', 'ideal'):
+            sel = [r for r in table if r['scenario'] == scn and r['variant'] == variant]
+            lines.append(
+                f'| `{scn}` | {variant} | {_law(sel[0])} [{_unit(sel)}] | '
+                + ' / '.join(f'{r["check_radius"]:.6f}' for r in sel) + ' | '
+                + ' / '.join(f'{r["peak_reduction"]:.3f}' for r in sel) + ' | '
+                + ' / '.join(r['verdict'] for r in sel) + ' |')
+    return '\n'.join(lines)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -92,6 +138,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--positions', default='P1,P2')
     parser.add_argument('--scenarios', default=','.join(SCENARIOS))
     parser.add_argument('--try', dest='candidate', help='order,bandwidth_hz,delay_steps')
+    parser.add_argument('--markdown', action='store_true',
+                        help='print the table of docs/statespace.md instead')
     args = parser.parse_args(argv)
     try:
         candidate = None
@@ -102,6 +150,9 @@ def main(argv: list[str] | None = None) -> int:
     except (ConfigError, ValueError) as err:
         print(f'dynamics: {err}', file=sys.stderr)
         return 1
+    if args.markdown:
+        print(markdown_table(table))
+        return 0
     print(f'{"pos":4} {"scenario":24} {"variant":14} {"ord":>3} {"bw Hz":>7} {"dly":>3} '
           f'{"rho plant":>10} {"rho check":>10} {"peak red.":>9}  verdict')
     for r in table:

@@ -115,6 +115,10 @@ def struts12_share(res: StudyResults) -> list[dict]:
                    for s, m in band.items()}
             row['measured_rms_share'] = improvement_share(
                 rms['baseline'], rms['strut_damping_12'], rms['strut_damping_all'])
+            row['measured_rms_reduction_12'] = rms['baseline'] / rms['strut_damping_12']
+            row['measured_rms_reduction_all'] = rms['baseline'] / rms['strut_damping_all']
+            row['rms_reduction_12'] = vals['baseline'][1] / vals['strut_damping_12'][1]
+            row['rms_reduction_all'] = vals['baseline'][1] / vals['strut_damping_all'][1]
         rows.append(row)
     return rows
 

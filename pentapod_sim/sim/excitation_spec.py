@@ -13,6 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field, fields
 import json
 import math
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -179,7 +180,7 @@ def _json_float(value) -> float | str:
 
 def spec_to_dict(spec: ExcitationSpec) -> dict:
     """Plain, JSON-safe data of ``spec`` (floats; non-finite ones as 'inf', '-inf', 'nan')."""
-    out = {}
+    out: dict[str, Any] = {}
     for f in fields(ExcitationSpec):
         value = getattr(spec, f.name)
         if f.name in ('direction', 'frequencies'):
@@ -223,7 +224,7 @@ def spec_from_dict(data: dict) -> ExcitationSpec:
     unknown = sorted(set(data) - set(known))
     if unknown:
         raise ConfigError(f'unknown excitation parameter(s) {unknown}')
-    values = {}
+    values: dict[str, Any] = {}
     for name, value in data.items():
         if name in ('direction', 'frequencies'):
             if not isinstance(value, (list, tuple)):

@@ -101,11 +101,11 @@ def _open_loop_start(plant: PlantModel, controllers, size: int, dt: float | None
     else:
         lam = np.linalg.eigvals(plant.zoh_blocks(dt)[0]).T.ravel()
     origin = np.concatenate([np.arange(m), np.arange(m)])
-    ctrl = [np.linalg.eigvals(k.a) for k in controllers if k.n_states]
-    ctrl = np.concatenate(ctrl) if ctrl else np.zeros(0)
+    blocks = [np.linalg.eigvals(k.a) for k in controllers if k.n_states]
+    ctrl = np.concatenate(blocks) if blocks else np.zeros(0)
     rest = size - 2 * m - ctrl.size           # input memory u_{k-1}: eigenvalues 0 at t = 0
     lam = np.concatenate([lam, ctrl, np.zeros(rest)]).astype(complex)
-    return lam, np.concatenate([origin, -np.ones(ctrl.size + rest, dtype=int)])
+    return lam, np.concatenate([origin, np.full(ctrl.size + rest, -1, dtype=int)])
 
 
 def _match(old: np.ndarray, old_origin: np.ndarray, new: np.ndarray) -> tuple[np.ndarray, bool]:

@@ -42,7 +42,7 @@ MAX_SUBSTEPS = 1000
 def check_substeps(substeps) -> int:
     """Return ``substeps`` as an int in [1, MAX_SUBSTEPS] (ConfigError names a bad value)."""
     if isinstance(substeps, bool) or not isinstance(substeps, numbers.Integral) \
-            or not 1 <= substeps <= MAX_SUBSTEPS:
+            or not 1 <= int(substeps) <= MAX_SUBSTEPS:
         raise ConfigError(f'substeps must be an integer from 1 to {MAX_SUBSTEPS} (plant '
                           f'substeps per exchange), got {substeps!r}')
     return int(substeps)
