@@ -25,7 +25,6 @@ import struct
 import sys
 
 import numpy as np
-from rosbags.typesys import get_typestore, Stores
 
 
 def type_name(cls) -> str:
@@ -35,13 +34,21 @@ def type_name(cls) -> str:
 
 @functools.cache
 def typestore():
-    """The ROS 2 Jazzy type store of rosbags (built once)."""
+    """The ROS 2 Jazzy type store of rosbags (built once; imported only when needed)."""
+    from rosbags.typesys import get_typestore, Stores
     return get_typestore(Stores.ROS2_JAZZY)
 
 
 class WireCdr:
     """
     Serialiser of one rclpy message class to wire CDR bytes.
+
+    Parameters
+    ----------
+    cls : type
+        The rclpy message class.
+    direct : bool
+        Use the direct path of the type if it has one (:data:`DIRECT`); False: rosbags.
 
     Raises
     ------
@@ -51,10 +58,11 @@ class WireCdr:
 
     def __init__(self, cls, direct: bool = True):
         self.name = type_name(cls)
-        self._store = typestore()
-        self._convert = _converter(cls, self._store)
         fast = DIRECT.get(self.name) if direct and sys.byteorder == 'little' else None
         self._direct = fast() if fast is not None else None
+        if self._direct is None:
+            self._store = typestore()
+            self._convert = _converter(cls, self._store)
 
     def __call__(self, msg) -> bytes:
         """The CDR bytes (with encapsulation header) of ``msg``."""
