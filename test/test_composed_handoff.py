@@ -24,6 +24,7 @@ from diagnostic_msgs.msg import DiagnosticStatus
 import numpy as np
 import pytest
 from rclpy.serialization import deserialize_message
+import yaml
 
 from fixtures.demo_model import demo_model
 from pentapod_damper.scenario_laws import scenario_laws
@@ -276,3 +277,50 @@ def test_the_in_process_recorder_writes_the_bytes_dds_delivers(tmp_path):
         assert not differ, (topic, differ[:5])
     # the forces in the bag are the DDS bytes of what the plant applied: not all zero
     assert len(set(bus[force_topic('damper')][2])) > steps // 2
+
+
+#: A DDS subscriber of one topic in its own process (a live view, ``ros2 topic echo``).
+ECHO = r"""
+import sys
+import rclpy
+from sensor_msgs.msg import JointState
+from pentapod_sim.nodes.common import STATE_QOS
+rclpy.init()
+node = rclpy.create_node('echo')
+node.create_subscription(JointState, sys.argv[1], lambda msg: None, STATE_QOS)
+print('ready', flush=True)
+try:
+    rclpy.spin(node)
+except BaseException as err:
+    print('ended', repr(err), flush=True)
+"""
+
+
+def test_an_outside_subscriber_still_gets_its_topic_over_dds(tmp_path):
+    """
+    Another process subscribed to one state topic gets it over DDS, the other topics stay off.
+
+    The recorder in the composition does not count as a DDS subscriber of the topics it takes
+    from the bus; it ignores the DDS copies it also receives and records every step once.
+    """
+    steps = 3000
+    echo = subprocess.Popen([sys.executable, '-c', ECHO, interface.TCP_STATE],
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            cwd=ROOT)
+    try:
+        assert echo.stdout.readline().strip() == 'ready'
+        path = _scenario(tmp_path, steps, record=True)
+        doc = yaml.safe_load(path.read_text())
+        doc['plant']['ros__parameters']['wait_for_subscribers'].append('echo')  # discovered
+        path.write_text(dump_params(doc))
+        _, counts = _composed(tmp_path, path, 'events')
+    finally:
+        echo.kill()
+        echo.wait()
+    assert counts.get(interface.TCP_STATE, 0) > 0, counts
+    others = [t for t in STEP_TOPICS if t != interface.TCP_STATE]
+    assert {t: counts.get(t, 0) for t in others} == dict.fromkeys(others, 0), counts
+    bag = open_bag(tmp_path / 'bags' / 'run')
+    every_step = np.arange(steps) * round(1e9 / RATE)
+    for topic in STEP_TOPICS:
+        assert np.array_equal(bag.topic(topic).log_time_ns, every_step), topic
