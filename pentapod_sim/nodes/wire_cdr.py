@@ -12,8 +12,9 @@ writes the same (little-endian XCDR1, encapsulation header ``00 01 00 00``, zero
 serialises it and pads the end.
 
 The per-step types of a run, sensor_msgs/JointState and rosgraph_msgs/Clock, take a direct path
-(:class:`JointStateCdr`, :func:`clock_cdr`, about 4x faster here): the same layout written with
-``struct``, the header and names block cached per name list. test/test_wire_cdr.py checks them
+(:class:`JointStateCdr`, :func:`clock_cdr`; hand-written because the recorder pays it per
+step: bench/bench_wire_cdr.py measures it against rosbags' serialiser): the same layout
+written with ``struct``, the header and names block cached per name list. test/test_wire_cdr.py checks them
 against rosbags' serialiser, test/test_composed_handoff.py against a DDS recorder's bag.
 """
 from __future__ import annotations
