@@ -14,8 +14,9 @@ serialises it and pads the end.
 The per-step types of a run, sensor_msgs/JointState and rosgraph_msgs/Clock, take a direct path
 (:class:`JointStateCdr`, :func:`clock_cdr`; hand-written because the recorder pays it per
 step: bench/bench_wire_cdr.py measures it against rosbags' serialiser): the same layout
-written with ``struct``, the header and names block cached per name list. test/test_wire_cdr.py checks them
-against rosbags' serialiser, test/test_composed_handoff.py against a DDS recorder's bag.
+written with ``struct``, the header and names block cached per name list.
+test/test_wire_cdr.py checks them against rosbags' serialiser, test/test_composed_handoff.py
+against a DDS recorder's bag.
 """
 from __future__ import annotations
 
