@@ -14,10 +14,13 @@ from pathlib import Path
 import sys
 import time
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))   # run from a checkout
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))                 # run from a checkout
+sys.path.insert(0, str(ROOT / 'test'))        # the reference serialiser (rosbags)
 from sensor_msgs.msg import JointState  # noqa: E402
 
-from pentapod_sim.nodes.wire_cdr import WireCdr  # noqa: E402
+from fixtures.rosbags_cdr import RosbagsCdr  # noqa: E402
+from pentapod_sim.nodes.wire_cdr import serializer  # noqa: E402
 
 
 def _messages(n: int) -> list:
@@ -41,7 +44,7 @@ def _rate(serialise, messages) -> float:
 def run(quick: bool) -> list[dict]:
     """One row: direct path against rosbags' serialiser, best of 3 alternating."""
     messages = _messages(2000 if quick else 20000)
-    direct, library = WireCdr(JointState), WireCdr(JointState, direct=False)
+    direct, library = serializer(JointState), RosbagsCdr(JointState)
     if any(direct(m) != library(m) for m in messages[:200]):
         raise RuntimeError('the direct path and rosbags give different bytes')
     best = {'direct': 0.0, 'rosbags': 0.0}

@@ -13,7 +13,8 @@ from rclpy.serialization import deserialize_message
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
-from pentapod_sim.nodes.wire_cdr import WireCdr
+from fixtures.rosbags_cdr import RosbagsCdr
+from pentapod_sim.nodes.wire_cdr import serializer
 
 
 def _joint_states(rng):
@@ -31,7 +32,7 @@ def _joint_states(rng):
 
 def test_joint_state_direct_path_equals_rosbags():
     rng = np.random.default_rng(5)
-    direct, general = WireCdr(JointState), WireCdr(JointState, direct=False)
+    direct, general = serializer(JointState), RosbagsCdr(JointState)
     count = 0
     for msg in _joint_states(rng):
         data = direct(msg)
@@ -48,6 +49,12 @@ def test_joint_state_direct_path_equals_rosbags():
 def test_clock_direct_path_equals_rosbags(sec, nanosec):
     msg = Clock()
     msg.clock.sec, msg.clock.nanosec = sec, nanosec
-    data = WireCdr(Clock)(msg)
-    assert data == WireCdr(Clock, direct=False)(msg) and len(data) == 12
+    data = serializer(Clock)(msg)
+    assert data == RosbagsCdr(Clock)(msg) and len(data) == 12
     assert deserialize_message(data, Clock) == msg
+
+
+def test_types_without_a_direct_serialiser_stay_on_dds():
+    """The recorder takes from the bus only what it can write as DDS delivers it."""
+    from geometry_msgs.msg import WrenchStamped
+    assert serializer(WrenchStamped) is None

@@ -40,7 +40,7 @@ from pentapod_sim import interface, shutdown
 from pentapod_sim.errors import BagError, ConfigError
 from pentapod_sim.nodes.common import declare_table, node_args, run_node
 from pentapod_sim.nodes.parameter_tables import RECORDER
-from pentapod_sim.nodes.wire_cdr import type_name, WireCdr
+from pentapod_sim.nodes.wire_cdr import serializer, type_name
 from pentapod_sim.recording import BagWriter, qos_profile
 from pentapod_sim.recording.msgdefs import has_header_stamp
 from pentapod_sim.recording.run_end import RunStatus, shortfalls, StepLedger
@@ -177,10 +177,9 @@ class RecorderNode(Node):
         for topic, cls in topics.items():
             if not self._selected(topic) or topic == interface.RUN_STATUS:
                 continue
-            try:
-                cdr = WireCdr(cls)
-            except KeyError:
-                continue    # a type rosbags does not know: stays on DDS
+            cdr = serializer(cls)
+            if cdr is None:
+                continue    # no direct serialiser for this type: it stays on DDS
             record = self._record(topic, type_name(cls))
             self.from_bus.add(topic)
             bus.subscribe(topic, lambda msg, record=record, cdr=cdr: record(cdr(msg)),
