@@ -291,7 +291,9 @@ def test_run_status_passes_the_plant_status_through(run, view):
     assert final['sim_time'] == pytest.approx((STEPS - 1) / RATE)
     assert final['steps_per_second'] == float(last['step_rate'])
     assert final['deadline_misses'] == 0 == int(last['deadline_misses'])    # lockstep
-    assert final['rejected_messages'] == 0 == int(last['rejected_messages'])
+    # passed through; under the test's CPU load the plant may reject stale copies of answers
+    # to a re-published step (by design), so the count need not be 0
+    assert final['rejected_messages'] == int(last['rejected_messages'])
     # the plant's run-status messages are forwarded as they were recorded, byte for byte
     forwarded = [payload for _, payload in seen['client'].of_topic(interface.RUN_STATUS)]
     in_bag = {bytes(p) for p in run['bag'].topic(interface.RUN_STATUS).payloads}

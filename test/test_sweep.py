@@ -107,9 +107,17 @@ def test_two_worker_cluster_equals_serial_loop_and_survives_a_failing_task(setti
     assert np.allclose([again[0][a] for a in 'xyzab'], poison)
 
 
+#: Ten more reachable poses for the interruption test: enough work left after the first pose's
+#: file that the SIGINT always lands mid-run, even when a loaded machine delays the test's poll.
+MORE_DEG = [(0.01 * i, 0.01 * i, 0.85, 0.0, 0.0) for i in range(1, 11)]
+
+
 def test_interrupted_sweep_resumes_without_recomputing(settings, serial, tmp_path):
     """Ctrl-C stops a running sweep; the rerun skips every pose whose file was written."""
-    cmd = [sys.executable, '-m', 'pentapod_damper.sweep', *POSE_ARGS, '--scenarios',
+    poses_deg = POSES_DEG + MORE_DEG
+    poses = np.array([[x, y, z, np.radians(a), np.radians(b)] for x, y, z, a, b in poses_deg])
+    cmd = [sys.executable, '-m', 'pentapod_damper.sweep',
+           *['--pose=' + ','.join(map(str, q)) for q in poses_deg], '--scenarios',
            ','.join(SCENARIOS), '--n-points', str(N_POINTS), '--out', str(tmp_path),
            '--workers', '2', '--no-plots', '--no-progress']
     proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
@@ -124,17 +132,19 @@ def test_interrupted_sweep_resumes_without_recomputing(settings, serial, tmp_pat
     assert proc.returncode == 130, output
     assert 'run the same command again to resume' in output
     before = {p.name: p.stat().st_mtime_ns for p in results.glob('*.parquet')}
-    assert 1 <= len(before) < 6, 'the sweep was not interrupted midway'
+    assert 1 <= len(before) < len(poses), 'the sweep was not interrupted midway'
     done_keys = set(_rows(tmp_path, settings))
     computed = []
-    report = run_sweep(POSES, settings, tmp_path, serial=True, progress=False,
+    report = run_sweep(poses, settings, tmp_path, serial=True, progress=False,
                        on_rows=computed.extend)
     assert report.skipped == len(before)
     assert {r['key'] for r in computed}.isdisjoint(done_keys)
-    assert len(computed) == 6 - len(before)
+    assert len(computed) == len(poses) - len(before)
     assert all(p.stat().st_mtime_ns == before[p.name] for p in results.glob('*.parquet')
                if p.name in before)
-    _assert_same(serial[1], _rows(tmp_path, settings))
+    rows = _rows(tmp_path, settings)
+    assert len(rows) == len(poses)
+    _assert_same(serial[1], {k: r for k, r in rows.items() if k in serial[1]})
 
 
 def test_unreachable_pose_is_recorded_with_the_violated_limit(serial):
