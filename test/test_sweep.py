@@ -120,8 +120,11 @@ def test_interrupted_sweep_resumes_without_recomputing(settings, serial, tmp_pat
            *['--pose=' + ','.join(map(str, q)) for q in poses_deg], '--scenarios',
            ','.join(SCENARIOS), '--n-points', str(N_POINTS), '--out', str(tmp_path),
            '--workers', '2', '--no-plots', '--no-progress']
+    # a suite started as a background job of a non-interactive shell runs with SIGINT ignored,
+    # and a child inherits that; a user's Ctrl-C reaches a sweep with the default handling
     proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                            text=True)
+                            text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     results = tmp_path / 'results'
     deadline = time.monotonic() + 240
     while not list(results.glob('*.parquet')) and proc.poll() is None:   # first task done
