@@ -11,7 +11,7 @@ and its exact TCP peak reduction is computed
 (:class:`pentapod_damper.study.analytic.SampledPairFrf`, searched at the resonances) against the
 exact open-loop peak. ``--try order,bandwidth_hz,delay_steps`` replaces the scenario's dynamics
 to compare candidates; ``--markdown`` prints the table of
-docs/statespace.md ("Default dynamics per damper type"), which test/test_damping_table.py
+docs/statespace.md ("Default dynamics per damper type"), which test/test_damper_dynamics.py
 checks against this code.
 
     python -m pentapod_damper.study.dynamics [--positions P1,P2] [--scenarios a,b]
@@ -25,6 +25,7 @@ import argparse
 import sys
 
 from pentapod_damper.laws import Dynamics, ViscousDamper
+from pentapod_damper.node_parameters import DAMPER, DYNAMICS_PARAMS
 from pentapod_damper.scenario_laws import scenario_laws
 from pentapod_damper.study.analytic import SampledPairFrf
 from pentapod_damper.study.config import load_study_config
@@ -41,9 +42,10 @@ SCENARIOS = ('strut_damping_all', 'strut_damping_12', 'strut_chord_damping_all',
              'strut_chord_damping_12', 'axial_damping', 'tcp_damping')
 
 
-#: Node parameters that set a damper's gains and dynamics; the ideal variant drops them.
-_LAW_KEYS = ('bending_gain', 'chord_gain', 'axial_gain', 'tcp_gain', 'filter_order',
-             'bandwidth_hz', 'filter_damping', 'delay_steps', 'filter_hold')
+#: Damper node parameters that set its gains and dynamics (from the node's table); the ideal
+#: variant drops them, so the node's defaults apply.
+_LAW_KEYS = frozenset([p.name for p in DYNAMICS_PARAMS]
+                      + [p.name for p in DAMPER.params if p.name.endswith('_gain')])
 
 
 def ideal_laws(scenario: str, dt: float) -> list:
