@@ -17,6 +17,11 @@ messages (docs/architecture.md, docs/nodes.md):
   subscribed): the N full-rate TCP samples of exchange k in one message, stamp t_k, joints
   ``tcp_{x,y,z}@j`` (j = 0..N-1, sample time t_k + j dt / N), position [m], velocity [m/s]
   (:func:`fullrate_layout`).
+* ``/pentapod/live/batch/<topic>`` (:func:`display_batch_topic`; published only while
+  subscribed, by the live view): the *display batches* of the state topics and of every force
+  source's topic, M steps (the plant's ``display_batch_period``) in one JointState, stamp of
+  the first step, joints ``<joint>@j`` for step j of the batch (:func:`batch_layout`), the
+  fields of the per-step topic, header.frame_id the step dt [s] as ``repr(dt)``.
 
 A quantity the model lacks is published as NaN.
 """
@@ -66,8 +71,12 @@ NO_LINEAR_MODEL = 'no linear model'
 #: :func:`pentapod_sim.sim.excitation_spec.spec_message`, which
 #: :func:`pentapod_sim.analysis.excitation_record.excitation_of` reads back from a bag.
 EXCITATION_SPEC_PREFIX = '/pentapod/excitation_spec/'
-#: Channels only the live view serves (Foxglove WebSocket, not ROS topics): its derived data.
+#: Channels only the live view serves (Foxglove WebSocket, not ROS topics): its derived data;
+#: and the plant's display batches, ROS topics only the live view reads (a recorder skips them).
 LIVE_PREFIX = '/pentapod/live/'
+#: The plant's display batch of a per-step topic ``/pentapod/<name>`` is
+#: ``DISPLAY_BATCH_PREFIX + <name>`` (:func:`display_batch_topic`).
+DISPLAY_BATCH_PREFIX = LIVE_PREFIX + 'batch/'
 #: Run status (sensor_msgs/JointState, one joint per figure: pentapod_sim.live.status).
 LIVE_STATUS = '/pentapod/live/status'
 #: Running amplitude spectrum of the TCP response: ``TCP_SPECTRUM_PREFIX + 'frequency'`` [Hz]
@@ -129,6 +138,26 @@ def tcp_spectrum_topic(name: str) -> str:
     return TCP_SPECTRUM_PREFIX + name
 
 
+def has_display_batch(topic: str) -> bool:
+    """True for a per-step topic whose values the plant also publishes in display batches."""
+    return topic in STATE_TOPICS or topic.startswith(FORCE_PREFIX)
+
+
+def display_batch_topic(topic: str) -> str:
+    """The display-batch topic of a state or force topic (ValueError for other topics)."""
+    if not has_display_batch(topic):
+        raise ValueError(f'{topic} has no display batch (state and force topics have)')
+    return DISPLAY_BATCH_PREFIX + topic[len(NAMESPACE):]
+
+
+def batched_topic(topic: str) -> str | None:
+    """The per-step topic a display-batch topic carries; None for any other topic."""
+    if not topic.startswith(DISPLAY_BATCH_PREFIX):
+        return None
+    origin = NAMESPACE + topic[len(DISPLAY_BATCH_PREFIX):]
+    return origin if has_display_batch(origin) else None
+
+
 def is_testbed_topic(topic: str) -> bool:
     """True for /clock and every topic under the testbed namespace."""
     return topic == CLOCK or topic.startswith(NAMESPACE)
@@ -167,12 +196,13 @@ STREAM_DEPTH = int(math.ceil((RECORDER_STALL + REPAIR_TIME) * MAX_SHIPPED_RATE))
 #: QoS per class of topic: plant outputs and /clock ('state'), forces from the sources
 #: ('force'; one message per step), diagnostics such as PMA state and excitation ('info'), the
 #: run status ('status': the last one kept for a late reader) and the sources' controller models
-#: ('model': published once, kept for a late reader) and the exciters' signal parameters
-#: ('spec': published once, kept for a late reader).
+#: ('model': published once, kept for a late reader), the exciters' signal parameters
+#: ('spec': published once, kept for a late reader) and the plant's display batches
+#: ('display': one message per ``display_batch_period``, read best effort by the live view).
 QOS = {'state': QosSpec(STREAM_DEPTH), 'force': QosSpec(STREAM_DEPTH),
        'info': QosSpec(STREAM_DEPTH), 'status': QosSpec(4, durability='transient_local'),
        'model': QosSpec(1, durability='transient_local'),
-       'spec': QosSpec(1, durability='transient_local')}
+       'spec': QosSpec(1, durability='transient_local'), 'display': QosSpec(100)}
 
 
 def qos_class(topic: str) -> str | None:
@@ -187,6 +217,8 @@ def qos_class(topic: str) -> str | None:
         return 'model'
     if topic.startswith(EXCITATION_SPEC_PREFIX):
         return 'spec'
+    if batched_topic(topic) is not None:
+        return 'display'
     return 'status' if topic == RUN_STATUS else None
 
 
@@ -274,6 +306,29 @@ def state_layouts(output_names: Sequence[str]) -> list[TopicLayout]:
     return layouts
 
 
+def batch_layout(layout: TopicLayout, row_length: int, rows: int, topic: str) -> TopicLayout:
+    """
+    Layout of ``rows`` samples of ``layout`` in one message, on the flattened (rows, n) array.
+
+    Sample j (row j of an array whose rows have ``row_length`` values) becomes the joints
+    ``<joint>@<j>``, in the order of ``layout``'s joints, sample after sample.
+    """
+    offsets = np.arange(rows)[:, None] * row_length
+
+    def flat(index):
+        return np.where(index < 0, -1, offsets + index).reshape(-1)
+    return TopicLayout(topic, [f'{j}@{s}' for s in range(rows) for j in layout.joints],
+                       flat(layout.position_index), flat(layout.velocity_index))
+
+
+def split_batch_name(name: str) -> tuple[str, int]:
+    """``('tcp_x', 3)`` for the batched joint name ``'tcp_x@3'`` (ValueError if not one)."""
+    joint, at, sample = name.rpartition('@')
+    if not at or not joint or not sample.isdigit():
+        raise ValueError(f'{name!r} is no batched joint name <joint>@<sample>')
+    return joint, int(sample)
+
+
 def fullrate_layout(output_names: Sequence[str], substeps: int) -> TopicLayout | None:
     """
     Layout of :data:`TCP_STATE_FULLRATE` on the flattened (N, n_out) full-rate outputs.
@@ -284,13 +339,7 @@ def fullrate_layout(output_names: Sequence[str], substeps: int) -> TopicLayout |
     tcp = next((lay for lay in state_layouts(output_names) if lay.topic == TCP_STATE), None)
     if tcp is None:
         return None
-    n_out, rows = len(output_names), np.arange(substeps)[:, None]
-
-    def flat(index):
-        return np.where(index < 0, -1, rows * n_out + index).reshape(-1)
-    return TopicLayout(TCP_STATE_FULLRATE, [f'{j}@{s}' for s in range(substeps)
-                                            for j in tcp.joints],
-                       flat(tcp.position_index), flat(tcp.velocity_index))
+    return batch_layout(tcp, len(output_names), substeps, TCP_STATE_FULLRATE)
 
 
 def stamp_ns(step: int, dt: float) -> int:

@@ -39,7 +39,8 @@ SPECTRUM_N = 1024
 SOURCES = ['exciter', 'damper_tcp', 'pma']
 #: Live views of the run: node name -> (extra parameters, share of the display windows that
 #: must arrive). The starved one polls every 0.5 s into 40-message histories, so it loses
-#: messages for sure.
+#: messages of the per-step topics (excitation, PMA state) for sure; the plant's display
+#: batches (50 steps each) fit.
 VIEWS = {'live_view': ((), 0.5),
          'starved_view': (('queue_depth:=40', 'tick_period:=0.5'), 0.02)}
 MIN_SHOWN = VIEWS['live_view'][1]

@@ -3,7 +3,8 @@ The live view's worker: topic streams in, Foxglove WebSocket channels out (ROS-f
 
 :class:`LiveHub` owns the foxglove-sdk WebSocket server and a worker thread. Every
 ``tick_period`` the worker calls the node's ``poll`` (which takes the raw CDR bytes its
-subscriptions hold into the :class:`TopicStream` backlogs), decodes the backlogs, downsamples
+subscriptions hold into the :class:`TopicStream` backlogs; the plant's state and force topics
+arrive as its display batches, :class:`BatchStream`), decodes the backlogs, downsamples
 them to min/max envelopes, updates the TCP spectrum and the run status (passing the plant's
 run-status messages through, :meth:`LiveHub.add_run_status`) and logs the results on Foxglove
 channels whose schemas are
@@ -30,7 +31,7 @@ from pentapod_sim import interface
 from pentapod_sim.errors import ConfigError
 from pentapod_sim.live.spectrum import RunningSpectrum
 from pentapod_sim.live.status import RunStatus, STATUS_NAMES
-from pentapod_sim.live.streams import Shape, TopicStream
+from pentapod_sim.live.streams import BatchStream, Shape, TopicStream
 from pentapod_sim.parameters import Values
 from pentapod_sim.recording.msgdefs import message_definition
 
@@ -123,9 +124,15 @@ class LiveHub:
         self.channels[topic] = channel
         return channel
 
-    def add_topic(self, topic: str, msg_type: str) -> TopicStream:
-        """Serve a topic: make its stream and its Foxglove channel."""
-        stream = TopicStream(topic, msg_type, self.period_ns, self.p.queue_depth)
+    def add_topic(self, topic: str, msg_type: str, batched: bool = False) -> TopicStream:
+        """
+        Serve a topic: make its stream and its Foxglove channel.
+
+        ``batched``: the stream takes the plant's display batches of the topic
+        (:class:`BatchStream`) instead of its per-step messages.
+        """
+        kind = BatchStream if batched else TopicStream
+        stream = kind(topic, msg_type, self.period_ns, self.p.queue_depth)
         self._channel(topic, msg_type)
         self.streams[topic] = stream
         return stream

@@ -9,6 +9,11 @@ lockstep plant re-sends while it waits, notices a new run (stamps going back) an
 envelope downsampler. Supported types: sensor_msgs/JointState (columns: the joints' position,
 then velocity, then effort values, for the fields the messages carry) and
 geometry_msgs/WrenchStamped (force x, y, z, torque x, y, z).
+
+A :class:`BatchStream` gets a state or force topic from the plant's display batches
+(:mod:`pentapod_sim.nodes.display_batch`: M steps per JointState, joints ``<joint>@j``) and
+unpacks them into the per-step samples the topic carries, stamps included, so the rest of the
+view cannot tell the two apart.
 """
 from __future__ import annotations
 
@@ -28,6 +33,7 @@ from pentapod_sim.analysis.cdr_arrays import (
     wrench_arrays,
 )
 from pentapod_sim.errors import BagError
+from pentapod_sim.interface import split_batch_name, stamp_ns, step_of
 from pentapod_sim.live.envelope import EnvelopeDownsampler, Sample
 
 #: Message types the live view downsamples.
@@ -182,3 +188,93 @@ class TopicStream:
         """Forget the run: envelope window and newest stamp."""
         self.envelope.reset()
         self.last_stamp = -1
+
+
+@dataclass
+class BatchLayout:
+    """One layout of display-batch messages: where their values are and what they mean."""
+
+    length: int                          # message bytes
+    structure: npt.NDArray[np.intp]      # bytes that define the layout
+    reference: npt.NDArray[np.uint8]     # their values
+    dt: float                            # step [s] (header.frame_id)
+    joints: list[str]                    # per-step joints
+    samples: int                         # steps per message
+    fields: list[tuple[str, int]]        # (field, byte offset), fields present
+
+
+class BatchStream(TopicStream):
+    """
+    A per-step topic served from the plant's display batches of it.
+
+    ``topic`` is the per-step topic (the channel name); the node subscribes to its display
+    batch topic (:func:`pentapod_sim.interface.display_batch_topic`) and offers those
+    messages. Decoding yields the per-step stamps and values; a lost batch counts its samples
+    in ``dropped``. Served messages have an empty frame_id, as the plant's state messages and
+    the sources' force messages have.
+    """
+
+    def __init__(self, topic: str, msg_type: str, period_ns: int, backlog: int):
+        super().__init__(topic, msg_type, period_ns, backlog)
+        self.samples = 1                  # steps per message, as last decoded
+        self._layout: BatchLayout | None = None
+
+    def offer(self, data: bytes, sequence: int | None = None) -> None:
+        """Queue one batch; lost or dropped batches count their steps in ``dropped``."""
+        if sequence is not None:
+            if self.sequence is not None and sequence > self.sequence + 1:
+                self.dropped += (sequence - self.sequence - 1) * self.samples
+            self.sequence = sequence
+        if len(self.queue) >= self.backlog:
+            self.dropped += self.samples
+            return
+        self.queue.append(data)
+
+    def _parse(self, data: bytes) -> BatchLayout:
+        """The layout of one batch (BagError if it is none)."""
+        lay = self._layout
+        if (lay is not None and len(data) == lay.length and np.array_equal(
+                np.frombuffer(data, dtype=np.uint8)[lay.structure], lay.reference)):
+            return lay
+        parsed = joint_state_layout(data)
+        names = parsed.names
+        try:
+            dt = float(frame_id(data))
+            split = [split_batch_name(n) for n in names]
+        except ValueError as err:
+            raise BagError(f'{self.topic}: not a display batch: {err}') from None
+        joints = [j for j, sample in split if sample == 0]
+        samples = len(names) // max(len(joints), 1)
+        if not joints or names != [f'{j}@{s}' for s in range(samples) for j in joints]:
+            raise BagError(f'{self.topic}: joints {names[:4]}... are no display batch')
+        fields = [(f, offset) for f, (offset, count) in parsed.arrays.items() if count]
+        if any(parsed.arrays[f][1] != len(names) for f, _ in fields) or not dt > 0:
+            raise BagError(f'{self.topic}: malformed display batch')
+        structure = parsed.structure
+        lay = self._layout = BatchLayout(len(data), structure,
+                                         np.frombuffer(data, dtype=np.uint8)[structure].copy(),
+                                         dt, joints, samples, fields)
+        return lay
+
+    def decode(self, batch: list[bytes]) -> tuple[npt.NDArray[np.int64],
+                                                  npt.NDArray[np.float64]]:
+        """Per-step stamps [ns] and value rows of a backlog of batches."""
+        all_stamps, all_rows = [], []
+        for data, first in zip(batch, stamps_ns(batch)):
+            lay = self._parse(data)
+            if self.shape is None:
+                self.shape = Shape('', list(lay.joints),
+                                   [(f, len(lay.joints)) for f, _ in lay.fields])
+            elif lay.joints != self.shape.names or [f for f, _ in lay.fields] != [
+                    f for f, _ in self.shape.fields]:
+                raise BagError(f'{self.topic}: batch joints {lay.joints} differ from '
+                               f'{self.shape.names}')
+            self.samples = lay.samples
+            k0 = step_of(int(first), lay.dt)
+            all_stamps.append(np.array([stamp_ns(k0 + j, lay.dt) for j in range(lay.samples)],
+                                       dtype=np.int64))
+            count = lay.samples * len(lay.joints)
+            parts = [np.frombuffer(data, dtype='<f8', count=count, offset=offset).reshape(
+                lay.samples, len(lay.joints)) for _, offset in lay.fields]
+            all_rows.append(np.hstack(parts))
+        return np.concatenate(all_stamps), np.vstack(all_rows)

@@ -1,5 +1,5 @@
 """
-Full-rate outputs of a multi-rate plant node: into the trace, and batched onto a topic.
+Full-rate outputs of a multi-rate plant node (trace, batched topic); the display batches.
 
 With ``substeps`` N > 1 the plant integrates N exact ZOH substeps per exchange
 (:class:`pentapod_sim.sim.multirate.MultiRatePlant`); the states go out once per exchange as
@@ -13,6 +13,10 @@ waits for its last step like the other per-step topics, and the bag readers know
 pre-built message with 3N joints costs about 31 us per exchange with a subscriber here, a
 std_msgs/Float64MultiArray (no stamp) 21 us, N JointStates per exchange 1,300-1,900 us
 (N = 10; /tmp measurement, see the report of issue 12 item 3).
+
+The same per-step hook feeds the plant's display batches (:mod:`.display_batch`): every
+``display_batch_period`` one message per state topic and per force source, for the live view,
+published only while subscribed.
 """
 from __future__ import annotations
 
@@ -23,16 +27,21 @@ from sensor_msgs.msg import JointState
 
 from pentapod_sim.interface import fullrate_layout, stamp_ns, TCP_STATE_FULLRATE
 from pentapod_sim.nodes.common import stamp_msg, STATE_QOS
+from pentapod_sim.nodes.display_batch import DisplayBatches
 
 
 class FullRateOutputs:
     """
-    The plant node's full-rate outputs (nothing at all for a single-rate plant).
+    The plant node's full-rate outputs (none for a single-rate plant) and display batches.
+
+    The display batches are :class:`~pentapod_sim.nodes.display_batch.DisplayBatches`,
+    attribute ``display``.
 
     Parameters
     ----------
     node : rclpy.node.Node
-        The plant node (creates the publisher when N > 1 and the model has TCP outputs).
+        The plant node (creates the publisher when N > 1 and the model has TCP outputs; its
+        ``mixer`` and parameter ``display_batch_period`` make the display batches).
     core : DiscretePlant or MultiRatePlant
         The plant core.
     """
@@ -47,15 +56,23 @@ class FullRateOutputs:
         self.msg = JointState(name=self.layout.joints) if self.layout else None
         self.active = False
         self._rows = np.empty((self.substeps, len(core.output_names)))
+        self.display = DisplayBatches(node, core, node.mixer, node.params.display_batch_period)
+        self._context = node.context
 
     def refresh(self) -> None:
-        """Note whether the topic has a subscriber (called with the plant's own refresh)."""
+        """Note whether the topics have subscribers (called with the plant's own refresh)."""
         self.active = self.pub is not None and self.pub.get_subscription_count() > 0
+        self.display.refresh()
 
     @property
     def publishers(self) -> list:
-        """The publisher, if any (for the plant's subscriber waits and acks)."""
-        return [self.pub] if self.pub is not None else []
+        """The publishers (for the plant's subscriber waits and acks)."""
+        return ([self.pub] if self.pub is not None else []) + self.display.publishers
+
+    def flush(self) -> None:
+        """Publish the open display batch (the run ended; not after the context shut down)."""
+        if self._context.ok():
+            self.display.flush()
 
     def active_topics(self) -> list[str]:
         """The topic, if it is published every exchange now."""
@@ -63,12 +80,13 @@ class FullRateOutputs:
 
     def record(self, k: int, y: np.ndarray, u: np.ndarray, trace) -> None:
         """
-        Record exchange k: ``trace.record(k, y, u)``, plus its full-rate outputs if wanted.
+        Record exchange k: trace, display batches, and the full-rate outputs if wanted.
 
         Call between ``outputs`` (y_k) and ``advance`` (u_k). The full-rate outputs are
         computed only if the trace keeps them or the topic has a subscriber.
         """
         trace.record(k, y, u)
+        self.display.record(k, y)
         full = trace.full
         if not self.active and full is None:
             return

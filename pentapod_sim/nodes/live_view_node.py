@@ -1,14 +1,19 @@
 """
 Live view node: serves the testbed topics to Foxglove over its WebSocket protocol.
 
-A thin rclpy adapter around :class:`pentapod_sim.live.hub.LiveHub`. It subscribes to every
-testbed topic of type JointState or WrenchStamped (found at start and by discovery) with raw
-(CDR bytes) subscriptions that no executor serves: they sit in a callback group the executor
-never waits on (:class:`PolledGroup`), and the hub's worker thread takes what they hold once
-every ``tick_period`` (:meth:`LiveViewNode.take`). So the process does no work per message
-in Python and wakes at its own pace, not the plant's; decoding, downsampling and the WebSocket
-work run on the same worker thread, and every thread of the process runs at a lower priority
-(``nice``). The subscriptions are best effort by default: the plant's reliable KEEP_LAST
+A thin rclpy adapter around :class:`pentapod_sim.live.hub.LiveHub`. It serves every testbed
+topic of type JointState or WrenchStamped (found at start and by discovery); the plant's state
+topics and the sources' force topics it takes from the plant's display batches
+(:mod:`pentapod_sim.nodes.display_batch`, one message per ``display_batch_period`` carrying
+every step), never per step, so the plant publishes no per-step message for the view and the
+sources send it nothing (the full-rate TCP topic of a multi-rate plant is served only if named
+in ``topics``: subscribing would make the plant compute and publish it every exchange). The
+subscriptions are raw (CDR bytes) and no executor serves them: they sit in a callback group the
+executor never waits on (:class:`PolledGroup`), and the hub's worker thread takes what they
+hold once every ``tick_period`` (:meth:`LiveViewNode.take`). So the process does no work per
+message in Python and wakes at its own pace, not the plant's; decoding, downsampling and the
+WebSocket work run on the same worker thread, and every thread of the process runs at a lower
+priority (``nice``). The subscriptions are best effort by default: the plant's reliable KEEP_LAST
 writers then neither keep, resend nor wait for acknowledgements for the live view, so a slow or
 stalled live view cannot hold up the lockstep loop (it loses display samples instead, counted
 in the run status from the gaps in the publishers' sequence numbers). The plant's run status
@@ -41,6 +46,9 @@ from pentapod_sim.nodes.common import declare_table, node_args, qos, run_node, s
 MESSAGE_CLASSES = {interface.JOINT_STATE: JointState, interface.WRENCH_STAMPED: WrenchStamped}
 #: Topics subscribed at start, before any publisher exists (others come by discovery).
 KNOWN_TOPICS = (*interface.STATE_TOPICS, interface.EXCITATION, interface.PMA_STATE)
+#: Testbed topics served only when named in ``topics``: /clock (no values), the full-rate TCP
+#: samples (a multi-rate plant computes and publishes them every exchange while subscribed).
+NOT_BY_DEFAULT = (interface.CLOCK, interface.TCP_STATE_FULLRATE)
 
 
 class RclpyEncoder:
@@ -113,12 +121,16 @@ class LiveViewNode(Node):
             return False
         if self.params.topics:
             return topic in self.params.topics
-        return interface.is_testbed_topic(topic) and topic != interface.CLOCK
+        return interface.is_testbed_topic(topic) and topic not in NOT_BY_DEFAULT
 
     def discover(self) -> None:
         """Subscribe to selected topics that appeared (JointState and WrenchStamped only)."""
         for topic, types in self.get_topic_names_and_types():
+            topic = interface.batched_topic(topic) or topic     # a display batch: its topic
             if topic in self.subs or not self._selected(topic):
+                continue
+            if interface.has_display_batch(topic):
+                self._subscribe(topic, interface.JOINT_STATE)
                 continue
             if types[0] not in SUPPORTED_TYPES:
                 self.subs[topic] = None     # not served; do not look again
@@ -126,12 +138,16 @@ class LiveViewNode(Node):
             self._subscribe(topic, types[0])
 
     def _subscribe(self, topic: str, msg_type: str) -> None:
-        stream = self.hub.add_topic(topic, msg_type)
-        sub = self.create_subscription(MESSAGE_CLASSES[msg_type], topic, stream.offer,
+        """Serve ``topic``: from its display batches if the plant makes them, else per step."""
+        batched = interface.has_display_batch(topic)
+        source = interface.display_batch_topic(topic) if batched else topic
+        stream = self.hub.add_topic(topic, msg_type, batched=batched)
+        sub = self.create_subscription(MESSAGE_CLASSES[msg_type], source, stream.offer,
                                        self.qos, raw=True, callback_group=self.group)
         self.subs[topic] = sub
         self.polled.append((stream, sub))
-        self.get_logger().info(f'serving {topic} [{msg_type}]')
+        self.get_logger().info(f'serving {topic} [{msg_type}]' + (
+            f' from {source}' if batched else ''))
 
     def take(self) -> None:
         """Move every message the subscriptions hold into the streams (the hub's worker)."""

@@ -85,6 +85,10 @@ PLANT = ParameterTable('plant', [
     Param('status_period', 'float', 0.5, 'wall time between run-status messages during a run '
           '(/pentapod/run_status: steps, step_rate, deadline_misses, rejected_messages)', 's',
           0.01, 3600.0),
+    Param('display_batch_period', 'float', 0.01, 'simulated time per message of the display '
+          'batches (/pentapod/live/batch/*, published only while subscribed, e.g. by the '
+          'live view): one sensor_msgs/JointState per state topic and per force source carries '
+          'the values of round(display_batch_period / dt) steps (at least 1)', 's', 0.0, 10.0),
 ], summary='integrates the modal plant; publishes /clock and the state topics, applies the '
            'forces of its sources.')
 

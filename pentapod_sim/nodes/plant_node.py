@@ -377,6 +377,7 @@ def run(node: PlantNode, executor) -> None:
     finally:
         wall = time.monotonic() - wall
         node.status.stop()
+        node.fullrate.flush()
         if shutdown.requested():
             end = f'stopped by {shutdown.signal_name()}'
         node.announce(interface.RUN_FINISHED if node.core.k == node.n_steps

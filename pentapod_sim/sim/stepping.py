@@ -253,6 +253,7 @@ class ForceMixer:
         n = len(self.input_names)
         self.latest = {name: np.zeros(n) for name in self.sources}
         self.latest_step = dict.fromkeys(self.sources, -1)
+        self.latest_names: dict[str, Sequence[str]] = dict.fromkeys(self.sources, ())
 
     def _indices(self, source: str, names: tuple[str, ...]) -> npt.NDArray[np.intp] | str:
         """Map port names to input indices (cached per name tuple) or return a reject reason."""
@@ -302,6 +303,7 @@ class ForceMixer:
         vec[:] = 0.0
         vec[self._cache[(source, tuple(names))]] = values
         self.latest_step[source] = step
+        self.latest_names[source] = names      # the ports of latest[source], message order
         self.accepted[source] += 1
         return None
 
