@@ -45,6 +45,8 @@ EXCITER = {'kind': 'random', 'amplitude': 20.0, 'direction': [1.0, 0.5, 0.0],
            'f_start': 5.0, 'f_end': 300.0, 'duration': 2.0, 'seed': 3}
 SOURCES = ['exciter', 'damper', 'pma']
 STEP_TOPICS = [interface.CLOCK, *interface.STATE_TOPICS, *map(force_topic, SOURCES)]
+#: Per-step topics the hand-off carries: those, and the sources' diagnostics.
+BUS_TOPICS = [*STEP_TOPICS, interface.EXCITATION, interface.PMA_STATE]
 
 #: A composed run with every rclpy publish counted per topic (JSON file, argv[2]).
 COUNTING = r"""
@@ -127,15 +129,16 @@ def test_composed_sources_take_the_plants_messages_without_dds(tmp_path, executo
     No outside subscriber: no per-step message goes through DDS, the trace is the offline one.
 
     Without the hand-off every step publishes /clock (the exciter), the state topics (the
-    damper, the PMA) and three force topics on DDS: so it does on rclpy's SingleThreadedExecutor
-    (``PENTAPOD_EXECUTOR=single``), where the composition stays on DDS. The status timer keeps
+    damper, the PMA), three force topics, the excitation and the PMA state on DDS: so it does
+    on rclpy's SingleThreadedExecutor (``PENTAPOD_EXECUTOR=single``), where the composition
+    stays on DDS. The status timer keeps
     firing although the loop no longer waits in the executor.
     """
     path = _scenario(tmp_path, steps, record=False)
     run, counts = _composed(tmp_path, path, executor)
-    dds = {t: counts.get(t, 0) for t in STEP_TOPICS}
+    dds = {t: counts.get(t, 0) for t in BUS_TOPICS}
     if executor == 'events':
-        assert dds == dict.fromkeys(STEP_TOPICS, 0), counts
+        assert dds == dict.fromkeys(BUS_TOPICS, 0), counts
     else:
         assert all(n >= steps for n in dds.values()), counts
     # the counter sees what does go through DDS: each source's model, the run status
@@ -158,12 +161,12 @@ def test_a_recorder_in_the_composition_records_every_step(tmp_path):
     steps = 4000
     path = _scenario(tmp_path, steps, record=True)
     run, counts = _composed(tmp_path, path, 'events')
-    assert {t: counts.get(t, 0) for t in STEP_TOPICS} == dict.fromkeys(STEP_TOPICS, 0), counts
+    assert {t: counts.get(t, 0) for t in BUS_TOPICS} == dict.fromkeys(BUS_TOPICS, 0), counts
     assert run['rejected'].size == 0, run['rejected']
     _assert_offline_loop(path, run, steps)
 
     bag = open_bag(tmp_path / 'bags' / 'run')
-    for topic in STEP_TOPICS + [interface.EXCITATION, interface.PMA_STATE]:
+    for topic in BUS_TOPICS:
         assert bag.topic(topic).count == steps, topic
     every_step = np.arange(steps) * round(1e9 / RATE)
     for topic in STEP_TOPICS:
@@ -249,7 +252,7 @@ def test_the_in_process_recorder_writes_the_bytes_dds_delivers(tmp_path):
     inside.mkdir()
     outside.mkdir()
     _, counts = _composed(inside, _scenario(inside, steps, record=True), 'events')
-    assert {t: counts.get(t, 0) for t in STEP_TOPICS} == dict.fromkeys(STEP_TOPICS, 0)
+    assert {t: counts.get(t, 0) for t in BUS_TOPICS} == dict.fromkeys(BUS_TOPICS, 0)
 
     recorder = subprocess.Popen(
         [sys.executable, '-m', 'pentapod_sim.nodes.recorder_node', '--ros-args',
@@ -265,11 +268,11 @@ def test_the_in_process_recorder_writes_the_bytes_dds_delivers(tmp_path):
             recorder.kill()
     assert recorder.returncode == 0, out
     assert 'none missing' in out, out
-    assert all(counts[t] >= steps for t in STEP_TOPICS), counts     # DDS carried them
+    assert all(counts[t] >= steps for t in BUS_TOPICS), counts      # DDS carried them
 
     dds, bus = _bag_bytes(outside / 'bags' / 'run'), _bag_bytes(inside / 'bags' / 'run')
     stamps = (np.arange(steps) * round(1e9 / RATE)).tolist()
-    for topic in STEP_TOPICS + [interface.EXCITATION, interface.PMA_STATE]:
+    for topic in BUS_TOPICS:
         assert bus[topic][3] == stamps, topic
         assert bus[topic][:2] == dds[topic][:2], topic
         assert len(bus[topic][2]) == len(dds[topic][2]) == steps, topic

@@ -6,6 +6,7 @@ sent while the plant is mid-run (its log says so); a run long enough that it can
 """
 import os
 from pathlib import Path
+import re
 import signal
 import subprocess
 import sys
@@ -176,7 +177,11 @@ def test_a_killed_source_is_named(tmp_path, runner_of):
     assert code == 1, out
     assert time.monotonic() - t0 < 2.0 + 3.0 + 10.0 + 5.0
     assert 'node damper killed by SIGKILL' in out, out
-    assert 'force source(s) damper' in out, out
+    # the damper is named; on a loaded machine the exciter's answer to the same step can be
+    # late as well (DDS delivery while a reader of the plant's topics has just died), and
+    # the plant then names both
+    named = re.search(r'force source\(s\) ([\w, ]+) (?:silent|left)', out)
+    assert named and 'damper' in named.group(1).split(', '), out
     assert 'Traceback' not in out
     trace = np.load(tmp_path / 'trace.npz')
     assert 0 < int(trace['steps_run']) < LONG and str(trace['end']).startswith('error: ')

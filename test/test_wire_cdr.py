@@ -1,12 +1,13 @@
 """
 Wire CDR of rclpy message objects (pentapod_sim/nodes/wire_cdr.py).
 
-The direct JointState/Clock serialisers against rosbags' serialiser (the general path) on
-messages that exercise every alignment case (names of every length mod 4, empty and non-empty
-arrays, a frame id, non-ASCII text), and both against rclpy's deserialiser (the bytes decode to
-the message). That they equal what DDS delivers is checked on a recorded run in
-test_composed_handoff.py.
+The direct JointState/Clock/WrenchStamped serialisers against rosbags' serialiser (the general
+path) on messages that exercise every alignment case (names of every length mod 4, empty and
+non-empty arrays, frame ids of every length mod 8, non-ASCII text), and against rclpy's
+deserialiser (the bytes decode to the message). That they equal what DDS delivers is checked
+on a recorded run in test_composed_handoff.py.
 """
+from geometry_msgs.msg import WrenchStamped
 import numpy as np
 import pytest
 from rclpy.serialization import deserialize_message
@@ -54,7 +55,23 @@ def test_clock_direct_path_equals_rosbags(sec, nanosec):
     assert deserialize_message(data, Clock) == msg
 
 
+@pytest.mark.parametrize('frame_id', ['', 't', 'tc', 'tcp', 'tcp0', 'tcp_µ', 'x' * 9])
+def test_wrench_stamped_direct_path_equals_rosbags(frame_id):
+    """Every frame-id length mod 8 puts the wrench's doubles behind a different padding."""
+    rng = np.random.default_rng(len(frame_id))
+    msg = WrenchStamped()
+    msg.header.stamp.sec, msg.header.stamp.nanosec = int(rng.integers(0, 2**31 - 1)), 7
+    msg.header.frame_id = frame_id
+    force, torque = msg.wrench.force, msg.wrench.torque
+    force.x, force.y, force.z, torque.x, torque.y, torque.z = rng.normal(size=6).tolist()
+    direct = serializer(WrenchStamped)
+    data = direct(msg)
+    assert data == RosbagsCdr(WrenchStamped)(msg) and len(data) % 4 == 0
+    assert deserialize_message(data, WrenchStamped) == msg
+    assert direct(msg) == data            # the cached frame block gives the same bytes
+
+
 def test_types_without_a_direct_serialiser_stay_on_dds():
     """The recorder takes from the bus only what it can write as DDS delivers it."""
-    from geometry_msgs.msg import WrenchStamped
-    assert serializer(WrenchStamped) is None
+    from diagnostic_msgs.msg import DiagnosticStatus
+    assert serializer(DiagnosticStatus) is None

@@ -19,7 +19,7 @@ from sensor_msgs.msg import JointState
 
 from pentapod_damper.node_parameters import PMA, pma_law
 from pentapod_sim.interface import PMA_STATE
-from pentapod_sim.nodes.common import INFO_QOS, run_node
+from pentapod_sim.nodes.common import run_node
 from pentapod_sim.nodes.lockstep_source import LockstepSource
 from pentapod_sim.sim.controllers import controller_of, DiscreteController
 
@@ -32,8 +32,7 @@ class PmaNode(LockstepSource):
         self.law = pma_law(self.params, 1.0 / self.params.sample_rate)
         self.setup(self.law.sensor_ports, self.law.actuator_ports)
         self.joints = [p.replace('pma_force_', 'pma_') for p in self.law.actuator_ports]
-        self.state_pub = self.create_publisher(JointState, PMA_STATE, INFO_QOS)
-        self.info_pubs.append(self.state_pub)
+        self.state_out = self.info_outlet(JointState, PMA_STATE)
         self.get_logger().info(f'PMA m_a = {self.law.mass} kg, g = {self.law.gain} 1/s '
                                f'(b = {self.law.mass * self.law.gain:.6g} N s/m) on '
                                f'{self.law.actuator_ports}')
@@ -55,7 +54,7 @@ class PmaNode(LockstepSource):
         msg = JointState(name=self.joints, position=self.law.stroke.tolist(),
                          velocity=self.law.mass_velocity.tolist(), effort=efforts.tolist())
         msg.header.stamp = stamp
-        self.state_pub.publish(msg)
+        self.state_out.publish(msg)
 
 
 def main(argv=None) -> int:

@@ -18,7 +18,7 @@ from std_msgs.msg import String
 
 from pentapod_sim.errors import ConfigError
 from pentapod_sim.interface import EXCITATION, excitation_spec_topic, stamp_ns, step_of
-from pentapod_sim.nodes.common import INFO_QOS, qos, run_node
+from pentapod_sim.nodes.common import qos, run_node
 from pentapod_sim.nodes.lockstep_source import LockstepSource
 from pentapod_sim.nodes.parameter_tables import excitation_spec, EXCITER
 from pentapod_sim.sim.excitation import Excitation
@@ -39,8 +39,7 @@ class ExciterNode(LockstepSource):
         except ConfigError as err:
             raise ConfigError(f'exciter parameters: {err}') from None
         self.setup([], TCP_PORTS)
-        self.wrench_pub = self.create_publisher(WrenchStamped, EXCITATION, INFO_QOS)
-        self.info_pubs.append(self.wrench_pub)
+        self.wrench_out = self.info_outlet(WrenchStamped, EXCITATION)
         self.spec_pub = self.create_publisher(String, excitation_spec_topic(self.source_name),
                                               qos('spec'))
         self.spec_pub.publish(String(data=spec_message(spec, self.params.sample_rate,
@@ -61,7 +60,7 @@ class ExciterNode(LockstepSource):
         msg.header.stamp = stamp
         msg.header.frame_id = 'tcp'
         msg.wrench.force.x, msg.wrench.force.y, msg.wrench.force.z = map(float, efforts)
-        self.wrench_pub.publish(msg)
+        self.wrench_out.publish(msg)
 
 
 def describe(signal: Excitation) -> str:

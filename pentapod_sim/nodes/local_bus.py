@@ -27,10 +27,14 @@ time instead, so timers (run status), graph events and in-process DDS deliveries
 raw subscriptions, the live view) keep flowing; their queues (``interface.QOS``, 40,000 messages
 per per-step stream) hold many seconds of steps, far more than a period.
 
+The sources' per-step diagnostics (excitation, PMA state: :meth:`LockstepSource.info_outlet`)
+are outlets too: an in-process recorder takes them from the bus, DDS carries them only to
+subscribers outside it.
+
 What stays on DDS: the sources' force publishers (the plant's start-up and graph checks count
 them; a force topic of an in-process source is served by the hand-off only), the controller
-models, diagnostics (PMA state, excitation), run status, and everything of nodes that are no
-lockstep source of the plant in this process (an in-process recorder takes those over DDS).
+models, run status, and everything of nodes that are no lockstep source of the plant in this
+process (an in-process recorder takes those over DDS).
 A composition on rclpy's own executors
 (``PENTAPOD_EXECUTOR=single``) stays on DDS altogether (:func:`connect`).
 """
@@ -114,6 +118,13 @@ class Outlet:
         self._auto = always_remote and bus is not None
         self._next = 0.0
         self.dds_published = 0          # messages that went out on DDS
+
+    def attach(self, bus: LocalBus) -> None:
+        """Hand this outlet's messages to the in-process callbacks of ``bus`` from now on."""
+        self.local = bus.callbacks(self.topic_name)
+        self.bus = bus
+        if self.remote and not self._auto:      # was a plain publisher: now refreshed itself
+            self._auto, self.remote = True, False
 
     def refresh(self) -> bool:
         """Note whether DDS has subscribers; True if anyone (DDS or in-process) listens."""
@@ -217,12 +228,11 @@ def connect(plant, nodes, executor) -> LocalBus | None:
             del plant.force_subs[name]
             bus.subscribe(force_topic(name), lambda msg, name=name: plant._on_force(name, msg))
     for outlet in plant.outlets():
-        outlet.local = bus.callbacks(outlet.topic_name)
-        outlet.bus = bus
+        outlet.attach(bus)
     for source in sources:
         source.use_bus(bus)
     topics = {o.topic_name: o.pub.msg_type
-              for o in plant.outlets() + [s.force_out for s in sources]}
+              for o in plant.outlets() + [o for s in sources for o in s.outlets()]}
     for node in nodes:
         if hasattr(node, 'take_from_bus'):
             node.take_from_bus(bus, topics)

@@ -28,6 +28,7 @@ from pentapod_sim.interface import CLOCK, force_topic, port_location
 from pentapod_sim.nodes.common import (
     declare_table,
     FORCE_QOS,
+    INFO_QOS,
     node_args,
     stamp_msg,
     stamp_to_ns,
@@ -54,7 +55,8 @@ class LockstepSource(Node):
                                     defaults={'source_name': self.get_name()})
         self.source_name = self.params.source_name or self.get_name()
         self.wait_for = self.params.wait_for_subscribers
-        self.info_pubs: list = []   # subclasses add their diagnostic publishers
+        self.info_pubs: list = []   # diagnostic publishers (info_outlet)
+        self.info_outs: list[Outlet] = []
         self.rejected = {}
         self.answered = 0
         self._last_warn = 0.0
@@ -95,7 +97,27 @@ class LockstepSource(Node):
         self.subs = []
         for topic in self.state_topics():
             bus.subscribe(topic, lambda msg, t=topic: self._on_state(t, msg))
-        self.force_out = Outlet(self.force_pub, bus, always_remote=True)
+        self.force_out.attach(bus)
+        for out in self.info_outs:
+            out.attach(bus)
+
+    def info_outlet(self, msg_type, topic: str) -> Outlet:
+        """
+        A per-step diagnostic publisher (``INFO_QOS``) as an outlet.
+
+        It publishes on DDS every time, or, once :meth:`use_bus` attached it to a composition's
+        bus, hands its messages to the in-process callbacks (a recorder) and publishes on DDS
+        only while another node subscribes. Its publisher counts for ``wait_for_subscribers``.
+        """
+        pub = self.create_publisher(msg_type, topic, INFO_QOS)
+        self.info_pubs.append(pub)
+        out = Outlet(pub, always_remote=True)
+        self.info_outs.append(out)
+        return out
+
+    def outlets(self) -> list[Outlet]:
+        """The per-step outlets: the force answer, then the diagnostics."""
+        return [self.force_out, *self.info_outs]
 
     def linear_model(self):
         """

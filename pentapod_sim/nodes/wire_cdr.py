@@ -9,9 +9,10 @@ padding unwritten (garbage), while the DDS sample holds exactly the serialised l
 zeroed padding, the whole padded with zeros to a multiple of 4 bytes (little-endian XCDR1,
 encapsulation header ``00 01 00 00``). rosbags' CDR serialiser writes those bytes but costs
 several times more per message; the recorder pays it per step, so the per-step types of a run,
-sensor_msgs/JointState and rosgraph_msgs/Clock, have direct serialisers here
-(:class:`JointStateCdr`, :func:`clock_cdr`: the same layout written with ``struct``, the header
-and names block cached per name list; bench/bench_wire_cdr.py measures them against rosbags').
+sensor_msgs/JointState, rosgraph_msgs/Clock and geometry_msgs/WrenchStamped (excitation), have
+direct serialisers here (:class:`JointStateCdr`, :func:`clock_cdr`, :class:`WrenchStampedCdr`:
+the same layout written with ``struct``, the header and names block cached per name list;
+bench/bench_wire_cdr.py measures them against rosbags').
 Other types have none (:func:`serializer` gives None) and stay on DDS.
 test/test_wire_cdr.py checks the direct serialisers against rosbags' serialiser
 (test/fixtures/rosbags_cdr.py), test/test_composed_handoff.py against a DDS recorder's bag.
@@ -83,6 +84,31 @@ def _strings_block(frame_id: str, names: tuple) -> bytes:
     return bytes(out)
 
 
+_WRENCH = struct.Struct('<6d')
+
+
+class WrenchStampedCdr:
+    """Wire CDR of geometry_msgs/WrenchStamped (little-endian machine)."""
+
+    def __init__(self):
+        self._frames: dict[str, bytes] = {}
+
+    def __call__(self, msg) -> bytes:
+        header, wrench = msg.header, msg.wrench
+        frame = self._frames.get(header.frame_id)
+        if frame is None:
+            if len(self._frames) >= JointStateCdr.MAX_BLOCKS:
+                self._frames.clear()
+            data = header.frame_id.encode()
+            frame = _COUNT.pack(len(data) + 1) + data + b'\x00'
+            frame += bytes(-(8 + len(frame)) % 8)       # the wrench's doubles align to 8
+            self._frames[header.frame_id] = frame
+        force, torque = wrench.force, wrench.torque
+        return b''.join((ENCAPSULATION, _STAMP.pack(header.stamp.sec, header.stamp.nanosec),
+                         frame, _WRENCH.pack(force.x, force.y, force.z,
+                                             torque.x, torque.y, torque.z)))
+
+
 def clock_cdr(msg) -> bytes:
     """Wire CDR of rosgraph_msgs/Clock."""
     return ENCAPSULATION + _STAMP.pack(msg.clock.sec, msg.clock.nanosec)
@@ -90,7 +116,8 @@ def clock_cdr(msg) -> bytes:
 
 #: Types with a direct path: type name -> factory of the serialiser.
 DIRECT = {'sensor_msgs/msg/JointState': JointStateCdr,
-          'rosgraph_msgs/msg/Clock': lambda: clock_cdr}
+          'rosgraph_msgs/msg/Clock': lambda: clock_cdr,
+          'geometry_msgs/msg/WrenchStamped': WrenchStampedCdr}
 
 
 
