@@ -15,6 +15,8 @@ plant names the PMA as unchecked.
 """
 from __future__ import annotations
 
+import array
+
 from sensor_msgs.msg import JointState
 
 from pentapod_damper.node_parameters import PMA, pma_law
@@ -33,6 +35,7 @@ class PmaNode(LockstepSource):
         self.setup(self.law.sensor_ports, self.law.actuator_ports)
         self.joints = [p.replace('pma_force_', 'pma_') for p in self.law.actuator_ports]
         self.state_out = self.info_outlet(JointState, PMA_STATE)
+        self.state = JointState(name=self.joints)     # refilled every step
         self.get_logger().info(f'PMA m_a = {self.law.mass} kg, g = {self.law.gain} 1/s '
                                f'(b = {self.law.mass * self.law.gain:.6g} N s/m) on '
                                f'{self.law.actuator_ports}')
@@ -51,9 +54,11 @@ class PmaNode(LockstepSource):
 
     def after_publish(self, stamp, efforts) -> None:
         """Publish stroke, proof-mass velocity and force."""
-        msg = JointState(name=self.joints, position=self.law.stroke.tolist(),
-                         velocity=self.law.mass_velocity.tolist(), effort=efforts.tolist())
-        msg.header.stamp = stamp
+        msg = self.state
+        msg.position = array.array('d', self.law.stroke.tobytes())
+        msg.velocity = array.array('d', self.law.mass_velocity.tobytes())
+        msg.effort = array.array('d', efforts.tobytes())
+        msg.header.stamp.sec, msg.header.stamp.nanosec = stamp.sec, stamp.nanosec
         self.state_out.publish(msg)
 
 

@@ -11,6 +11,7 @@ not), falling back to the SingleThreadedExecutor if it is missing.
 """
 from __future__ import annotations
 
+import gc
 import math
 import os
 import sys
@@ -161,6 +162,21 @@ def refuse_unknown_overrides(node, table: ParameterTable, args) -> None:
         raise table.unknown(name, f'node {node.get_name()!r}')
 
 
+def freeze_start_up() -> None:
+    """
+    Collect the start-up garbage once, then take every object alive now out of the collector.
+
+    A node's loop allocates few containers, but a collection of an older generation re-scans
+    every tracked object there: the ~135,000 objects of the imports, the model and the nodes.
+    Such a generation-1 collection took 1-5 ms here (a missed deadline at a 1 kHz exchange);
+    a composed 30,000-step run saw one in its loop. Frozen (:func:`gc.freeze`), they are no
+    longer scanned and the same run saw a single generation-0 collection (51-91 us).
+    :func:`run_node` calls this once the node is built.
+    """
+    gc.collect()
+    gc.freeze()
+
+
 def stamp_msg(ns: int) -> Time:
     """builtin_interfaces/Time from integer nanoseconds."""
     return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
@@ -295,6 +311,7 @@ def run_node(factory: Callable[..., object], argv=None, run: Callable | None = N
             node.add_to(spinner)
         else:
             spinner.add_node(node)
+        freeze_start_up()
         if run is not None:
             run(node, spinner)
         else:

@@ -40,6 +40,8 @@ class ExciterNode(LockstepSource):
             raise ConfigError(f'exciter parameters: {err}') from None
         self.setup([], TCP_PORTS)
         self.wrench_out = self.info_outlet(WrenchStamped, EXCITATION)
+        self.wrench = WrenchStamped()
+        self.wrench.header.frame_id = 'tcp'
         self.spec_pub = self.create_publisher(String, excitation_spec_topic(self.source_name),
                                               qos('spec'))
         self.spec_pub.publish(String(data=spec_message(spec, self.params.sample_rate,
@@ -55,11 +57,11 @@ class ExciterNode(LockstepSource):
         return self.signal.force(k)
 
     def after_publish(self, stamp, efforts) -> None:
-        """Publish the applied force."""
-        msg = WrenchStamped()
-        msg.header.stamp = stamp
-        msg.header.frame_id = 'tcp'
-        msg.wrench.force.x, msg.wrench.force.y, msg.wrench.force.z = map(float, efforts)
+        """Publish the applied force (one message object, refilled every step)."""
+        msg = self.wrench
+        msg.header.stamp.sec, msg.header.stamp.nanosec = stamp.sec, stamp.nanosec
+        force = msg.wrench.force
+        force.x, force.y, force.z = map(float, efforts)
         self.wrench_out.publish(msg)
 
 

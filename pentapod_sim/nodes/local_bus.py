@@ -12,7 +12,8 @@ live view, in this process or another, ``ros2 topic echo``), so those get every 
 before. The message objects carry the values a DDS round trip would give (JointState arrays
 are ``array('d')`` either way, stamps are integers), so the traces stay bit-identical to
 separate processes and to the offline loop. Every callback of a topic gets the same object, as
-rclcpp hands out const messages: a callback must not change it.
+rclcpp hands out const messages: a callback must not change it, nor keep it past the call
+(the sources refill one message object every step).
 
 A recorder in the composition (:class:`pentapod_sim.nodes.recorder_node.RecorderNode`) takes
 the topics of these outlets from the bus too (:meth:`RecorderNode.take_from_bus`): it

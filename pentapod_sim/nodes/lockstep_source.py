@@ -14,6 +14,7 @@ run the plant's messages and the answers pass in-process (:meth:`LockstepSource.
 """
 from __future__ import annotations
 
+import array
 import time
 from typing import Sequence
 
@@ -30,7 +31,6 @@ from pentapod_sim.nodes.common import (
     FORCE_QOS,
     INFO_QOS,
     node_args,
-    stamp_msg,
     stamp_to_ns,
     STATE_QOS,
     subscribers_of,
@@ -76,6 +76,9 @@ class LockstepSource(Node):
         self.force_pub = self.create_publisher(JointState, force_topic(self.source_name),
                                                FORCE_QOS)
         self.force_out = Outlet(self.force_pub, always_remote=True)
+        # building a message costs several us (rosidl's checks): the answer is built once and
+        # refilled; publishing serialises it and in-process callbacks must not keep it
+        self._answer = JointState(name=self.actuator_ports)
         self.subs = [self.create_subscription(
             Clock if t == CLOCK else JointState, t,
             lambda msg, t=t: self._on_state(t, msg), STATE_QOS) for t in self.state_topics()]
@@ -193,8 +196,9 @@ class LockstepSource(Node):
             if t != CLOCK and not self._extract(t, msg_t, sensors):
                 return
         efforts = np.asarray(self.compute(ns, sensors), dtype=float)
-        out = JointState(name=self.actuator_ports, effort=efforts.tolist())
-        out.header.stamp = stamp_msg(ns)
+        out = self._answer                 # one message object, refilled every step
+        out.effort = array.array('d', efforts.tobytes())
+        out.header.stamp.sec, out.header.stamp.nanosec = divmod(ns, 1_000_000_000)
         self.force_out.publish(out)
         self._last = (ns, out)
         self.answered += 1
