@@ -16,6 +16,7 @@ from collections import Counter
 from dataclasses import dataclass
 import logging
 import math
+import sys
 from typing import Mapping, Sequence
 
 import control
@@ -317,9 +318,12 @@ class ForceMixer:
         if isinstance(idx, str):
             return idx
         values = np.asarray(efforts, dtype=float)
-        if not np.all(np.isfinite(values)):
-            return f'nonfinite: effort {list(values)}'
-        if np.any(np.abs(values) > self.max_effort):
+        # one vectorised test for the usual case (NaN and, with the bound finite, Inf fail it
+        # too); the reasons after it
+        bound = min(self.max_effort, sys.float_info.max)
+        if not (np.abs(values) <= bound).all():
+            if not np.all(np.isfinite(values)):
+                return f'nonfinite: effort {list(values)}'
             worst = int(np.argmax(np.abs(values)))
             return (f'limit: effort {values[worst]:.6g} on {names[worst]!r} exceeds max_effort '
                     f'{self.max_effort:.6g}')
