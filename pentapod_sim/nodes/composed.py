@@ -79,6 +79,8 @@ class Composition:
 #: Wall time [s] the in-process deliveries queued at the end of a run may take (also after a
 #: stop signal: a recorder in the composition then still gets every step the plant ran).
 FINAL_DRAIN = 2.0
+#: Wall time [s] spun after that for DDS deliveries inside the process (run status, ...).
+END_SETTLE = 0.5
 
 
 def run(composition: Composition, executor) -> None:
@@ -90,7 +92,11 @@ def run(composition: Composition, executor) -> None:
         if plant.drain is not None and plant.context.ok():
             plant.drain.flush(executor, FINAL_DRAIN)
     if not shutdown.requested():
-        spin_until(executor, lambda: False, 0.5)      # deliveries still queued in-process
+        # deliveries still queued in-process: until every recorder drained the announced end
+        # (at most the time rclpy's DDS deliveries need), else that time
+        recorders = [n for n in composition.nodes if hasattr(n, 'done')]
+        spin_until(executor, lambda: bool(recorders) and all(n.done() for n in recorders),
+                   END_SETTLE)
 
 
 def main(argv=None) -> int:
