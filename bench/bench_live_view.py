@@ -7,9 +7,12 @@ without the live view node and a Foxglove WebSocket client subscribed to every c
 and once with a recorder in both runs. The figure is the plant's steps per wall second; the
 ratio (with / without the live view) is 1 when the view costs the loop nothing.
 
-Without a recorder, the live view is what makes the plant publish all three state topics
-(the damper alone subscribes to strut_states only), so that row includes the plant's cost of
-publishing two more topics per step; with a recorder the plant publishes them anyway.
+The live view takes the plant's state topics and the sources' forces from the plant's display
+batches (pentapod_sim/nodes/display_batch.py: one message per topic every 10 ms of simulated
+time), so it adds no per-step publish to the plant or the damper: without a recorder the plant
+publishes only strut_states per step (for the damper) with or without the view. Before the
+batches, the view's per-step subscriptions made the plant publish two more state topics every
+step and the view decode 5,000 messages a second per topic (0.79x, bench/RESULTS.md history).
 
 Four kinds of runs, each without and with a recorder: no live view; the live view with no
 client (its own cost: subscriptions, worker thread, server); the view and the Foxglove client
@@ -116,7 +119,8 @@ def run(quick: bool) -> list[dict]:
     """
     steps, repeats = (3000, 1) if quick else (10000, 5)
     note = (f'{steps} steps of a 200-state demo model at {RATE:g} Hz, best of {repeats}; live '
-            'view defaults (best effort, polled subscriptions, nice +10, 100 Hz envelopes)')
+            'view defaults (display batches of 10 ms, best effort, polled subscriptions, nice '
+            '+10, 100 Hz envelopes)')
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)

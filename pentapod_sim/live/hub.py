@@ -7,7 +7,8 @@ subscriptions hold into the :class:`TopicStream` backlogs; the plant's state and
 arrive as its display batches, :class:`BatchStream`), decodes the backlogs, downsamples
 them to min/max envelopes, updates the TCP spectrum and the run status (passing the plant's
 run-status messages through, :meth:`LiveHub.add_run_status`) and logs the results on Foxglove
-channels whose schemas are
+channels (serialising and computing spectra only for channels a client subscribed to) whose
+schemas are
 the ros2msg definitions of the message types and whose payloads are CDR, as a ROS 2 graph
 would deliver them. Channel topics are the ROS topic names (plus the live-only channels of
 :data:`pentapod_sim.interface.LIVE_PREFIX`), so one Foxglove layout works live and on bags.
@@ -221,6 +222,8 @@ class LiveHub:
 
     def _send(self, stream: TopicStream, samples) -> None:
         channel, shape = self.channels[stream.topic], stream.shape or Shape()
+        if not channel.has_sinks():
+            return                # no client subscribed: nothing to serialise
         for stamp, row in samples:
             if stream.msg_type == interface.WRENCH_STAMPED:
                 data = self.encoder.wrench(stamp, shape.frame_id, row.tolist())
@@ -242,6 +245,9 @@ class LiveHub:
             start += count
 
     def _send_spectrum(self) -> None:
+        if not any(self.channels[interface.tcp_spectrum_topic(name)].has_sinks()
+                   for name in ('frequency',) + TCP_JOINTS):
+            return                # no client subscribed: nothing to compute
         result = self.spectrum.compute()
         if result is None:
             return
@@ -268,6 +274,8 @@ class LiveHub:
     def _send_status(self, wall: float) -> None:
         values = self.status.report(wall, self.dropped())
         stamp = max(self.status.newest, 0)
+        if not self.channels[interface.LIVE_STATUS].has_sinks():
+            return
         data = self.encoder.joint_state(stamp, '', list(STATUS_NAMES),
                                         {'position': np.asarray(values).tolist(),
                                          'velocity': [], 'effort': []})

@@ -33,12 +33,13 @@ from pentapod_sim.analysis.cdr_arrays import (
     wrench_arrays,
 )
 from pentapod_sim.errors import BagError
-from pentapod_sim.interface import split_batch_name, stamp_ns, step_of
+from pentapod_sim.interface import split_batch_name, step_of
 from pentapod_sim.live.envelope import EnvelopeDownsampler, Sample
 
 #: Message types the live view downsamples.
 SUPPORTED_TYPES = (interface.JOINT_STATE, interface.WRENCH_STAMPED)
 HEADER_FRAME_OFFSET = 12  # CDR header (4) + stamp (8): the frame_id string length
+BATCH_STAMP = struct.Struct('<iI')  # header.stamp (sec, nanosec) after the CDR header
 
 
 def frame_id(data: bytes) -> str:
@@ -260,7 +261,8 @@ class BatchStream(TopicStream):
                                                   npt.NDArray[np.float64]]:
         """Per-step stamps [ns] and value rows of a backlog of batches."""
         all_stamps, all_rows = [], []
-        for data, first in zip(batch, stamps_ns(batch)):
+        for data in batch:
+            sec, nanosec = BATCH_STAMP.unpack_from(data, 4)
             lay = self._parse(data)
             if self.shape is None:
                 self.shape = Shape('', list(lay.joints),
@@ -270,9 +272,10 @@ class BatchStream(TopicStream):
                 raise BagError(f'{self.topic}: batch joints {lay.joints} differ from '
                                f'{self.shape.names}')
             self.samples = lay.samples
-            k0 = step_of(int(first), lay.dt)
-            all_stamps.append(np.array([stamp_ns(k0 + j, lay.dt) for j in range(lay.samples)],
-                                       dtype=np.int64))
+            k0 = step_of(sec * 1_000_000_000 + nanosec, lay.dt)
+            # stamp_ns(k, dt) = round(k dt 1e9) for every k at once (both round half to even)
+            steps = np.arange(k0, k0 + lay.samples, dtype=np.int64)
+            all_stamps.append(np.rint(steps * lay.dt * 1e9).astype(np.int64))
             count = lay.samples * len(lay.joints)
             parts = [np.frombuffer(data, dtype='<f8', count=count, offset=offset).reshape(
                 lay.samples, len(lay.joints)) for _, offset in lay.fields]

@@ -76,6 +76,7 @@ class DisplayBatches:
                        for name in mixer.sources}
         self.y = np.empty((self.size, n_out))
         self.u = {name: np.empty((self.size, n_in)) for name in mixer.sources}
+        # ports of each source's forces in the open batch (() before its first answer)
         self.ports: dict[str, tuple[str, ...]] = dict.fromkeys(mixer.sources, ())
         self.active: list = []            # publishers with a subscriber
         self.k0, self.count = 0, 0
@@ -108,12 +109,14 @@ class DisplayBatches:
         if self.count and k != self.k0 + self.count:
             self.flush()                  # not the next step: start a new batch
         latest, names = self.mixer.latest, self.mixer.latest_names
-        if any(tuple(names[s]) != self.ports[s] for s in self.ports):
-            self.flush()                  # a source changed its ports
-            self.ports = {s: tuple(names[s]) for s in self.ports}
-        if self.count == 0:
-            self.k0 = k
+        for source, ports in self.ports.items():
+            if tuple(names[source]) != ports:
+                self.flush()              # a source changed its ports: a new batch
+                self.ports = {s: tuple(names[s]) for s in self.ports}
+                break
         row = self.count
+        if row == 0:
+            self.k0 = k
         self.y[row] = y
         for source, rows in self.u.items():
             rows[row] = latest[source]
