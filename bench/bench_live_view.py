@@ -87,8 +87,8 @@ def lockstep(folder: Path, model_file: Path, steps: int, live: bool, record: boo
                            'sys.argv = sys.argv[1:]; runpy.run_path(sys.argv[0], '
                            "run_name='__main__')", str(CLIENT), f'ws://127.0.0.1:{port}'],
                           f'client_{tag}.log')
-        if live:
-            waits.append('live_view')
+        if live and client_nice is not None:
+            waits.append('live_view')     # it subscribes only while a client watches
         plant = session.node('pentapod_sim.nodes.plant_node', 'plant',
                              f'model_file:={model_file}', f'steps:={steps}',
                              f'sample_rate:={RATE}', 'sources:=[damper0]',

@@ -318,3 +318,44 @@ def test_the_view_serves_the_trace_values_at_their_stamps(viewed_run):
         assert log_time == _stamp(msg) == stamp_ns(k, dt)
         window = np.flatnonzero(window_of == window_of[k])
         assert all(e in u[window, names.index(p)] for p, e in zip(msg.name, msg.effort)), k
+
+
+def test_without_a_client_the_view_subscribes_to_nothing(tmp_path):
+    """No client: the plant publishes no display batch; a client watching makes it publish."""
+    import rclpy
+
+    from pentapod_sim.nodes import plant_node
+    from pentapod_sim.nodes.common import make_executor, spin_until
+    model_file = demo_model(4, seed=2).save(tmp_path / 'model.npz')
+    view = _start(tmp_path, 'live_view', 'pentapod_sim.nodes.live_view_node', 'port:=0',
+                  'discovery_period:=0.1')
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=int(os.environ['ROS_DOMAIN_ID']))
+    try:
+        port = _port(tmp_path / 'live_view.log', view)   # the view subscribed before this
+        plant = plant_node.PlantNode(context=ctx, cli_args=[
+            '--ros-args', '-p', f'model_file:={model_file}', '-p', 'steps:=2000',
+            '-p', f'sample_rate:={RATE}', '-p', "loop_check:='off'"])
+        executor = make_executor(ctx)
+        executor.add_node(plant)
+        batch_pubs = plant.fullrate.display.publishers
+
+        def watched():
+            return [pub.get_subscription_count() > 0 for pub in batch_pubs]
+        assert not spin_until(executor, lambda: any(watched()), 2.0)
+        plant_node.run(plant, executor)
+        assert plant.fullrate.display.published == 0
+        assert [out.dds_published for out, _ in plant.state_outs] == [0] * len(plant.layouts)
+        client = FoxgloveClient(f'ws://127.0.0.1:{port}').start()
+        try:
+            client.wait_for_topics([interface.TCP_STATE], 30.0)
+            assert spin_until(executor, lambda: all(watched()), 30.0), watched()
+        finally:
+            client.stop()
+        assert spin_until(executor, lambda: not any(watched()), 30.0), watched()  # it left
+        executor.shutdown()
+        plant.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=ctx)
+        view.send_signal(signal.SIGINT)
+        assert view.wait(timeout=20) == 128 + signal.SIGINT

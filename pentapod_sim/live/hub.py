@@ -138,6 +138,22 @@ class LiveHub:
         self.streams[topic] = stream
         return stream
 
+    def wanted(self, topic: str) -> bool:
+        """
+        True while a client watches ``topic``'s channel or a channel made from it.
+
+        The run figures are made from the state topics' stamps, the spectrum from the TCP
+        state (any thread).
+        """
+        channels = self.channels
+        if channels[topic].has_sinks():
+            return True
+        if topic in interface.STATE_TOPICS and channels[interface.LIVE_STATUS].has_sinks():
+            return True
+        return topic == interface.TCP_STATE and any(
+            channels[interface.tcp_spectrum_topic(name)].has_sinks()
+            for name in ('frequency',) + TCP_JOINTS)
+
     def add_run_status(self, data: bytes, values: Mapping[str, str]) -> None:
         """
         Take one run-status message of the plant: its CDR bytes and key/value pairs.

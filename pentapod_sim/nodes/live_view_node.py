@@ -7,8 +7,10 @@ topics and the sources' force topics it takes from the plant's display batches
 (:mod:`pentapod_sim.nodes.display_batch`, one message per ``display_batch_period`` carrying
 every step), never per step, so the plant publishes no per-step message for the view and the
 sources send it nothing (the full-rate TCP topic of a multi-rate plant is served only if named
-in ``topics``: subscribing would make the plant compute and publish it every exchange). The
-subscriptions are raw (CDR bytes) and no executor serves them: they sit in a callback group the
+in ``topics``: subscribing would make the plant compute and publish it every exchange). Like
+foxglove_bridge it subscribes to a topic only while a WebSocket client watches its channel
+(or the run figures or spectrum made from it): with no client, it takes nothing from the run.
+The subscriptions are raw (CDR bytes) and no executor serves them: they sit in a callback group the
 executor never waits on (:class:`PolledGroup`), and the hub's worker thread takes what they
 hold once every ``tick_period`` (:meth:`LiveViewNode.take`). So the process does no work per
 message in Python and wakes at its own pace, not the plant's; decoding, downsampling and the
@@ -24,6 +26,7 @@ Parameters: :data:`pentapod_sim.live.params.LIVE_VIEW`.
 """
 from __future__ import annotations
 
+import threading
 import time
 
 from diagnostic_msgs.msg import DiagnosticStatus
@@ -49,6 +52,8 @@ KNOWN_TOPICS = (*interface.STATE_TOPICS, interface.EXCITATION, interface.PMA_STA
 #: Testbed topics served only when named in ``topics``: /clock (no values), the full-rate TCP
 #: samples (a multi-rate plant computes and publishes them every exchange while subscribed).
 NOT_BY_DEFAULT = (interface.CLOCK, interface.TCP_STATE_FULLRATE)
+#: Wall time [s] between two looks at what the connected clients watch.
+CLIENT_PERIOD = 0.1
 
 
 class RclpyEncoder:
@@ -101,8 +106,10 @@ class LiveViewNode(Node):
                               reliability=ReliabilityPolicy[params.reliability.upper()],
                               durability=DurabilityPolicy.VOLATILE)
         self.hub = LiveHub(params, RclpyEncoder(), poll=self.take)
-        self.subs = {}
+        self.subs = {}            # topic -> its subscription; None: not now (or not served)
+        self.served = {}          # topic -> (stream, message class, topic subscribed to)
         self.polled = []          # (stream, subscription), taken by the hub's worker
+        self._lock = threading.Lock()     # polled: the worker's take against changes
         self.group = PolledGroup()
         for topic in KNOWN_TOPICS:
             if self._selected(topic):
@@ -124,7 +131,7 @@ class LiveViewNode(Node):
         return interface.is_testbed_topic(topic) and topic not in NOT_BY_DEFAULT
 
     def discover(self) -> None:
-        """Subscribe to selected topics that appeared (JointState and WrenchStamped only)."""
+        """Serve selected topics that appeared (JointState and WrenchStamped only)."""
         for topic, types in self.get_topic_names_and_types():
             topic = interface.batched_topic(topic) or topic     # a display batch: its topic
             if topic in self.subs or not self._selected(topic):
@@ -138,24 +145,51 @@ class LiveViewNode(Node):
             self._subscribe(topic, types[0])
 
     def _subscribe(self, topic: str, msg_type: str) -> None:
-        """Serve ``topic``: from its display batches if the plant makes them, else per step."""
+        """
+        Serve ``topic``: its channel now, its subscription while a client watches it.
+
+        The subscription is to the topic's display batches if the plant makes them, else to
+        the topic itself (:meth:`follow_clients`).
+        """
         batched = interface.has_display_batch(topic)
         source = interface.display_batch_topic(topic) if batched else topic
         stream = self.hub.add_topic(topic, msg_type, batched=batched)
-        sub = self.create_subscription(MESSAGE_CLASSES[msg_type], source, stream.offer,
-                                       self.qos, raw=True, callback_group=self.group)
-        self.subs[topic] = sub
-        self.polled.append((stream, sub))
+        self.served[topic] = (stream, MESSAGE_CLASSES[msg_type], source)
+        self.subs[topic] = None
         self.get_logger().info(f'serving {topic} [{msg_type}]' + (
             f' from {source}' if batched else ''))
 
+    def follow_clients(self) -> None:
+        """
+        Subscribe to what a connected client watches; unsubscribe from what nobody watches.
+
+        Like foxglove_bridge: with no client the view subscribes to no data topic, so the
+        plant publishes nothing for it and nothing is received. Called from the executor's
+        thread (:func:`serve`, a timer in a composition).
+        """
+        for topic, (stream, msg_class, source) in list(self.served.items()):
+            wanted, sub = self.hub.wanted(topic), self.subs[topic]
+            if wanted and sub is None:
+                stream.sequence = None     # a new start: the numbers skipped are no loss
+                sub = self.create_subscription(msg_class, source, stream.offer, self.qos,
+                                               raw=True, callback_group=self.group)
+                with self._lock:
+                    self.subs[topic] = sub
+                    self.polled.append((stream, sub))
+            elif not wanted and sub is not None:
+                with self._lock:
+                    self.polled.remove((stream, sub))
+                    self.subs[topic] = None
+                self.destroy_subscription(sub)
+
     def take(self) -> None:
         """Move every message the subscriptions hold into the streams (the hub's worker)."""
-        for stream, sub in list(self.polled):
-            with sub.handle:
-                while (got := sub.handle.take_message(sub.msg_type, True)) is not None:
-                    data, info = got
-                    stream.offer(data, info.get('publication_sequence_number'))
+        with self._lock:
+            for stream, sub in self.polled:
+                with sub.handle:
+                    while (got := sub.handle.take_message(sub.msg_type, True)) is not None:
+                        data, info = got
+                        stream.offer(data, info.get('publication_sequence_number'))
 
 
     def start(self, nice: int) -> None:
@@ -169,11 +203,13 @@ class LiveViewNode(Node):
         """
         Start inside a composed run (:mod:`pentapod_sim.nodes.composed`).
 
-        The server starts without renicing (the plant shares the process) and a timer on the
-        composition's executor looks for new topics; ``close`` stops the server.
+        The server starts without renicing (the plant shares the process) and timers on the
+        composition's executor look for new topics and follow the clients; ``close`` stops
+        the server.
         """
         self.start(0)
         self.create_timer(self.params.discovery_period, self.discover)
+        self.create_timer(CLIENT_PERIOD, self.follow_clients)
 
     def close(self) -> None:
         """Stop the worker and the WebSocket server."""
@@ -186,7 +222,8 @@ def serve(node: LiveViewNode, executor) -> None:
     try:
         next_look = time.monotonic() + node.params.discovery_period
         while rclpy.ok() and not shutdown.requested():
-            executor.spin_once(timeout_sec=0.1)
+            executor.spin_once(timeout_sec=CLIENT_PERIOD)
+            node.follow_clients()
             if time.monotonic() > next_look:
                 node.discover()
                 next_look = time.monotonic() + node.params.discovery_period
