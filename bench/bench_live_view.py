@@ -10,9 +10,11 @@ ratio (with / without the live view) is 1 when the view costs the loop nothing.
 The live view takes the plant's state topics and the sources' forces from the plant's display
 batches (pentapod_sim/nodes/display_batch.py: one message per topic every 10 ms of simulated
 time), so it adds no per-step publish to the plant or the damper: without a recorder the plant
-publishes only strut_states per step (for the damper) with or without the view. Before the
-batches, the view's per-step subscriptions made the plant publish two more state topics every
-step and the view decode 5,000 messages a second per topic (0.79x, bench/RESULTS.md history).
+publishes only strut_states per step (for the damper) with or without the view. And it
+subscribes only while a client watches, so with no client it takes nothing from the run (the
+plant does not wait for it then). Before the batches, the view's per-step subscriptions made
+the plant publish two more state topics every step and the view decode 5,000 messages a
+second per topic (0.79x, git history of bench/RESULTS.md).
 
 Four kinds of runs, each without and with a recorder: no live view; the live view with no
 client (its own cost: subscriptions, worker thread, server); the view and the Foxglove client
@@ -119,8 +121,8 @@ def run(quick: bool) -> list[dict]:
     """
     steps, repeats = (3000, 1) if quick else (10000, 5)
     note = (f'{steps} steps of a 200-state demo model at {RATE:g} Hz, best of {repeats}; live '
-            'view defaults (display batches of 10 ms, best effort, polled subscriptions, nice '
-            '+10, 100 Hz envelopes)')
+            'view defaults (display batches of 10 ms, subscribed while a client watches, best '
+            'effort, polled, nice +10, 100 Hz envelopes)')
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)

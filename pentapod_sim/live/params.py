@@ -14,7 +14,8 @@ LIVE_VIEW = ParameterTable('live_view', [
     Param('port', 'int', DEFAULT_PORT, 'TCP port of the WebSocket server; 0 = any free port '
           '(logged)', '', 0, 65535),
     Param('topics', 'string[]', [], 'topics to serve; empty: every /pentapod/* topic of type '
-          'sensor_msgs/JointState or geometry_msgs/WrenchStamped'),
+          'sensor_msgs/JointState or geometry_msgs/WrenchStamped except the full-rate TCP '
+          "topic (state and force topics come from the plant's display batches)"),
     Param('display_rate', 'float', 100.0, 'envelope windows per simulated second; each window '
           'is sent as two messages carrying its minimum and maximum', 'Hz', 0.1, 1.0e6),
     Param('spectrum_samples', 'int', 4096, 'newest TCP samples per spectrum (resolution = '
