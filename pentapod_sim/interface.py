@@ -180,6 +180,17 @@ class QosSpec:
     durability: str = 'volatile'
 
 
+#: Durability the per-step streams' writers offer. Transient local: a recorder (reliable,
+#: transient local reader) that matches a writer late still gets every step in the writer's
+#: history. Discovery is not symmetric: a source started before the recorder saw the
+#: recorder's reader within a second and answered, while the recorder found the source's
+#: writers 4-5 s later; a volatile reader then drops what came before and the bag lacked the
+#: source's first 2,000-2,700 steps. Readers that want only new steps (the plant's force
+#: subscriptions, the sources' state subscriptions, controllers) subscribe volatile
+#: (``pentapod_sim.nodes.common.qos(kind, fresh=True)``).
+STREAM_DURABILITY = 'transient_local'
+
+
 #: Highest sample rate [Hz] of the shipped configurations (config/scenarios/*.yaml: 5 kHz,
 #: config/study.yaml: 3 kHz; test/test_recording_stalls.py checks them). A lockstep run with a
 #: controller steps slower (about 2,000 steps/s here), a realtime run at the sample rate.
@@ -199,8 +210,10 @@ STREAM_DEPTH = int(math.ceil((RECORDER_STALL + REPAIR_TIME) * MAX_SHIPPED_RATE))
 #: ('model': published once, kept for a late reader), the exciters' signal parameters
 #: ('spec': published once, kept for a late reader) and the plant's display batches
 #: ('display': one message per ``display_batch_period``, read best effort by the live view).
-QOS = {'state': QosSpec(STREAM_DEPTH), 'force': QosSpec(STREAM_DEPTH),
-       'info': QosSpec(STREAM_DEPTH), 'status': QosSpec(4, durability='transient_local'),
+QOS = {'state': QosSpec(STREAM_DEPTH, durability=STREAM_DURABILITY),
+       'force': QosSpec(STREAM_DEPTH, durability=STREAM_DURABILITY),
+       'info': QosSpec(STREAM_DEPTH, durability=STREAM_DURABILITY),
+       'status': QosSpec(4, durability='transient_local'),
        'model': QosSpec(1, durability='transient_local'),
        'spec': QosSpec(1, durability='transient_local'), 'display': QosSpec(100)}
 

@@ -145,7 +145,13 @@ def test_composed_sources_take_the_plants_messages_without_dds(tmp_path, executo
     for source in SOURCES:
         assert counts[interface.controller_model_topic(source)] >= 1, counts
     _periodic(counts[interface.RUN_STATUS] - 2, float(run['wall_time']))
-    assert run['rejected'].size == 0, run['rejected']
+    if executor == 'events':
+        assert run['rejected'].size == 0, run['rejected']     # one answer per step
+    else:
+        # over DDS on a loaded machine the plant re-publishes a step after resend_period and
+        # drops the late second answers as stale or duplicate, by design; nothing else
+        assert [r for r in run['rejected'] if r.split('/')[1].split('=')[0]
+                not in ('stale', 'duplicate')] == [], run['rejected']
     _assert_offline_loop(path, run, steps)
 
 

@@ -236,3 +236,53 @@ def test_recorder_stalled_past_the_last_message_does_not_close_early(tmp_path):
     assert running == [True, True] and n == steps
     check_bag(bag, steps)
     assert 'none missing' in recorder_log
+
+
+def _log_time(log: str, text: str) -> float:
+    """ROS log time [s] of the first line of ``log`` containing ``text``."""
+    match = re.search(r'\[(\d+\.\d+)\] \[\w+\]: ' + re.escape(text), log)
+    assert match, (text, log)
+    return float(match.group(1))
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_a_recorder_that_matches_a_writer_late_still_gets_every_step(tmp_path):
+    """
+    The recorder finds the exciter's force topic seconds after the run started: all is in.
+
+    A recorder subscribes to topics other than the known ones when its discovery timer finds
+    them (here every 8 s), and DDS discovery is not symmetric: a writer can match a reader
+    seconds before the reader matches it. Either way the reader matches late. The per-step
+    writers keep their history for such a reader (transient local), so the bag still holds
+    the exciter's first steps; with volatile writers it lacked them (a CI run lost 2,156).
+    """
+    steps = 6000
+    params = tmp_path / 'scenario.yaml'
+    params.write_text(SCENARIO.format(steps=steps, out=tmp_path).replace(
+        'flush_period: 0.2', 'flush_period: 0.2\n    discovery_period: 8.0'))
+    procs = {'recorder': start('pentapod_sim.nodes.recorder_node', 'recorder', params,
+                               tmp_path / 'recorder.log')}
+    try:
+        end = time.monotonic() + 60
+        while 'recording to' not in (tmp_path / 'recorder.log').read_text():
+            assert time.monotonic() < end and procs['recorder'].poll() is None
+            time.sleep(0.05)
+        for name, module in (('exciter', 'pentapod_sim.nodes.exciter_node'),
+                             ('plant', 'pentapod_sim.nodes.plant_node')):
+            procs[name] = start(module, name, params, tmp_path / f'{name}.log')
+        assert procs['plant'].wait(timeout=180) == 0
+        assert procs['recorder'].wait(timeout=90) == 0
+    finally:
+        for proc in procs.values():
+            if proc.poll() is None:
+                proc.send_signal(signal.SIGINT)
+                proc.wait(timeout=30)
+    plant_log, recorder_log = ((tmp_path / f'{n}.log').read_text() for n in ('plant', 'recorder'))
+    # the race happened: the exciter had answered for a while when the recorder subscribed
+    started = _log_time(plant_log, 'lockstep run of')
+    subscribed = _log_time(recorder_log, f'subscribed {interface.force_topic("exciter")}')
+    assert subscribed > started + 0.5, (started, subscribed)
+    assert ran(plant_log)[0] == steps
+    check_bag(tmp_path / 'bag', steps)
+    assert 'none missing' in recorder_log

@@ -29,7 +29,13 @@ from sensor_msgs.msg import JointState
 
 from pentapod_damper.node_parameters import EXAMPLE_CONTROLLER
 from pentapod_sim.interface import force_topic, TCP_STATE
-from pentapod_sim.nodes.common import declare_table, FORCE_QOS, node_args, run_node, STATE_QOS
+from pentapod_sim.nodes.common import (
+    declare_table,
+    FORCE_QOS,
+    node_args,
+    run_node,
+    STATE_SUB_QOS,  # new steps only, no writer history
+)
 
 
 class ExampleController(Node):
@@ -43,7 +49,7 @@ class ExampleController(Node):
         self.gain = params.gain
         self.pub = self.create_publisher(JointState, force_topic(params.source_name),
                                          FORCE_QOS)
-        self.sub = self.create_subscription(JointState, TCP_STATE, self.on_state, STATE_QOS)
+        self.sub = self.create_subscription(JointState, TCP_STATE, self.on_state, STATE_SUB_QOS)
         self.last_stamp = None
         self.last_answer = None
 

@@ -36,20 +36,31 @@ from pentapod_sim.parameters import all_tables, Param, ParameterTable, Values
 RCLError = rclpy_implementation.RCLError
 
 
-def qos(kind: str) -> QoSProfile:
-    """Rclpy QoS profile of a class of topics of :data:`pentapod_sim.interface.QOS`."""
+def qos(kind: str, fresh: bool = False) -> QoSProfile:
+    """
+    Rclpy QoS profile of a class of topics of :data:`pentapod_sim.interface.QOS`.
+
+    ``fresh``: a subscription that wants only what is published after it matched (volatile),
+    also where the writers keep their history for late readers (transient local).
+    """
     spec = interface.QOS[kind]
+    durability = 'volatile' if fresh else spec.durability
     return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=spec.depth,
                       reliability=ReliabilityPolicy[spec.reliability.upper()],
-                      durability=DurabilityPolicy[spec.durability.upper()])
+                      durability=DurabilityPolicy[durability.upper()])
 
 
-#: Plant outputs (states, /clock): reliable, deep enough that lockstep never drops a step.
+#: Plant outputs (states, /clock): reliable, deep enough that lockstep never drops a step;
+#: the writers keep their history for a late recorder (``interface.STREAM_DURABILITY``).
 STATE_QOS = qos('state')
 #: Forces from sources: reliable; a source sends one message per step.
 FORCE_QOS = qos('force')
 #: Diagnostics streams (PMA state, excitation): reliable, deep.
 INFO_QOS = qos('info')
+#: Subscriptions of the lockstep loop itself (sources to states, plant to forces): the steps
+#: published from now on, none of a writer's history.
+STATE_SUB_QOS = qos('state', fresh=True)
+FORCE_SUB_QOS = qos('force', fresh=True)
 
 _TYPES = {'bool': ParameterType.PARAMETER_BOOL, 'int': ParameterType.PARAMETER_INTEGER,
           'float': ParameterType.PARAMETER_DOUBLE, 'str': ParameterType.PARAMETER_STRING,

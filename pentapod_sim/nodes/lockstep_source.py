@@ -32,7 +32,7 @@ from pentapod_sim.nodes.common import (
     INFO_QOS,
     node_args,
     stamp_to_ns,
-    STATE_QOS,
+    STATE_SUB_QOS,
     subscribers_of,
 )
 from pentapod_sim.nodes.local_bus import LocalBus, Outlet
@@ -81,7 +81,7 @@ class LockstepSource(Node):
         self._answer = JointState(name=self.actuator_ports)
         self.subs = [self.create_subscription(
             Clock if t == CLOCK else JointState, t,
-            lambda msg, t=t: self._on_state(t, msg), STATE_QOS) for t in self.state_topics()]
+            lambda msg, t=t: self._on_state(t, msg), STATE_SUB_QOS) for t in self.state_topics()]
         self.model_pub = publish_model(self, self.source_name, self.model_text())
 
     def state_topics(self) -> list[str]:

@@ -27,7 +27,7 @@ from pentapod_sim.nodes import loop_check
 from pentapod_sim.nodes.common import (
     declare_param,
     declare_table,
-    FORCE_QOS,
+    FORCE_SUB_QOS,
     node_args,
     run_node,
     shared_topic_error,
@@ -84,7 +84,7 @@ class PlantNode(Node):
         self.fullrate = FullRateOutputs(self, self.core)
         self.force_subs = {name: self.create_subscription(
             JointState, force_topic(name),
-            lambda msg, name=name: self._on_force(name, msg), FORCE_QOS)
+            lambda msg, name=name: self._on_force(name, msg), FORCE_SUB_QOS)
             for name in self.mixer.sources}
         self.status = RunStatusPublisher(self, self.params.status_period)
         self.loop_models = loop_check.ModelCollector(self, self.mixer.sources)

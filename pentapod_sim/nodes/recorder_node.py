@@ -90,7 +90,7 @@ class RecorderNode(Node):
         self._records = {}       # topic -> callback writing one message's CDR bytes
         for topic, msg_type in KNOWN_TOPICS.items():
             if self._selected(topic) or topic == interface.RUN_STATUS:
-                self._subscribe(topic, msg_type, [])
+                self._subscribe(topic, msg_type)
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.create_timer(params.discovery_period, self.discover, clock=steady)
         self.create_timer(params.flush_period, self.flush, clock=steady)
@@ -103,34 +103,47 @@ class RecorderNode(Node):
         return interface.is_testbed_topic(topic) and not topic.startswith(interface.LIVE_PREFIX)
 
     def discover(self) -> None:
-        """Subscribe to new selected topics with a publisher; follow best-effort publishers."""
+        """
+        Subscribe to new selected topics with a publisher; follow what publishers offer.
+
+        A topic is first subscribed as :func:`_reach` says for the publishers known then; a
+        later publisher that offers less (volatile, best effort) cannot match that reader, so
+        the topic is subscribed again at that publisher's level, with a warning (its messages
+        before the new subscription matched are lost). The level never goes back up.
+        """
         for topic, types in self.get_topic_names_and_types():
             if not self._selected(topic):
                 continue
             known = self.subs.get(topic)
-            if known is not None and (known[0] is None or known[2]):
+            if known is not None and (known[0] is None or known[2] == BEST_EFFORT):
                 continue  # unrecordable, or already best effort (matches every publisher)
             publishers = self.get_publishers_info_by_topic(topic)
-            if not publishers or (known is not None and not _any_best_effort(publishers)):
+            if not publishers:
                 continue
-            if known is not None:  # a best-effort publisher cannot match a reliable reader
+            reach = _reach(topic, publishers)
+            if known is not None and reach >= known[2]:
+                continue
+            if known is not None:  # the reader asks more than a publisher offers
                 self.destroy_subscription(known[0])
-                self.get_logger().warning(f'{topic}: best-effort publisher, messages may be lost')
+                self.get_logger().warning(f'{topic}: a publisher offers only {LEVELS[reach]}; '
+                                          're-subscribed, messages may be lost')
             try:
-                self._subscribe(topic, types[0], publishers)
+                self._subscribe(topic, types[0], reach)
             except (BagError, ImportError, AttributeError, ValueError) as err:
                 self.get_logger().error(f'cannot record {topic} [{types[0]}]: {err}')
-                self.subs[topic] = (None, types[0], False)  # do not retry every period
+                self.subs[topic] = (None, types[0], BEST_EFFORT)  # do not retry every period
 
-    def _subscribe(self, topic: str, msg_type: str, publishers) -> None:
-        best_effort = _any_best_effort(publishers)
+    def _subscribe(self, topic: str, msg_type: str, reach: int | None = None) -> None:
+        """Subscribe at level ``reach`` (:func:`_reach`; None: the topic's own, no publisher)."""
+        if reach is None:
+            reach = _reach(topic, [])
         status = topic == interface.RUN_STATUS
-        # transient local (run status, excitation spec): a late recorder gets it too
+        # transient local (per-step streams, run status, excitation spec): a recorder that
+        # matched a writer late gets what the writer still holds
         qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=self.depth,
-                         reliability=(ReliabilityPolicy.BEST_EFFORT if best_effort
+                         reliability=(ReliabilityPolicy.BEST_EFFORT if reach == BEST_EFFORT
                                       else ReliabilityPolicy.RELIABLE),
-                         durability=(DurabilityPolicy.TRANSIENT_LOCAL
-                                     if interface.is_latched(topic)
+                         durability=(DurabilityPolicy.TRANSIENT_LOCAL if reach == LATE_JOINER
                                      else DurabilityPolicy.VOLATILE))
         callback = self._record(topic, msg_type)
         if status:
@@ -138,9 +151,9 @@ class RecorderNode(Node):
         else:
             callback = self._from_dds(topic, callback)
         sub = self.create_subscription(message_class(msg_type), topic, callback, qos, raw=True)
-        self.subs[topic] = (sub, msg_type, best_effort)
+        self.subs[topic] = (sub, msg_type, reach)
         self.get_logger().info(f'subscribed {topic} [{msg_type}]'
-                               f'{" best effort" if best_effort else ""}')
+                               f'{" best effort" if reach == BEST_EFFORT else ""}')
 
     def _register(self, topic: str, msg_type: str) -> None:
         """Add the topic to the bag at its first message, with the publishers' offered QoS."""
@@ -310,8 +323,26 @@ def _flow(mapping: dict) -> str:
                           width=1 << 20).strip()
 
 
-def _any_best_effort(publishers) -> bool:
-    return any(p.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT for p in publishers)
+#: Levels of a recorder subscription, each matching every publisher the next one matches:
+#: best effort and volatile (any publisher), reliable and volatile, reliable and transient
+#: local (gets a writer's history when it matches late; only transient-local writers).
+BEST_EFFORT, RELIABLE, LATE_JOINER = 0, 1, 2
+LEVELS = {BEST_EFFORT: 'best effort', RELIABLE: 'volatile', LATE_JOINER: 'transient local'}
+
+
+def _reach(topic: str, publishers) -> int:
+    """
+    The highest level that matches every one of ``publishers`` (no publisher: the topic's).
+
+    Transient local only for topics whose testbed writers offer it
+    (:func:`pentapod_sim.interface.is_latched`) and only while every publisher does.
+    """
+    if any(p.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT for p in publishers):
+        return BEST_EFFORT
+    if interface.is_latched(topic) and all(
+            p.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL for p in publishers):
+        return LATE_JOINER
+    return RELIABLE
 
 
 #: After a stop signal the recorder waits this long [s, wall time] for the plant's end
