@@ -220,12 +220,16 @@ class RecorderNode(Node):
 
     def _callback(self, topic: str, msg_type: str, stamped: bool, selected: bool = True):
         clock, write, note = self.get_clock(), self.writer.write, self.ledger.note
+        # the node's clock is the system clock unless use_sim_time: time.time_ns reads that
+        # in 0.04 us, rclpy's Clock.now in 1.9 us (per message, several per step)
+        now_ns = (time.time_ns if not self.get_parameter('use_sim_time').value
+                  else lambda: clock.now().nanoseconds)
         registered = []
 
         def on_message(data: bytes) -> None:
             if not selected:
                 return
-            received = clock.now().nanoseconds
+            received = now_ns()
             if not registered:
                 self._register(topic, msg_type)
                 registered.append(True)
