@@ -97,7 +97,10 @@ def run_sections(scenario: str, position: str, model_file: Path, cfg: StudyConfi
             # the study checks every loop against its check model itself
             # (pipeline.scenario_analytic): the plant's start-up check would repeat it
             params.update(position=position, model_file=str(model_file), duration=duration,
-                          timing='lockstep', steps=0, output_file='', loop_check='off')
+                          timing='lockstep', steps=0, output_file='', loop_check='off',
+                          # the waited-for recorder gets every step even if it matches late
+                          # (transient-local per-step writers; in a composition the hand-off)
+                          subscriber_settle=0.0)
         elif name.startswith('exciter'):
             params = dict(exciter) if exciter else excitation_params(cfg, kind)
         # nothing is published before the recorder is matched (plant: step 0; sources: their
