@@ -35,8 +35,7 @@ subscribers outside it.
 What stays on DDS: the sources' force publishers (the plant's start-up and graph checks count
 them; a force topic of an in-process source is served by the hand-off only), the controller
 models, run status, and everything of nodes that are no lockstep source of the plant in this
-process (an in-process recorder takes those over DDS).
-A composition on rclpy's own executors
+process (an in-process recorder takes those over DDS). A composition on rclpy's own executors
 (``PENTAPOD_EXECUTOR=single``) stays on DDS altogether (:func:`connect`).
 """
 from __future__ import annotations

@@ -55,8 +55,7 @@ class LockstepSource(Node):
                                     defaults={'source_name': self.get_name()})
         self.source_name = self.params.source_name or self.get_name()
         self.wait_for = self.params.wait_for_subscribers
-        self.info_pubs: list = []   # diagnostic publishers (info_outlet)
-        self.info_outs: list[Outlet] = []
+        self.info_outs: list[Outlet] = []   # diagnostic publishers (info_outlet)
         self.rejected = {}
         self.answered = 0
         self._last_warn = 0.0
@@ -112,9 +111,7 @@ class LockstepSource(Node):
         bus, hands its messages to the in-process callbacks (a recorder) and publishes on DDS
         only while another node subscribes. Its publisher counts for ``wait_for_subscribers``.
         """
-        pub = self.create_publisher(msg_type, topic, INFO_QOS)
-        self.info_pubs.append(pub)
-        out = Outlet(pub, always_remote=True)
+        out = Outlet(self.create_publisher(msg_type, topic, INFO_QOS), always_remote=True)
         self.info_outs.append(out)
         return out
 
@@ -163,8 +160,8 @@ class LockstepSource(Node):
 
     def subscribers_ready(self) -> bool:
         """True once every ``wait_for_subscribers`` node is matched on every info topic."""
-        for pub in self.info_pubs:
-            names, matched = subscribers_of(self, pub)
+        for out in self.info_outs:
+            names, matched = subscribers_of(self, out.pub)
             if not matched or any(n not in names for n in self.wait_for):
                 return False
         return True

@@ -85,7 +85,7 @@ class RecorderNode(Node):
         self.depth = params.queue_depth
         self.writer = BagWriter(Path(params.output_dir) / name, run_info=run_info,
                                 flush_period_s=0.0)
-        self.subs = {}  # topic -> (subscription or None, msg_type, best_effort)
+        self.subs = {}  # topic -> (subscription or None, msg_type, level: _reach)
         self.from_bus = set()    # topics taken from a composition's bus (take_from_bus)
         self._records = {}       # topic -> callback writing one message's CDR bytes
         for topic, msg_type in KNOWN_TOPICS.items():
