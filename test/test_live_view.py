@@ -340,8 +340,9 @@ def test_run_status_figures_of_a_published_status(tmp_path):
     node = Node('fake_plant', context=ctx)
     try:
         pub = node.create_publisher(DiagnosticStatus, interface.RUN_STATUS, qos('status'))
-        pub.publish(DiagnosticStatus(name='/plant', message='running', values=[
-            KeyValue(key=k, value=v) for k, v in values.items()]))
+        status = DiagnosticStatus(name='/plant', message='running', values=[
+            KeyValue(key=k, value=v) for k, v in values.items()])
+        pub.publish(status)
         procs.start('live_view', 'pentapod_sim.nodes.live_view_node', 'port:=0',
                     'status_period:=0.1')
         client = FoxgloveClient(f'ws://127.0.0.1:{_port(procs)}').start()
@@ -351,7 +352,10 @@ def test_run_status_figures_of_a_published_status(tmp_path):
                 client.of_topic(interface.RUN_STATUS) and any(
                     dict(zip(STATUS_NAMES, m.position))['deadline_misses'] == 7
                     for m in _decoded(client, interface.LIVE_STATUS))):
-            time.sleep(0.1)
+            # as a plant does every status_period: a status logged before the client
+            # subscribed to its channel reached nobody (the view does not keep it)
+            pub.publish(status)
+            time.sleep(0.5)
         client.stop()
     finally:
         procs.close()
