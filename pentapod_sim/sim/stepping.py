@@ -295,11 +295,11 @@ class ForceMixer:
             Lockstep (True): only ``step == current_step`` is accepted; real time (False):
             any step <= current_step that is newer than the held one.
         """
-        reason = self._check(source, names, efforts, step, current_step, exact)
+        values = np.asarray(efforts, dtype=float)
+        reason = self._check(source, names, values, step, current_step, exact)
         if reason is not None:
             self.rejected[(source, reason.split(':')[0])] += 1
             return reason
-        values = np.asarray(efforts, dtype=float)
         vec = self.latest[source]
         vec[:] = 0.0
         vec[self._cache[(source, tuple(names))]] = values
@@ -308,16 +308,15 @@ class ForceMixer:
         self.accepted[source] += 1
         return None
 
-    def _check(self, source, names, efforts, step, current_step, exact) -> str | None:
-        """Return the reason a message is unacceptable, or None."""
+    def _check(self, source, names, values, step, current_step, exact) -> str | None:
+        """Return the reason a message (efforts as a float array) is unacceptable, or None."""
         if source not in self.sources:
             return f'unknown_source: {source!r} is not a configured force source'
-        if len(names) != len(efforts):
-            return f'length: {len(names)} names but {len(efforts)} efforts'
+        if len(names) != len(values):
+            return f'length: {len(names)} names but {len(values)} efforts'
         idx = self._indices(source, tuple(names))
         if isinstance(idx, str):
             return idx
-        values = np.asarray(efforts, dtype=float)
         # one vectorised test for the usual case (NaN and, with the bound finite, Inf fail it
         # too); the reasons after it
         bound = min(self.max_effort, sys.float_info.max)
