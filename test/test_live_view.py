@@ -352,8 +352,7 @@ def test_run_status_figures_of_a_published_status(tmp_path):
                 client.of_topic(interface.RUN_STATUS) and any(
                     dict(zip(STATUS_NAMES, m.position))['deadline_misses'] == 7
                     for m in _decoded(client, interface.LIVE_STATUS))):
-            # as a plant does every status_period: a status logged before the client
-            # subscribed to its channel reached nobody (the view does not keep it)
+            # as a plant does every status_period
             pub.publish(status)
             time.sleep(0.5)
         client.stop()
@@ -369,6 +368,59 @@ def test_run_status_figures_of_a_published_status(tmp_path):
     assert (last['step'], last['steps_per_second']) == (1233, 567.5)
     assert (last['deadline_misses'], last['rejected_messages']) == (7, 3)
     assert math.isnan(last['sim_time']) and last['dropped_by_live_view'] == 0
+
+
+def test_a_client_that_comes_after_the_last_run_status_still_gets_it(tmp_path):
+    """
+    The run status is kept for late clients, as foxglove_bridge does for transient-local topics.
+
+    A finished run publishes its last status once. The race is made to happen: a first
+    client waits until the view has taken that status in (the live status shows its
+    figures) and leaves; a second client connects afterwards and must still get the status.
+    """
+    from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+    import rclpy
+    from rclpy.node import Node
+
+    from pentapod_sim.nodes.common import qos
+    values = {'state': 'finished', 'steps': '4000', 'dt': '0.0002',
+              'last_stamp_ns': '799800000', 'step_topics': '/clock', 'step_rate': '812.0',
+              'deadline_misses': '11', 'rejected_messages': '0'}
+    procs = Procs(tmp_path)
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=int(os.environ['ROS_DOMAIN_ID']))
+    node = Node('fake_plant', context=ctx)
+    try:
+        pub = node.create_publisher(DiagnosticStatus, interface.RUN_STATUS, qos('status'))
+        pub.publish(DiagnosticStatus(name='/plant', message='finished', values=[
+            KeyValue(key=k, value=v) for k, v in values.items()]))       # once
+        procs.start('live_view', 'pentapod_sim.nodes.live_view_node', 'port:=0',
+                    'status_period:=0.1')
+        url = f'ws://127.0.0.1:{_port(procs)}'
+        first = FoxgloveClient(url).start()
+        end = time.monotonic() + 60.0
+        while time.monotonic() < end and not any(
+                dict(zip(STATUS_NAMES, m.position))['deadline_misses'] == 11
+                for m in _decoded(first, interface.LIVE_STATUS)):
+            time.sleep(0.1)
+        first.stop()
+        assert any(dict(zip(STATUS_NAMES, m.position))['deadline_misses'] == 11
+                   for m in _decoded(first, interface.LIVE_STATUS)), 'status never taken in'
+        time.sleep(0.5)                       # the view's passes see nobody watching
+        late = FoxgloveClient(url).start()
+        late.wait_for_topics([interface.RUN_STATUS], timeout=60.0)
+        end = time.monotonic() + 30.0
+        while time.monotonic() < end and not late.of_topic(interface.RUN_STATUS):
+            time.sleep(0.1)
+        late.stop()
+    finally:
+        procs.close()
+        node.destroy_node()
+        rclpy.try_shutdown(context=ctx)
+    forwarded = _decoded(late, interface.RUN_STATUS)
+    assert forwarded, 'the late client got no run status'
+    assert {kv.key: kv.value for kv in forwarded[-1].values} == values
+    assert late.of_topic(interface.RUN_STATUS)[-1][0] == 799800000       # same log time
 
 
 def _decoded(client, topic: str) -> list:

@@ -111,6 +111,8 @@ class LiveHub:
         self._thread: threading.Thread | None = None
         self._arrival: dict[str, float] = {}
         self._next = {'status': 0.0, 'spectrum': 0.0}
+        self._last_status: tuple[bytes, int] | None = None    # CDR bytes, log time [ns]
+        self._status_watched = False
         self._channel(interface.LIVE_STATUS, interface.JOINT_STATE)
         self._channel(interface.RUN_STATUS, interface.DIAGNOSTIC_STATUS)
         for name in ('frequency',) + TCP_JOINTS:
@@ -195,10 +197,18 @@ class LiveHub:
     def tick(self, wall: float, final: bool = False) -> None:
         """One pass: every backlog, idle flushes, status and spectrum when due."""
         self.poll()
+        channel = self.channels[interface.RUN_STATUS]
+        watched, self._status_watched = self._status_watched, channel.has_sinks()
         while self._run_status:
             data, values = self._run_status.popleft()
             self.status.add_plant(values)
-            self.channels[interface.RUN_STATUS].log(data, log_time=self._status_stamp(values))
+            self._last_status = (data, self._status_stamp(values))
+            channel.log(data, log_time=self._last_status[1])
+            watched = True          # a client watching now got it
+        if self._status_watched and not watched and self._last_status is not None:
+            # a client that started watching after the last status gets it too (the topic
+            # is transient local, as foxglove_bridge hands a late subscriber the last one)
+            channel.log(self._last_status[0], log_time=self._last_status[1])
         newest = -1
         for stream in list(self.streams.values()):
             self._pass(stream, wall, final)
