@@ -229,10 +229,9 @@ def multirate_rows(n_exchanges: int, rate: float = 1000.0, substeps: int = 10,
 FIFO_PRIORITY = 10   # SCHED_FIFO priority of the real-time runs at machine rates (chrt)
 
 
-#: Fast DDS transports of the separate-process real-time runs (``FASTDDS_BUILTIN_TRANSPORTS``).
-#: With the default (shared memory + UDP) about one exchange a second missed its 1 ms deadline
-#: here, at intervals of 1.02-1.1 s (18 of 20,000 in each of two 20 s runs, both processes
-#: pinned); UDP alone missed 7 and 2 (docs/nodes.md, "Real time in separate processes").
+#: Fast DDS transports of the separate-process real-time runs (``FASTDDS_BUILTIN_TRANSPORTS``):
+#: the set-up with the fewest missed deadlines here, though not reliably below 0.1 %
+#: (docs/nodes.md, "Real time in separate processes").
 REALTIME_TRANSPORTS = 'UDPv4'
 
 
@@ -539,7 +538,8 @@ def ros_rows(quick: bool) -> list[dict]:
         rows += composed_rows(folder, model_file, steps, base)
         seconds = 1.0 if quick else 5.0
         for rate in (1000.0, 5000.0, 10000.0):
-            res = plant_run(folder, model_file, 1, int(seconds * rate), 'realtime', rate)
+            res = plant_run(folder, model_file, 1, int(seconds * rate), 'realtime', rate,
+                            pin=True, FASTDDS_BUILTIN_TRANSPORTS=REALTIME_TRANSPORTS)
             rows.append(_row(f'realtime {rate / 1000:g} kHz achieved rate',
                              res['achieved_rate'], 'Hz', 'target', rate,
                              note=f'lateness p50 {res["lateness_p50"] * 1e6:.0f} us, '
@@ -547,7 +547,8 @@ def ros_rows(quick: bool) -> list[dict]:
                                   f'{res["lateness_max"] * 1e6:.0f} us, '
                                   f'{int(res["overruns"])} overruns, '
                                   f'{int(res.get("missed_steps", 0))} missed deadlines of '
-                                  f'{int(seconds * rate)} steps (plant + 1 damper)'))
+                                  f'{int(seconds * rate)} steps (plant + 1 damper, pinned to '
+                                  f'one CPU each, Fast DDS {REALTIME_TRANSPORTS} only)'))
         rows += multirate_realtime_rows(folder, model_file, 5.0 if quick else 60.0)
     return rows
 
