@@ -11,6 +11,7 @@ the extremes of a window are required to be the recorded ones where the window p
 arrived whole (the view lost nothing and both of its messages carry the window's first and
 last recorded stamps).
 """
+import contextlib
 import math
 import os
 from pathlib import Path
@@ -324,42 +325,57 @@ def test_layout_paths_resolve_live_and_in_the_bag(run):
     assert checked >= 20
 
 
-def test_run_status_figures_of_a_published_status(tmp_path):
-    """A run-status message (no plant, no state topics) reaches the status channel as is."""
+@contextlib.contextmanager
+def _status_and_view(tmp_path, values: dict):
+    """
+    A fake plant that has published one run status with ``values``, and a live view.
+
+    Yields ``(publish, url)``: ``publish()`` sends the same status again; ``url`` is the view's
+    Foxglove server. Everything is shut down on leaving.
+    """
     from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
     import rclpy
     from rclpy.node import Node
 
     from pentapod_sim.nodes.common import qos
-    values = {'state': 'running', 'steps': '1234', 'dt': '0.0002', 'last_stamp_ns': '246600000',
-              'step_topics': '/clock', 'step_rate': '567.5', 'deadline_misses': '7',
-              'rejected_messages': '3'}
     procs = Procs(tmp_path)
     ctx = rclpy.Context()
     rclpy.init(context=ctx, domain_id=int(os.environ['ROS_DOMAIN_ID']))
     node = Node('fake_plant', context=ctx)
     try:
         pub = node.create_publisher(DiagnosticStatus, interface.RUN_STATUS, qos('status'))
-        status = DiagnosticStatus(name='/plant', message='running', values=[
+        status = DiagnosticStatus(name='/plant', message=values['state'], values=[
             KeyValue(key=k, value=v) for k, v in values.items()])
         pub.publish(status)
         procs.start('live_view', 'pentapod_sim.nodes.live_view_node', 'port:=0',
                     'status_period:=0.1')
-        client = FoxgloveClient(f'ws://127.0.0.1:{_port(procs)}').start()
-        client.wait_for_topics([interface.RUN_STATUS, interface.LIVE_STATUS], timeout=60.0)
-        end = time.monotonic() + 60.0
-        while time.monotonic() < end and not (
-                client.of_topic(interface.RUN_STATUS) and any(
-                    dict(zip(STATUS_NAMES, m.position))['deadline_misses'] == 7
-                    for m in _decoded(client, interface.LIVE_STATUS))):
-            # as a plant does every status_period
-            pub.publish(status)
-            time.sleep(0.5)
-        client.stop()
+        yield (lambda: pub.publish(status)), f'ws://127.0.0.1:{_port(procs)}'
     finally:
         procs.close()
         node.destroy_node()
         rclpy.try_shutdown(context=ctx)
+
+
+def _shows_misses(client, misses: int) -> bool:
+    """True once the client got a live status with ``misses`` deadline misses."""
+    return any(dict(zip(STATUS_NAMES, m.position))['deadline_misses'] == misses
+               for m in _decoded(client, interface.LIVE_STATUS))
+
+
+def test_run_status_figures_of_a_published_status(tmp_path):
+    """A run-status message (no plant, no state topics) reaches the status channel as is."""
+    values = {'state': 'running', 'steps': '1234', 'dt': '0.0002', 'last_stamp_ns': '246600000',
+              'step_topics': '/clock', 'step_rate': '567.5', 'deadline_misses': '7',
+              'rejected_messages': '3'}
+    with _status_and_view(tmp_path, values) as (publish, url):
+        client = FoxgloveClient(url).start()
+        client.wait_for_topics([interface.RUN_STATUS, interface.LIVE_STATUS], timeout=60.0)
+        end = time.monotonic() + 60.0
+        while time.monotonic() < end and not (
+                client.of_topic(interface.RUN_STATUS) and _shows_misses(client, 7)):
+            publish()                    # as a plant does every status_period
+            time.sleep(0.5)
+        client.stop()
     forwarded = _decoded(client, interface.RUN_STATUS)
     assert {kv.key: kv.value for kv in forwarded[-1].values} == values
     assert client.of_topic(interface.RUN_STATUS)[-1][0] == 246600000       # log time
@@ -378,34 +394,16 @@ def test_a_client_that_comes_after_the_last_run_status_still_gets_it(tmp_path):
     client waits until the view has taken that status in (the live status shows its
     figures) and leaves; a second client connects afterwards and must still get the status.
     """
-    from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
-    import rclpy
-    from rclpy.node import Node
-
-    from pentapod_sim.nodes.common import qos
     values = {'state': 'finished', 'steps': '4000', 'dt': '0.0002',
               'last_stamp_ns': '799800000', 'step_topics': '/clock', 'step_rate': '812.0',
               'deadline_misses': '11', 'rejected_messages': '0'}
-    procs = Procs(tmp_path)
-    ctx = rclpy.Context()
-    rclpy.init(context=ctx, domain_id=int(os.environ['ROS_DOMAIN_ID']))
-    node = Node('fake_plant', context=ctx)
-    try:
-        pub = node.create_publisher(DiagnosticStatus, interface.RUN_STATUS, qos('status'))
-        pub.publish(DiagnosticStatus(name='/plant', message='finished', values=[
-            KeyValue(key=k, value=v) for k, v in values.items()]))       # once
-        procs.start('live_view', 'pentapod_sim.nodes.live_view_node', 'port:=0',
-                    'status_period:=0.1')
-        url = f'ws://127.0.0.1:{_port(procs)}'
+    with _status_and_view(tmp_path, values) as (_, url):     # published once
         first = FoxgloveClient(url).start()
         end = time.monotonic() + 60.0
-        while time.monotonic() < end and not any(
-                dict(zip(STATUS_NAMES, m.position))['deadline_misses'] == 11
-                for m in _decoded(first, interface.LIVE_STATUS)):
+        while time.monotonic() < end and not _shows_misses(first, 11):
             time.sleep(0.1)
         first.stop()
-        assert any(dict(zip(STATUS_NAMES, m.position))['deadline_misses'] == 11
-                   for m in _decoded(first, interface.LIVE_STATUS)), 'status never taken in'
+        assert _shows_misses(first, 11), 'status never taken in'
         time.sleep(0.5)                       # the view's passes see nobody watching
         late = FoxgloveClient(url).start()
         late.wait_for_topics([interface.RUN_STATUS], timeout=60.0)
@@ -413,10 +411,6 @@ def test_a_client_that_comes_after_the_last_run_status_still_gets_it(tmp_path):
         while time.monotonic() < end and not late.of_topic(interface.RUN_STATUS):
             time.sleep(0.1)
         late.stop()
-    finally:
-        procs.close()
-        node.destroy_node()
-        rclpy.try_shutdown(context=ctx)
     forwarded = _decoded(late, interface.RUN_STATUS)
     assert forwarded, 'the late client got no run status'
     assert {kv.key: kv.value for kv in forwarded[-1].values} == values
