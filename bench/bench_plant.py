@@ -527,7 +527,7 @@ def ros_rows(quick: bool) -> list[dict]:
                                  'plant imports numpy, scipy and python-control'))
             note = (f'{steps} steps, 200 states; each step: strut_states out (the only '
                     f'subscribed topic), {n_ctrl} answer(s) in; best of {rounds} rounds, '
-                    "interleaved with the baselines'")
+                    'interleaved with the baselines')
             rows.append(_row(f'lockstep plant + {n_ctrl} controller node(s)', rate, 'steps/s',
                              'rclpy ping-pong, 2 processes, default executor', base,
                              note=note))
