@@ -36,8 +36,14 @@ BASELINE = 'eigsh(K, k, M, sigma=0)'
 METHOD = {'ours': None, 'arpack': 'arpack', 'primme': 'primme'}
 
 
-def _one_case(kind: str, element_size: float | None, n_modes: int) -> dict:
-    """Build the model, solve, and return time [s], peak RSS [GB], DOF and top frequency."""
+def _one_case(kind: str, element_size: float | None, n_modes: int,
+              workers: int | None = None) -> dict:
+    """
+    Build the model, solve, and return time [s], peak RSS [GB], DOF and top frequency.
+
+    Peak RSS is this process's, and the largest window process's when windows were solved
+    side by side.
+    """
     extra = {}
     import numpy as np
     import scipy.sparse.linalg as spla
@@ -49,9 +55,10 @@ def _one_case(kind: str, element_size: float | None, n_modes: int) -> dict:
     t0, cpu0 = time.perf_counter(), time.process_time()
     if kind in METHOD:
         method = {} if METHOD[kind] is None else {'method': METHOD[kind]}
-        res = solve_modes(model.K, model.M, n_modes=n_modes, **method)
+        res = solve_modes(model.K, model.M, n_modes=n_modes, workers=workers, **method)
         f_top = float(res.frequencies[-1])
         extra = {k: res.stats[k] for k in ('method', 'windows', 'factorisations', 'retries',
+                                           'windows_unused', 'window_processes',
                                            'factorisation_time_s', 'eigensolver_time_s',
                                            'max_residual', 'max_orthogonality_error')}
         extra['frequencies_hz'] = res.frequencies.tolist()
@@ -60,13 +67,17 @@ def _one_case(kind: str, element_size: float | None, n_modes: int) -> dict:
         f_top = float(np.sqrt(lam.max()) / (2 * np.pi))
     wall, cpu = time.perf_counter() - t0, time.process_time() - cpu0
     rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6
-    return {'time_s': wall, 'cpu_s': cpu, 'peak_rss_gb': rss, 'n_dof': model.n_dof,
-            'f_top_hz': f_top, **extra}
+    child = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1e6
+    return {'time_s': wall, 'cpu_s': cpu, 'peak_rss_gb': rss, 'window_process_rss_gb': child,
+            'n_dof': model.n_dof, 'f_top_hz': f_top, **extra}
 
 
-def _case(kind: str, element_size: float | None, n_modes: int) -> dict:
+def _case(kind: str, element_size: float | None, n_modes: int,
+          workers: int | None = None) -> dict:
     cmd = [sys.executable, str(Path(__file__).resolve()), '--case', kind,
            '--n-modes', str(n_modes)]
+    if workers is not None:
+        cmd += ['--workers', str(workers)]
     if element_size is not None:
         cmd += ['--element-size', repr(element_size)]
     env = dict(os.environ, PYTHONPATH=str(ROOT))
@@ -82,6 +93,15 @@ def _pair(label: str, ours: dict, base: dict, note: str,
                      'baseline': baseline, 'baseline_value': base[key],
                      'ratio': base[key] / ours[key], 'note': note})
     return rows
+
+
+def _processes(case: dict) -> str:
+    """How the windows of a case were solved, and the memory of its window processes."""
+    text = (f'{case["windows"]} windows ({case["windows_unused"]} solved ahead and unused, '
+            f'{case["retries"]} solved again) in {case["window_processes"]} window process(es)')
+    if case['window_processes'] > 1:
+        text += f', peak RSS of the largest {case["window_process_rss_gb"]:.1f} GB'
+    return text
 
 
 def _have_primme() -> bool:
@@ -119,7 +139,15 @@ def run(quick: bool) -> list[dict]:
         return rows
     ours = _case('arpack', BASELINE_ELEMENT_SIZE, n)
     base = _case('plain', BASELINE_ELEMENT_SIZE, n)
-    rows += _pair(f'{n} modes, {ours["n_dof"]} DOF', ours, base, 'element size 2 mm')
+    rows += _pair(f'{n} modes, {ours["n_dof"]} DOF', ours, base,
+                  f'element size 2 mm; {_processes(ours)}')
+    one = _case('arpack', BASELINE_ELEMENT_SIZE, n, workers=1)
+    rows.append({'name': f'{n} modes, {ours["n_dof"]} DOF, windows side by side: wall time',
+                 'value': ours['time_s'], 'unit': 's',
+                 'baseline': 'one window at a time (workers=1)', 'baseline_value': one['time_s'],
+                 'ratio': one['time_s'] / ours['time_s'],
+                 'note': f'{_processes(ours)}; one at a time: {one["windows"]} windows, '
+                         f'{one["retries"]} retries'})
     primme = _have_primme()
     if primme:
         try:
@@ -143,7 +171,8 @@ def run(quick: bool) -> list[dict]:
     rows += _pair(f'{n} modes, paper scale ({paper["n_dof"]} DOF)', paper, extrapolated,
                   f'baseline EXTRAPOLATED x{scale:.2f} from {base["n_dof"]} DOF, not run; '
                   f'highest mode {paper["f_top_hz"]:.0f} Hz; window solver ARPACK, '
-                  f'{paper["windows"]} windows, {paper["factorisations"]} factorisations')
+                  f'{_processes(paper)}, {paper["factorisations"]} factorisations; goal: '
+                  'under 300 s')
     if primme:
         rows += _solver_rows(paper, _case('primme', PAPER_ELEMENT_SIZE, n), 'paper scale')
     return rows
@@ -156,9 +185,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--case', choices=('plain', *METHOD))
     parser.add_argument('--element-size', type=float, default=None)
     parser.add_argument('--n-modes', type=int, default=500)
+    parser.add_argument('--workers', type=int, default=None,
+                        help='window processes (default: solve_modes decides)')
     args = parser.parse_args(argv)
     if args.case:
-        print(json.dumps(_one_case(args.case, args.element_size, args.n_modes)))
+        print(json.dumps(_one_case(args.case, args.element_size, args.n_modes, args.workers)))
         return 0
     for r in run(args.quick):
         print(f'{r["name"]:55s} {r["value"]:9.3g} {r["unit"]:3s} baseline '

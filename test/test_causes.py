@@ -223,6 +223,23 @@ class TestModesCommand:
         for name in ('energy_shares.png', 'mode_distribution.png'):
             assert (tmp_path / name).stat().st_size > 1000
 
+    def test_workers_solve_the_slices_side_by_side(self, tmp_path, capsys):
+        import scipy.sparse.linalg as spla
+
+        from pentapod_sim.cli.modes import main
+        from pentapod_sim.fe import assembly, params
+
+        assert main(['--position', 'P1', '--out', str(tmp_path), '--n-modes', '60',
+                     '--modes-per-window', '12', '--workers', '2', '--no-neuber']) == 0
+        assert '2 window process(es)' in capsys.readouterr().out
+        with open(tmp_path / 'modes.csv') as fh:
+            f = [float(r['frequency_hz']) for r in csv.DictReader(fh)]
+        model = assembly.build_model(params.load_machine(), 'P1')
+        lam = spla.eigsh(model.K, 60, model.M, sigma=0, return_eigenvectors=False)
+        assert_allclose(f, np.sort(np.sqrt(lam)) / (2 * np.pi), rtol=1e-8)
+        assert main(['--position', 'P1', '--workers', '0']) == 2
+        assert 'error: --workers must be >= 1, got 0' in capsys.readouterr().err
+
     def test_unknown_position_is_an_error_naming_it(self, tmp_path, capsys):
         from pentapod_sim.cli.modes import main
 

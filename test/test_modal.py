@@ -6,7 +6,7 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 
 from pentapod_sim.errors import ModalError
-from pentapod_sim.modal import slicing
+from pentapod_sim.modal import slicing, window_pool
 from pentapod_sim.modal.solver import DENSE_LIMIT, solve_modes
 from pentapod_sim.modal.sturm import factor_at, factorize_shifted, inertia_count, sturm_count
 from pentapod_sim.modal.windows import METHODS
@@ -109,17 +109,17 @@ class TestSharedFactorisation:
 
         # now make the race happen: the eigenvalue at the shift comes back on the other side
         # of the shift than the inertia counted it; the slicer must move that shift
-        solve = slicing.window_eigs
+        solve = window_pool.window_eigs
 
-        def other_side(K, M, factor, k, method, tol):
-            lam, phi = solve(K, M, factor, k, method, tol)
+        def other_side(K, M, factor, k, method, tol, checkpoint=None):
+            lam, phi = solve(K, M, factor, k, method, tol, checkpoint)
             j = np.flatnonzero(lam_exact == factor.sigma)
             if j.size:
                 i = int(np.argmin(np.abs(lam - factor.sigma)))
                 lam[i] = factor.sigma * (1 - 1e-13 if factor.count == j[0] else 1 + 1e-13)
             return lam, phi
 
-        monkeypatch.setattr(slicing, 'window_eigs', other_side)
+        monkeypatch.setattr(window_pool, 'window_eigs', other_side)
         res = solve_modes(K, M, n_modes=80, modes_per_window=20)
         assert res.stats['retries'] >= 1
         assert_allclose(res.frequencies, exact[:80], rtol=1e-9)

@@ -33,6 +33,7 @@ from pentapod_sim.modal.causes import (
 )
 from pentapod_sim.modal.solver import solve_modes
 from pentapod_sim.modal.sturm import sturm_count
+from pentapod_sim.modal.window_pool import PARALLEL_MIN_DOF
 
 LOGGER = logging.getLogger('modes')
 #: Frequency band of the paper's mode count [Hz].
@@ -59,6 +60,9 @@ def _parser() -> argparse.ArgumentParser:
                         'naming the dominant TCP direction')
     parser.add_argument('--modes-per-window', type=int, default=None,
                         help='modes per spectrum slice of the eigen solver')
+    parser.add_argument('--workers', type=int, default=None,
+                        help='processes solving spectrum slices side by side (default: one per '
+                        f'core from {PARALLEL_MIN_DOF:,} DOF, else 1)')
     parser.add_argument('-v', '--verbose', action='store_true', help='debug log lines')
     return parser
 
@@ -69,6 +73,8 @@ def _solve(model, args):
         kwargs['f_max'] = PAPER_BAND_HZ
     if args.modes_per_window:
         kwargs['modes_per_window'] = args.modes_per_window
+    if args.workers is not None:
+        kwargs['workers'] = args.workers
     return solve_modes(model.K, model.M, **kwargs)
 
 
@@ -103,7 +109,8 @@ def run(args: argparse.Namespace) -> int:
           f'{modes.frequencies[0]:.2f}-{modes.frequencies[-1]:.2f} Hz')
     print(f'modes below {PAPER_BAND_HZ:g} Hz (Sturm count): {_band_count(model, modes)}')
     print(f'build {t_build:.2f} s, modal solve {t_solve:.2f} s '
-          f'({modes.stats["windows"]} windows, {modes.stats["method"]}), '
+          f'({modes.stats["windows"]} windows, {modes.stats["method"]}, '
+          f'{modes.stats.get("window_processes", 1)} window process(es)), '
           f'cause analysis {t_causes:.2f} s')
     print(f'written: {out / "modes.csv"}, {out / "energy_shares.png"}, '
           f'{out / "mode_distribution.png"}')
@@ -115,6 +122,9 @@ def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     if args.n_modes is not None and args.n_modes < 1:
         print(f'modes: error: --n-modes must be >= 1, got {args.n_modes}', file=sys.stderr)
+        return 2
+    if args.workers is not None and args.workers < 1:
+        print(f'modes: error: --workers must be >= 1, got {args.workers}', file=sys.stderr)
         return 2
     configure_logging(args.verbose)
     return run_command('modes', run, args, errors=(ModalError,))

@@ -11,22 +11,28 @@ window's modes are checked by one count-only factorisation at the final edge (f_
 above the last mode wanted). So every mode below the last edge is there exactly once, with
 one factorisation per window plus one, where counting at separate window edges took two.
 
+On several cores the windows above the last checked one are solved ahead, side by side
+(:class:`pentapod_sim.modal.window_pool.WindowPool`): their shifts are extrapolated from the
+last checked window as if the windows in between had delivered their targets. The checks are
+the same, one window after the other in shift order; a window solved ahead that ends up below
+the cut it should continue from is dropped and solved again, and one that misses modes is
+solved again for more, as above.
+
 Units: eigenvalues omega^2 [rad^2/s^2].
 """
 from __future__ import annotations
 
+from collections import deque
+from concurrent.futures import Future
 from dataclasses import dataclass, field
 import logging
 import math
-import time
 from typing import Callable
 
 import numpy as np
-import scipy.sparse as sp
 
 from pentapod_sim.errors import ModalError
-from pentapod_sim.modal.sturm import factor_at, ShiftedFactor
-from pentapod_sim.modal.windows import window_eigs
+from pentapod_sim.modal.window_pool import Window, WindowPool
 
 _LOG = logging.getLogger(__name__)
 
@@ -36,6 +42,13 @@ LANCZOS_TOL = 1e-8
 
 #: Modes asked for per window, relative to the modes it should deliver (overlap margin).
 WINDOW_PAD = 1.3
+
+#: Windows solved ahead are centred this many targets apart, so neighbours overlap by about
+#: ``WINDOW_PAD - AHEAD_SPACING`` targets (a checked window's successor: by half that, but
+#: placed from the window's actual top). At 148k DOF, 500 modes, 2 processes: 1.0 took 20
+#: windows, no retries, 42 s; 1.15 and 1.3 took 18 and 16 windows but 2 and 3 retries (a
+#: window solved again for more modes), 52 and 54 s (docs/modal.md).
+AHEAD_SPACING = 1.0
 
 #: Progress callback: (modes found so far, modes wanted or None, message).
 Progress = Callable[[int, 'int | None', str], None]
@@ -49,36 +62,42 @@ def _edge_between(lam: np.ndarray, hi_index: int) -> float:
     return 0.5 * (lam[i - 1] + lam[i])
 
 
+def _density(lam: np.ndarray) -> float:
+    """Modes per rad/s in a window (the mode count of these structures grows about linearly)."""
+    w = np.sqrt(np.clip(lam, 0.0, None))
+    return (w.size - 1) / max(w[-1] - w[0], 1e-300)
+
+
 def _next_shift(lam: np.ndarray, a: float, target: int) -> float:
     """
-    Shift of the next window above edge ``a`` [rad^2/s^2] that should hold ``target`` modes.
+    Shift [rad^2/s^2] of the next window above edge ``a`` that should hold ``target`` modes.
 
-    The mode count of these structures grows about linearly in frequency, so the density per
-    unit omega of the last window is extrapolated; the shift sits in the middle (in omega^2)
-    of the predicted window, and asking for ``WINDOW_PAD * target`` modes makes the returned
-    set reach a little below ``a``.
+    The density per unit omega of the last window ``lam`` is extrapolated; the shift sits in
+    the middle (in omega^2) of the predicted window, and asking for ``WINDOW_PAD * target``
+    modes makes the returned set reach a little below ``a``.
     """
-    w = np.sqrt(np.clip(lam, 0.0, None))
-    density = (w.size - 1) / max(w[-1] - w[0], 1e-300)   # modes per rad/s
+    density = _density(lam)
     w_a = math.sqrt(max(a, 0.0))
     w_b = w_a + target / density
     return 0.5 * (w_a ** 2 + w_b ** 2)
+
+
+def _edge_above(lam: np.ndarray, sigma: float, target: int) -> float:
+    """
+    Edge [rad^2/s^2] above which the window after one solved ahead at ``sigma`` is placed.
+
+    It lies half of ``AHEAD_SPACING * target`` modes above ``sigma`` (density extrapolated
+    from the window ``lam``), as a checked window's successor is placed above its cut.
+    """
+    return (math.sqrt(max(sigma, 0.0)) + 0.5 * AHEAD_SPACING * target / _density(lam)) ** 2
 
 
 def _between(lam: np.ndarray, lo: float, hi: float) -> np.ndarray:
     return (lam >= lo) & (lam < hi)
 
 
-@dataclass
-class _Run:
-    """One window: its factorisation (shift and Sturm count there) and the modes found."""
-
-    factor: ShiftedFactor
-    lam: np.ndarray
-    phi: np.ndarray
-
-    def n_in(self, lo: float, hi: float) -> int:
-        return int(np.count_nonzero(_between(self.lam, lo, hi)))
+def _n_in(window: Window, lo: float, hi: float) -> int:
+    return int(np.count_nonzero(_between(window.lam, lo, hi)))
 
 
 @dataclass
@@ -88,112 +107,158 @@ class Slicer:
 
     Every window is solved around its shift with the factorisation of ``K - shift M``, whose
     inertia is also the Sturm count at that shift: one factorisation per window, plus one
-    count-only factorisation at the upper end.
+    count-only factorisation at the upper end. ``ahead`` holds the windows being solved above
+    the last checked one (as many as the pool has processes), lowest first.
     """
 
-    K: sp.spmatrix
-    M: sp.spmatrix
+    pool: WindowPool
     per_window: int
-    method: str
     progress: Progress | None
     limit: float = math.inf           # no mode at or above this eigenvalue is kept
     lam: list = field(default_factory=list)
     phi: list = field(default_factory=list)
+    residual: list = field(default_factory=list)
     factors: list = field(default_factory=list)
     solve_times: list = field(default_factory=list)
+    ahead: deque = field(default_factory=deque)
     windows: int = 0
     retries: int = 0
-    final: ShiftedFactor | None = None
+    unused: int = 0                   # windows solved ahead and then not used
+    final: Window | None = None
 
     def report(self, found: int, wanted: int | None, msg: str) -> None:
         _LOG.info(msg)
         if self.progress is not None:
             self.progress(found, wanted, msg)
 
-    def factor(self, sigma: float) -> ShiftedFactor:
-        factor = factor_at(self.K, self.M, sigma)
-        self.factors.append(factor.seconds)
-        return factor
+    def take(self, future: Future) -> Window:
+        window = self.pool.result(future)
+        if window.factor_seconds:
+            self.factors.append(window.factor_seconds)
+        if window.k:
+            self.solve_times.append(window.solve_seconds)
+        return window
 
-    def solve(self, factor: ShiftedFactor, k: int) -> _Run:
-        t0 = time.perf_counter()
-        lam, phi = window_eigs(self.K, self.M, factor, k, self.method, LANCZOS_TOL)
-        self.solve_times.append(time.perf_counter() - t0)
-        return _Run(factor, lam, phi)
+    def solve(self, sigma: float, k: int) -> Window:
+        """Solve one window now (``k = 0``: only factorise and count)."""
+        return self.take(self.pool.submit(sigma, k))
 
-    def accept(self, run: _Run, lo: float, hi: float) -> None:
-        inside = _between(run.lam, lo, min(hi, self.limit))
+    def accept(self, window: Window, lo: float, hi: float) -> None:
+        inside = _between(window.lam, lo, min(hi, self.limit))
         if np.any(inside):
-            self.lam.append(run.lam[inside])
-            self.phi.append(run.phi[:, inside])
+            self.lam.append(window.lam[inside])
+            self.phi.append(window.phi[:, inside])
+            self.residual.append(window.residual[inside])
 
-    def retry(self, run: _Run, k: int, a: float, b: float, counted: int) -> tuple[_Run, int]:
-        """Solve the window of ``run`` again with more modes (same factorisation)."""
+    def retry(self, window: Window, a: float, b: float, counted: int) -> Window:
+        """Solve ``window`` again with more modes (at the same shift, unless it sits on one)."""
         self.retries += 1
         if self.retries > 20:
             raise ModalError(f'spectrum slicing could not fill window [{a:.6g}, {b:.6g}) '
                              f'rad^2/s^2: Sturm count {counted}')
-        k = int(k * 1.5) + 5
-        sigma = run.factor.sigma
-        near = np.abs(run.lam - sigma) < 1e-7 * abs(sigma)
+        k = int(window.k * 1.5) + 5
+        sigma = window.sigma
+        near = np.abs(window.lam - sigma) < 1e-7 * abs(sigma)
         if np.any(near):   # the shift sits on an eigenvalue: its count is unreliable, move it
             j = int(np.flatnonzero(near)[-1])
-            above = run.lam[j + 1] if j + 1 < run.lam.size else run.lam[j] * 1.01
-            return self.solve(self.factor(0.5 * (run.lam[j] + above)), k), k
-        return self.solve(run.factor, k), k
+            above = window.lam[j + 1] if j + 1 < window.lam.size else window.lam[j] * 1.01
+            sigma = 0.5 * (window.lam[j] + above)
+        return self.solve(sigma, k)
 
 
-def _interval(sl: Slicer, prev: _Run, lo: float, c_lo: int, cut: float, k: int) -> _Run:
+def _launch(sl: Slicer, prev: Window, below: int, cut: float, wanted: int | None,
+            lam_max: float | None) -> None:
     """
-    Solve the window above ``cut`` and accept every mode in [lo, its shift).
+    Keep as many windows above ``prev`` in the pool as it has processes.
 
-    Modes in [lo, cut) come from ``prev`` and those in [cut, shift) from the new window; their
-    number must equal the Sturm count at the new shift minus ``c_lo`` (both from the windows'
-    own factorisations). On a mismatch the new window is solved for more modes; once it
-    reaches below ``lo`` it supplies the whole interval.
+    ``below`` modes lie below ``cut`` (Sturm count plus the modes of ``prev``). The next
+    window is placed above ``cut`` and always started; each later one above the predicted
+    edge of the window before it, and only while the modes predicted below it are fewer than
+    ``wanted`` and that edge is below ``lam_max``.
+    """
+    while len(sl.ahead) < sl.pool.workers:
+        edge, skip = cut, 0
+        if sl.ahead:
+            _, last_target, last_sigma = sl.ahead[-1]
+            edge = _edge_above(prev.lam, last_sigma, last_target)
+            skip = sum(target for _, target, _ in sl.ahead)
+            if wanted is not None and below + skip >= wanted:
+                return
+            if lam_max is not None and edge >= lam_max:
+                return
+        target = sl.per_window
+        if wanted is not None:   # the last window asks only for what is still missing
+            target = max(4, min(target, wanted - below - skip + 2))
+        sigma = _next_shift(prev.lam, edge, target)
+        sl.ahead.append((sl.pool.submit(sigma, int(WINDOW_PAD * target)), target, sigma))
+
+
+def _next_window(sl: Slicer, prev: Window, below: int, cut: float, wanted: int | None,
+                 lam_max: float | None) -> Window:
+    """The lowest window above ``cut``: solved ahead, or now if those ahead lie below it."""
+    while True:
+        _launch(sl, prev, below, cut, wanted, lam_max)
+        future, _, _ = sl.ahead.popleft()
+        window = sl.take(future)
+        if window.sigma > cut:
+            return window
+        sl.unused += 1   # extrapolated too low: below where it should continue
+
+
+def _interval(sl: Slicer, prev: Window, lo: float, c_lo: int, cut: float,
+              run: Window) -> Window:
+    """
+    Accept every mode in [lo, the shift of ``run``) from ``prev`` and ``run``.
+
+    Modes in [lo, cut) come from ``prev`` and those in [cut, shift) from ``run``; their
+    number must equal the Sturm count at the shift minus ``c_lo`` (both from the windows'
+    own factorisations). On a mismatch ``run`` is solved for more modes; once it reaches
+    below ``lo`` it supplies the whole interval.
     """
     sl.windows += 1
-    run = sl.solve(sl.factor(_next_shift(prev.lam, cut, k)), int(WINDOW_PAD * k))
-    k = int(WINDOW_PAD * k)
     while True:
-        sigma, counted = run.factor.sigma, run.factor.count - c_lo
+        sigma, counted = run.sigma, run.count - c_lo
         if run.lam.size and run.lam[0] < lo:
             cut = lo
-        if prev.n_in(lo, cut) + run.n_in(cut, sigma) == counted and cut < sigma:
+        if _n_in(prev, lo, cut) + _n_in(run, cut, sigma) == counted and cut < sigma:
             sl.accept(prev, lo, cut)
             sl.accept(run, cut, sigma)
             return run
-        run, k = sl.retry(run, k, lo, sigma, counted)
+        _LOG.debug('window at %.6g rad^2/s^2 holds %d of the %d modes in [%.6g, %.6g) with '
+                   'its neighbour below (lowest %.6g, cut %.6g): solved again', sigma,
+                   _n_in(prev, lo, cut) + _n_in(run, cut, sigma), counted, lo, sigma,
+                   run.lam[0] if run.lam.size else math.nan, cut)
+        run = sl.retry(run, lo, sigma, counted)
 
 
 def slice_spectrum(sl: Slicer, wanted: int | None, lam_max: float | None) -> None:
     """Collect all eigenpairs below lam_max (if given) and at least ``wanted`` of them."""
-    scale = abs(sl.K.diagonal()).max() / abs(sl.M.diagonal()).max()
-    first = sl.factor(-1e-9 * scale)   # K may be only semi-definite: stay just below zero
-    k = sl.per_window + 1
+    K, M = sl.pool.K, sl.pool.M
+    scale = abs(K.diagonal()).max() / abs(M.diagonal()).max()
+    prev = sl.solve(-1e-9 * scale, sl.per_window + 1)   # K may be only semi-definite
     sl.windows = 1
-    prev = sl.solve(first, k)
-    lo, c_lo = first.sigma, first.count
+    lo, c_lo = prev.sigma, prev.count
     while True:
         done_by_limit = lam_max is not None and prev.lam[-1] >= lam_max
         cut = lam_max if done_by_limit else _edge_between(prev.lam, prev.lam.size - 1)
-        if done_by_limit or (wanted is not None and c_lo + prev.n_in(lo, cut) >= wanted):
-            end = sl.factor(cut)               # the last edge: a count-only factorisation
-            if end.count - c_lo == prev.n_in(lo, cut):
+        below = c_lo + _n_in(prev, lo, cut)
+        if done_by_limit or (wanted is not None and below >= wanted):
+            end = sl.solve(cut, 0)               # the last edge: a count-only factorisation
+            if end.count - c_lo == _n_in(prev, lo, cut):
                 sl.accept(prev, lo, cut)
                 sl.final = end
+                sl.unused += len(sl.ahead)
                 sl.report(end.count, wanted, f'last window: {end.count - c_lo} modes up to '
                           f'{math.sqrt(cut) / 2 / math.pi:.4g} Hz, {end.count} below (Sturm)')
                 return
-            prev, k = sl.retry(prev, k, lo, cut, end.count - c_lo)
+            prev = sl.retry(prev, lo, cut, end.count - c_lo)
             continue
-        target = sl.per_window
-        if wanted is not None:   # the last window asks only for what is still missing
-            target = max(4, min(target, wanted - c_lo - prev.n_in(lo, cut) + 2))
-        run = _interval(sl, prev, lo, c_lo, cut, target)
-        lo, c_lo = run.factor.sigma, run.factor.count
+        run = _interval(sl, prev, lo, c_lo, cut,
+                        _next_window(sl, prev, below, cut, wanted, lam_max))
+        lo, c_lo = run.sigma, run.count
         sl.report(c_lo, wanted, f'window {sl.windows}: modes up to '
                   f'{math.sqrt(max(lo, 0)) / 2 / math.pi:.4g} Hz, {c_lo} below (Sturm)')
-        prev, k = run, int(WINDOW_PAD * target)
+        prev = run
         if (wanted is not None and c_lo >= wanted) or (lam_max is not None and lo >= lam_max):
+            sl.unused += len(sl.ahead)
             return

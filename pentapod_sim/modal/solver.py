@@ -27,8 +27,9 @@ import numpy.typing as npt
 import scipy.linalg as sla
 import scipy.sparse as sp
 
-from pentapod_sim.modal.slicing import Progress, slice_spectrum, Slicer
-from pentapod_sim.modal.windows import DEFAULT_METHOD, METHODS
+from pentapod_sim.modal.slicing import LANCZOS_TOL, Progress, slice_spectrum, Slicer
+from pentapod_sim.modal.window_pool import default_workers, WindowPool
+from pentapod_sim.modal.windows import DEFAULT_METHOD, mass_normalise, METHODS
 
 _LOG = logging.getLogger(__name__)
 
@@ -142,36 +143,26 @@ def _assemble_blocks(lam_blocks: list, phi_blocks: list, n_keep: int | None):
     return lam, phi, blocks
 
 
-def _normalise_and_check(K, M, lam, phi, blocks, chunk: int = 16,
-                         edge_modes: int = 12) -> dict:
-    """Mass-normalise in place; return max residual and M-orthogonality errors."""
-    resid = 0.0
-    for lo in range(0, lam.size, chunk):   # column chunks keep M phi, K phi small
-        cols = slice(lo, lo + chunk)
-        Mphi = M @ phi[:, cols]
-        scale = 1.0 / np.sqrt(np.einsum('ij,ij->j', phi[:, cols], Mphi))
-        phi[:, cols] *= scale
-        Mphi *= scale
-        Kphi = K @ phi[:, cols]
-        r = np.linalg.norm(Kphi - Mphi * lam[cols], axis=0) / np.maximum(
-            np.linalg.norm(Kphi, axis=0), 1e-300)
-        resid = max(resid, float(r.max(initial=0.0)))
-    # M-orthogonality across each window edge, where a mode found twice would show: the
-    # highest modes of one window against the lowest of the next (a full Phi^T M Phi would
-    # cost O(n m^2), 2e11 flops for 500 modes of 800k DOF).
+def _edge_orthogonality(M, phi, blocks, edge_modes: int = 12) -> float:
+    """
+    Largest M-orthogonality error across the window edges, where a mode found twice would show.
+
+    The highest modes of one window against the lowest of the next (a full ``Phi^T M Phi``
+    would cost O(n m^2), 2e11 flops for 500 modes of 800k DOF).
+    """
     ortho = 0.0
     for j, (lo, hi) in enumerate(blocks):
         nxt = blocks[j + 1][1] if j + 1 < len(blocks) else hi
         cols = np.r_[max(lo, hi - edge_modes):min(nxt, hi + edge_modes)]
         G = phi[:, cols].T @ (M @ phi[:, cols])
         ortho = max(ortho, float(np.abs(G - np.eye(cols.size)).max()))
-    return {'max_residual': resid, 'max_orthogonality_error': ortho}
+    return ortho
 
 
 def solve_modes(K: sp.spmatrix, M: sp.spmatrix, *, n_modes: int | None = None,
                 f_max: float | None = None, modes_per_window: int = 30,
                 progress: Progress | None = None, tol_check: float = 1e-6,
-                method: str = DEFAULT_METHOD) -> ModalResult:
+                method: str = DEFAULT_METHOD, workers: int | None = None) -> ModalResult:
     """
     Compute the lowest undamped modes of ``K phi = omega^2 M phi``.
 
@@ -196,6 +187,11 @@ def solve_modes(K: sp.spmatrix, M: sp.spmatrix, *, n_modes: int | None = None,
     method : {'arpack', 'primme'}
         Eigensolver per window (:data:`pentapod_sim.modal.windows.METHODS`): shift-invert
         Lanczos (ARPACK through scipy) or block Davidson (PRIMME, an optional package).
+    workers : int, optional
+        Processes solving windows side by side (1: all in this process). Default: one per
+        core for problems of at least 100,000 DOF, else 1
+        (:func:`pentapod_sim.modal.window_pool.default_workers`). Each window process uses
+        the BLAS threads its environment allows (``OPENBLAS_NUM_THREADS``).
 
     Returns
     -------
@@ -220,24 +216,30 @@ def solve_modes(K: sp.spmatrix, M: sp.spmatrix, *, n_modes: int | None = None,
     if n <= DENSE_LIMIT:
         lam, phi, sturm = _solve_dense(K, M, n_modes, f_max)
         blocks, stats = [(0, lam.size)], {'method': 'dense eigh', 'windows': 1}
+        residual = mass_normalise(K, M, lam, phi)
     else:
         per_window = modes_per_window if n_modes is None else min(modes_per_window, n_modes)
-        sl = Slicer(K, M, max(per_window, 4), method, progress,
-                     math.inf if lam_max is None else lam_max)
-        slice_spectrum(sl, n_modes, lam_max)
+        workers = default_workers(n) if workers is None else workers
+        with WindowPool(K, M, method, LANCZOS_TOL, workers) as pool:
+            sl = Slicer(pool, max(per_window, 4), progress,
+                        math.inf if lam_max is None else lam_max)
+            slice_spectrum(sl, n_modes, lam_max)
+            if lam_max is not None:
+                final = sl.final if sl.final is not None and sl.final.sigma == lam_max \
+                    else sl.solve(lam_max, 0)
+                sturm = final.count
+        residual = np.concatenate(sl.residual)[:n_modes]
         lam, phi, blocks = _assemble_blocks(sl.lam, sl.phi, n_modes)
-        if lam_max is not None:
-            final = sl.final if sl.final is not None and sl.final.sigma == lam_max \
-                else sl.factor(lam_max)
-            sturm = final.count
         stats = {'method': f'{METHODS[method]}, spectrum slicing', 'windows': sl.windows,
-                 'retries': sl.retries, 'factorisations': len(sl.factors),
+                 'retries': sl.retries, 'windows_unused': sl.unused,
+                 'window_processes': workers, 'factorisations': len(sl.factors),
                  'factorisation_time_s': float(sum(sl.factors)),
                  'eigensolver_time_s': float(sum(sl.solve_times))}
     if lam.size and lam[0] < -tol_check * abs(lam).max():
         warnings.warn(f'negative eigenvalue {lam[0]:.3g} rad^2/s^2: K is not positive '
                       'semi-definite', RuntimeWarning, stacklevel=2)
-    stats.update(_normalise_and_check(K, M, lam, phi, blocks))
+    stats['max_residual'] = float(residual.max(initial=0.0))
+    stats['max_orthogonality_error'] = _edge_orthogonality(M, phi, blocks)
     stats['solve_time_s'] = time.perf_counter() - t0
     stats['n_dof'] = n
     if stats['max_residual'] > tol_check or stats['max_orthogonality_error'] > tol_check:

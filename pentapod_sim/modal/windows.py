@@ -15,9 +15,12 @@ The problem is ``K phi = lambda M phi``; the factorisation of ``K - sigma M``
   (docs/modal.md). PRIMME is an optional package, not in requirements.txt (``pip install
   primme`` builds it against a system BLAS and LAPACK, e.g. Debian's libopenblas-dev).
 
-Both return the eigenvalues [rad^2/s^2] sorted ascending and their vectors (columns).
+Both return the eigenvalues [rad^2/s^2] sorted ascending and their vectors (columns);
+:func:`mass_normalise` scales those to unit modal mass and gives each one's residual.
 """
 from __future__ import annotations
+
+from typing import Callable
 
 import numpy as np
 import scipy.sparse as sp
@@ -35,26 +38,38 @@ METHODS = {'arpack': 'shift-invert Lanczos (ARPACK)',
 DEFAULT_METHOD = 'arpack'
 
 
-def _operator(factor: ShiftedFactor, n: int) -> spla.LinearOperator:
-    """``(K - sigma M)^-1`` as an operator; blocks of vectors go to SuperLU in one call."""
-    return spla.LinearOperator((n, n), matvec=factor.lu.solve, matmat=factor.lu.solve,
-                               dtype=float)
+#: Called before every solve with the shift factorisation; it may raise to abandon the window.
+Checkpoint = Callable[[], None]
 
 
-def _arpack(K, M, factor: ShiftedFactor, k: int, tol: float):
+def _solver(factor: ShiftedFactor, checkpoint: Checkpoint | None) -> Callable:
+    """``x -> (K - sigma M)^-1 x``, calling ``checkpoint`` first when one is given."""
+    if checkpoint is None:
+        return factor.lu.solve
+    solve = factor.lu.solve
+
+    def checked(x):
+        checkpoint()
+        return solve(x)
+    return checked
+
+
+def _arpack(K, M, factor: ShiftedFactor, k: int, tol: float, checkpoint: Checkpoint | None):
     n = K.shape[0]
     v0 = np.random.default_rng(n).standard_normal(n)   # same start whatever ran before
-    return spla.eigsh(K, k=k, M=M, sigma=factor.sigma, OPinv=_operator(factor, n), which='LM',
+    solve = _solver(factor, checkpoint)   # blocks of vectors go to SuperLU in one call
+    op = spla.LinearOperator((n, n), matvec=solve, matmat=solve, dtype=float)
+    return spla.eigsh(K, k=k, M=M, sigma=factor.sigma, OPinv=op, which='LM',
                       v0=v0, ncv=min(n - 1, max(2 * k + 1, 20)), tol=tol)
 
 
-def _primme(K, M, factor: ShiftedFactor, k: int, tol: float):
+def _primme(K, M, factor: ShiftedFactor, k: int, tol: float, checkpoint: Checkpoint | None):
     try:
         import primme
     except ImportError:
         raise ModalError("method 'primme' needs the optional package primme "
                          '(pip install primme); method arpack needs nothing else') from None
-    n, solve = K.shape[0], factor.lu.solve
+    n, solve = K.shape[0], _solver(factor, checkpoint)
 
     def inverted(x):
         return M @ solve(M @ x)
@@ -80,7 +95,8 @@ def _primme(K, M, factor: ShiftedFactor, k: int, tol: float):
 
 
 def window_eigs(K: sp.spmatrix, M: sp.spmatrix, factor: ShiftedFactor, k: int, method: str,
-                tol: float) -> tuple[np.ndarray, np.ndarray]:
+                tol: float, checkpoint: Checkpoint | None = None
+                ) -> tuple[np.ndarray, np.ndarray]:
     """
     Return the ``k`` eigenpairs nearest ``factor.sigma``, eigenvalues ascending.
 
@@ -96,13 +112,36 @@ def window_eigs(K: sp.spmatrix, M: sp.spmatrix, factor: ShiftedFactor, k: int, m
         Eigensolver (:data:`METHODS`).
     tol : float
         Convergence tolerance (relative, see the module notes).
+    checkpoint : callable, optional
+        Called before every solve with the factorisation; whatever it raises ends the window.
     """
     k = min(k, K.shape[0] - 2)
     if method == 'arpack':
-        lam, phi = _arpack(K, M, factor, k, tol)
+        lam, phi = _arpack(K, M, factor, k, tol, checkpoint)
     elif method == 'primme':
-        lam, phi = _primme(K, M, factor, k, tol)
+        lam, phi = _primme(K, M, factor, k, tol, checkpoint)
     else:
         raise ValueError(f'method={method!r} is not one of {", ".join(METHODS)}')
     order = np.argsort(lam)
     return lam[order], phi[:, order]
+
+
+def mass_normalise(K: sp.spmatrix, M: sp.spmatrix, lam: np.ndarray, phi: np.ndarray,
+                   chunk: int = 16) -> np.ndarray:
+    """
+    Scale the columns of ``phi`` in place to ``phi_j^T M phi_j = 1``; return their residuals.
+
+    The residual of mode j is ``||K phi_j - lam_j M phi_j|| / ||K phi_j||``. Column chunks keep
+    the products ``M phi`` and ``K phi`` small.
+    """
+    resid = np.empty(lam.size)
+    for lo in range(0, lam.size, chunk):
+        cols = slice(lo, lo + chunk)
+        Mphi = M @ phi[:, cols]
+        scale = 1.0 / np.sqrt(np.einsum('ij,ij->j', phi[:, cols], Mphi))
+        phi[:, cols] *= scale
+        Mphi *= scale
+        Kphi = K @ phi[:, cols]
+        resid[cols] = np.linalg.norm(Kphi - Mphi * lam[cols], axis=0) / np.maximum(
+            np.linalg.norm(Kphi, axis=0), 1e-300)
+    return resid
