@@ -40,6 +40,7 @@ from pentapod_sim.interface import (
     force_topic,
     stamp_ns,
     state_layouts,
+    TopicLayout,
 )
 from pentapod_sim.nodes.common import qos, stamp_msg
 from pentapod_sim.nodes.wire_cdr import JointStateCdr
@@ -151,17 +152,16 @@ class DisplayBatches:
             key = (source, self.ports[source], count)
             if (got := self._layouts.get(key)) is None:
                 got = self._layouts[key] = self._force_layout(self.ports[source], count)
-            joints, index = got
-            msg.name = joints
-            msg.effort = array.array('d', self.u[source][:count].reshape(-1)[index].tobytes())
+            msg.name = got.joints
+            msg.effort = array.array(
+                'd', self.u[source][:count].reshape(-1)[got.position_index].tobytes())
             self._publish(pub, msg)
 
-    def _force_layout(self, ports: tuple[str, ...], count: int) -> tuple[list[str], np.ndarray]:
-        """Joints ``<port>@j`` and their indices into the flattened (count, n_in) forces."""
+    def _force_layout(self, ports: tuple[str, ...], count: int) -> TopicLayout:
+        """Joints ``<port>@j``; position indices into the flattened (count, n_in) forces."""
         columns = np.array([self.mixer.input_names.index(p) for p in ports], dtype=np.intp)
-        n_in = len(self.mixer.input_names)
-        index = (np.arange(count)[:, None] * n_in + columns).reshape(-1)
-        return [f'{p}@{j}' for j in range(count) for p in ports], index
+        one = TopicLayout('', list(ports), columns, np.full(columns.size, -1, dtype=np.intp))
+        return batch_layout(one, len(self.mixer.input_names), count, '')
 
     def _publish(self, pub, msg: JointState) -> None:
         pub.publish(self._cdr(msg))
