@@ -2,6 +2,7 @@
 import multiprocessing
 import os
 from pathlib import Path
+import signal
 import subprocess
 import sys
 import time
@@ -161,6 +162,37 @@ def test_a_window_process_does_not_outlive_its_caller(tmp_path):
     for pid in alive:
         os.kill(pid, 9)
     assert not alive, f'window processes {alive} outlived their caller'
+
+
+def test_ctrl_c_stops_the_modes_command_and_its_window_processes():
+    """SIGINT to the process group, as a terminal's Ctrl-C: one line, exit 130, nothing left."""
+    cmd = [sys.executable, '-m', 'pentapod_sim.cli.modes', '--position', 'P1',
+           '--element-size', '0.004', '--n-modes', '300', '--modes-per-window', '20',
+           '--no-neuber', '--workers', '2', '--out', '/nonexistent/never-written']
+    caller = subprocess.Popen(cmd, cwd=ROOT, stderr=subprocess.PIPE, text=True,
+                              start_new_session=True)
+    try:
+        err = ''
+        while 'window 2:' not in err:   # the window processes are at work
+            line = caller.stderr.readline()
+            assert line, f'modes ended before its second window: {err}'
+            err += line
+        group = [int(pid) for pid in subprocess.run(
+            ['pgrep', '-g', str(caller.pid)], capture_output=True, text=True).stdout.split()]
+        assert len(group) == 3                     # the command and its 2 window processes
+        os.killpg(caller.pid, signal.SIGINT)
+        err += caller.stderr.read()
+        assert caller.wait(timeout=30) == 130
+    finally:
+        if caller.poll() is None:
+            os.killpg(caller.pid, signal.SIGKILL)
+            caller.wait()
+    assert err.rstrip().endswith('modes: stopped by SIGINT'), err[-2000:]
+    assert 'Traceback' not in err, err[-2000:]
+    alive = [pid for pid in group if not _gone(pid, 10.0)]
+    for pid in alive:
+        os.kill(pid, 9)
+    assert not alive, f'processes {alive} outlived the command'
 
 
 def test_default_workers_one_per_core_for_large_problems_only():

@@ -4,12 +4,14 @@ Command-line entry points of the testbed (ROS-free).
 The helpers below give every command the same model options (machine file, positions file,
 position name, mesh size), the same logging setup and the same handling of a user's mistake
 (:func:`run_command`: one line ``<prog>: error: <message>`` on stderr, exit code 1, no
-traceback; argparse's usage errors keep exit code 2).
+traceback; argparse's usage errors keep exit code 2). Ctrl-C ends a command with one line
+``<prog>: stopped by SIGINT`` and exit code 130, as the nodes do (:mod:`pentapod_sim.shutdown`).
 """
 from __future__ import annotations
 
 import argparse
 import logging
+import signal
 import sys
 from typing import Callable
 
@@ -25,6 +27,8 @@ from pentapod_sim.errors import (
 USER_ERRORS = (ConfigError, UnreachablePoseError, PortError, ModelFileError, BagError, OSError)
 #: Exit code of a command stopped by a user error (argparse uses 2 for a bad command line).
 EXIT_USER_ERROR = 1
+#: Exit code of a command stopped by Ctrl-C (128 + SIGINT, the shell's convention).
+EXIT_SIGINT = 128 + signal.SIGINT
 
 
 def run_command(prog: str, func: Callable[[argparse.Namespace], int],
@@ -49,6 +53,9 @@ def run_command(prog: str, func: Callable[[argparse.Namespace], int],
         text = ' '.join(str(err).split('\n')) or type(err).__name__
         print(f'{prog}: error: {text}', file=sys.stderr, flush=True)
         return EXIT_USER_ERROR
+    except KeyboardInterrupt:
+        print(f'{prog}: stopped by SIGINT', file=sys.stderr, flush=True)
+        return EXIT_SIGINT
 
 
 def add_model_arguments(parser: argparse.ArgumentParser, position: str = 'P1') -> None:

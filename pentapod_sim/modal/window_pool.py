@@ -118,13 +118,14 @@ def _start_process(K, M, method: str, tol: float, stop) -> None:
 
     A fork inherits the caller's signal handlers, which may only record a stop request
     (:mod:`pentapod_sim.shutdown`); a window process has nothing to save, so SIGTERM and
-    SIGHUP end it and SIGINT raises KeyboardInterrupt, and it is sent SIGTERM when the caller
-    dies, even by SIGKILL, instead of solving on as an orphan.
+    SIGHUP end it, and it is sent SIGTERM when the caller dies, even by SIGKILL, instead of
+    solving on as an orphan. Ctrl-C reaches the whole process group: a window process ignores
+    it and leaves the decision to the caller, which stops its windows when it stops.
     """
     global _PROCESS_SOLVER
     for sig in (signal.SIGTERM, signal.SIGHUP):
         signal.signal(sig, signal.SIG_DFL)
-    signal.signal(signal.SIGINT, signal.default_int_handler)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     shutdown.die_with_parent()
     _PROCESS_SOLVER = _Solver(K, M, method, tol, stop)
 
