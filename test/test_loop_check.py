@@ -5,13 +5,18 @@ The model a source publishes must compute what the source computes: the stacked 
 damper node's laws and the ideal PMA's model are stepped here against the laws' own ``step``.
 The JSON round trip of a controller is tested in test/test_stability.py.
 """
+import logging
+import signal
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
 from fixtures.demo_model import demo_model
 from pentapod_damper.node_parameters import damper_laws, pma_law
-from pentapod_sim import interface
+from pentapod_sim import interface, shutdown
 from pentapod_sim.errors import ConfigError
+from pentapod_sim.nodes import loop_check
 from pentapod_sim.nodes.loop_check import model_text, parallel, sort_models
 from pentapod_sim.nodes.run_status import status_values
 from pentapod_sim.recording.run_end import RunStatus
@@ -99,3 +104,49 @@ def test_an_empty_parallel_model_and_bad_shapes():
     one = DiscreteController.static(['tcp_velocity_x'], ['tcp_force_x'], [[-5.0]])
     assert parallel([one]).n_states == 0
     np.testing.assert_array_equal(parallel([one, one]).d, np.diag([-5.0, -5.0]))
+
+
+class _Models:
+    """The plant's model subscriptions, standing in: the damper's model is in at once."""
+
+    def __init__(self, text: str, stop_while_waiting: bool):
+        self.text, self.stop = text, stop_while_waiting
+
+    def wait(self, executor):
+        if self.stop:
+            shutdown.request(signal.SIGINT)
+        return {'damper': self.text}
+
+
+@pytest.mark.parametrize('when', ['waiting for the models', 'building the check model'])
+def test_a_stop_during_the_truncation_check_skips_the_rest_of_it(monkeypatch, when):
+    """
+    SIGINT while the plant waits for its models or builds its check model skips the rest.
+
+    No eigenvalue problem follows (seconds that could outlast the runner's grace before its
+    SIGKILL).
+    """
+    plant = demo_model(3, inputs=['tcp_force_x', 'tcp_force_y'])
+    law = DiscreteController.static(['tcp_velocity_x'], ['tcp_force_x'], [[-100.0]])
+    node = SimpleNamespace(params=SimpleNamespace(loop_check='refuse'), model=plant,
+                           get_logger=lambda: logging.getLogger('plant'),
+                           loop_models=_Models(law.to_json(), when == 'waiting for the models'))
+    built = []
+
+    def build(node):
+        built.append(True)
+        shutdown.request(signal.SIGINT)
+        return None, ''
+
+    def solved(*args):
+        raise AssertionError('the eigenvalue problem ran after the stop request')
+    monkeypatch.setattr(loop_check, 'check_plant_model', build)
+    monkeypatch.setattr(loop_check, 'loop_result', solved)
+    saved = {sig: signal.getsignal(sig) for sig in shutdown.STOP_SIGNALS}
+    try:
+        assert loop_check.check_at_start(node, executor=None) is None
+    finally:
+        shutdown.install()          # clears the recorded stop
+        for sig, handler in saved.items():
+            signal.signal(sig, handler)
+    assert built == ([] if when == 'waiting for the models' else [True])

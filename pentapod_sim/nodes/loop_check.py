@@ -236,6 +236,9 @@ def check_at_start(node, executor) -> LoopCheck | None:
     """
     The plant node's truncation check before step 0 (parameter ``loop_check``).
 
+    A stop request (:mod:`pentapod_sim.shutdown`) that comes while the sources' models are
+    awaited or the check model is built skips the rest of the check (None).
+
     Raises
     ------
     RunError
@@ -246,7 +249,10 @@ def check_at_start(node, executor) -> LoopCheck | None:
     if policy == 'off':
         log.info('truncation check off (loop_check = off)')
         return None
-    models, open_loop, unchecked = sort_models(node.loop_models.wait(executor), node.model)
+    texts = node.loop_models.wait(executor)
+    if shutdown.requested():    # stopped while waiting: no check model, no eigenvalues
+        return None
+    models, open_loop, unchecked = sort_models(texts, node.model)
     missing = ''.join(f'; unchecked source {s!r}: {why}' for s, why in unchecked.items())
     if unchecked:
         log.warning(f'truncation check: source(s) {", ".join(unchecked)} gave no linear model '
@@ -257,6 +263,8 @@ def check_at_start(node, executor) -> LoopCheck | None:
         return None
     start = time.monotonic()
     check, check_name = check_plant_model(node)
+    if shutdown.requested():    # stopped while the check model was built: skip the check, so
+        return None             # the plant ends before the runner's SIGKILL (5 s after SIGINT)
     result, kept = loop_result(node, models, check, check_name, f'loop of plant and '
                                f'{", ".join(models)}')
     if kept is not None:
