@@ -141,6 +141,14 @@ def _gone(pid: int, seconds: float) -> bool:
     return False
 
 
+def _survivors(pids: list[int]) -> list[int]:
+    """The processes still alive 10 s on (killed then, so that none outlives the test)."""
+    alive = [pid for pid in pids if not _gone(pid, 10.0)]
+    for pid in alive:
+        os.kill(pid, 9)
+    return alive
+
+
 def test_a_window_process_does_not_outlive_its_caller(tmp_path):
     """The caller killed by SIGKILL mid-solve: its window processes, busy or idle, end too."""
     pids = tmp_path / 'pids'
@@ -158,9 +166,7 @@ def test_a_window_process_does_not_outlive_its_caller(tmp_path):
     finally:
         caller.kill()
         caller.wait()
-    alive = [pid for pid in windows if not _gone(pid, 10.0)]
-    for pid in alive:
-        os.kill(pid, 9)
+    alive = _survivors(windows)
     assert not alive, f'window processes {alive} outlived their caller'
 
 
@@ -189,9 +195,7 @@ def test_ctrl_c_stops_the_modes_command_and_its_window_processes():
             caller.wait()
     assert err.rstrip().endswith('modes: stopped by SIGINT'), err[-2000:]
     assert 'Traceback' not in err, err[-2000:]
-    alive = [pid for pid in group if not _gone(pid, 10.0)]
-    for pid in alive:
-        os.kill(pid, 9)
+    alive = _survivors(group)
     assert not alive, f'processes {alive} outlived the command'
 
 
