@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from fixtures.demo_model import demo_model
+from fixtures.stopping import stop_handlers  # noqa: F401  (a fixture)
 from pentapod_damper.node_parameters import damper_laws, pma_law
 from pentapod_sim import interface, shutdown
 from pentapod_sim.errors import ConfigError
@@ -118,6 +119,7 @@ class _Models:
         return {'damper': self.text}
 
 
+@pytest.mark.usefixtures('stop_handlers')
 @pytest.mark.parametrize('when', ['waiting for the models', 'building the check model'])
 def test_a_stop_during_the_truncation_check_skips_the_rest_of_it(monkeypatch, when):
     """
@@ -142,11 +144,5 @@ def test_a_stop_during_the_truncation_check_skips_the_rest_of_it(monkeypatch, wh
         raise AssertionError('the eigenvalue problem ran after the stop request')
     monkeypatch.setattr(loop_check, 'check_plant_model', build)
     monkeypatch.setattr(loop_check, 'loop_result', solved)
-    saved = {sig: signal.getsignal(sig) for sig in shutdown.STOP_SIGNALS}
-    try:
-        assert loop_check.check_at_start(node, executor=None) is None
-    finally:
-        shutdown.install()          # clears the recorded stop
-        for sig, handler in saved.items():
-            signal.signal(sig, handler)
+    assert loop_check.check_at_start(node, executor=None) is None
     assert built == ([] if when == 'waiting for the models' else [True])

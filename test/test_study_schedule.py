@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 
 from fixtures.demo_model import demo_model
+from fixtures.stopping import stop_handlers  # noqa: F401  (a fixture)
 from pentapod_damper.scenario_laws import scenario_laws
 from pentapod_damper.study import damping, measured_damping, pipeline
 from pentapod_damper.study.analytic import discrete_frf, sampled_loop, SampledPairFrf
@@ -29,15 +30,7 @@ from pentapod_sim.sim.stability import check_loop, controller_of
 ROOT = Path(__file__).resolve().parents[1]
 
 
-@pytest.fixture(autouse=True)
-def stop_handlers():
-    """Record stop signals (as the study does) for the test; restore the handlers after."""
-    saved = {sig: signal.getsignal(sig) for sig in shutdown.STOP_SIGNALS}
-    shutdown.install()
-    yield
-    shutdown.install()          # clears a recorded stop
-    for sig, handler in saved.items():
-        signal.signal(sig, handler)
+pytestmark = pytest.mark.usefixtures('stop_handlers')   # stop signals recorded, as the study does
 
 
 def _lines():
