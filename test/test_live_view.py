@@ -14,7 +14,6 @@ last recorded stamps).
 import contextlib
 import math
 import os
-from pathlib import Path
 import re
 import signal
 import subprocess
@@ -27,6 +26,7 @@ import pytest
 
 from fixtures.demo_model import demo_model
 from fixtures.foxglove_client import decoder, FoxgloveClient
+from fixtures.processes import NodeProcesses
 from pentapod_sim import interface
 from pentapod_sim.analysis.bag_reader import open_bag
 from pentapod_sim.live.layout import build_layout, message_paths
@@ -52,41 +52,7 @@ DISPLAY_TOPICS = [interface.TCP_STATE, interface.STRUT_STATES, interface.PMA_MOU
                                                                for s in SOURCES]
 
 
-class Procs:
-    """Node processes with logs; all stopped at the end."""
-
-    def __init__(self, folder: Path):
-        self.folder, self.procs = folder, {}
-        self.env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
-
-    def start(self, name: str, module: str, *params: str) -> subprocess.Popen:
-        cmd = [sys.executable, '-m', module, '--ros-args', '-r', f'__node:={name}']
-        for p in params:
-            cmd += ['-p', p]
-        log = open(self.folder / f'{name}.log', 'w')
-        self.procs[name] = subprocess.Popen(cmd, env=self.env, stdout=log,
-                                            stderr=subprocess.STDOUT)
-        return self.procs[name]
-
-    def log(self, name: str) -> str:
-        return (self.folder / f'{name}.log').read_text()
-
-    def stop(self, name: str) -> int:
-        proc = self.procs[name]
-        if proc.poll() is None:
-            proc.send_signal(signal.SIGINT)
-        try:
-            return proc.wait(timeout=20)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            return proc.wait()
-
-    def close(self):
-        for name in self.procs:
-            self.stop(name)
-
-
-def _port(procs: Procs, name: str = 'live_view', timeout: float = 60.0) -> int:
+def _port(procs: NodeProcesses, name: str = 'live_view', timeout: float = 60.0) -> int:
     end = time.monotonic() + timeout
     while time.monotonic() < end:
         found = re.search(r'server on ws://127\.0\.0\.1:(\d+)', procs.log(name))
@@ -126,7 +92,7 @@ def run(tmp_path_factory):
     """One lockstep run seen by the live view (client messages) and by the recorder (bag)."""
     folder = tmp_path_factory.mktemp('live')
     model_file = demo_model(10, seed=5).save(folder / 'model.npz')
-    procs = Procs(folder)
+    procs = NodeProcesses(folder)
     try:
         procs.start('recorder', 'pentapod_sim.nodes.recorder_node', f'output_dir:={folder}',
                     'bag_name:=run', 'flush_period:=0.2', 'discovery_period:=0.1')
@@ -338,7 +304,7 @@ def _status_and_view(tmp_path, values: dict):
     from rclpy.node import Node
 
     from pentapod_sim.nodes.common import qos
-    procs = Procs(tmp_path)
+    procs = NodeProcesses(tmp_path)
     ctx = rclpy.Context()
     rclpy.init(context=ctx, domain_id=int(os.environ['ROS_DOMAIN_ID']))
     node = Node('fake_plant', context=ctx)

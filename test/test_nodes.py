@@ -1,7 +1,5 @@
 """Nodes in real processes (rclpy, DDS on localhost): lockstep, energy, PMA, failures, help."""
 import os
-from pathlib import Path
-import signal
 import subprocess
 import sys
 import time
@@ -11,6 +9,7 @@ from numpy.testing import assert_allclose
 import pytest
 
 from fixtures.demo_model import demo_model
+from fixtures.processes import NodeProcesses
 from pentapod_damper.laws import Dynamics, ProofMassActuator, strut_bending_damper, tcp_damper
 from pentapod_sim.executables import module_of, NODE_KINDS
 from pentapod_sim.parameters import table_of
@@ -30,42 +29,9 @@ def ros_env():
     return env
 
 
-class Procs:
-    """Start node processes; always kill them at the end."""
-
-    def __init__(self, env, folder: Path):
-        self.env, self.folder, self.procs = env, folder, {}
-
-    def start(self, name: str, module: str, *params: str) -> subprocess.Popen:
-        cmd = [sys.executable, '-m', module, '--ros-args', '-r', f'__node:={name}']
-        for p in params:
-            cmd += ['-p', p]
-        log = open(self.folder / f'{name}.log', 'w')
-        proc = subprocess.Popen(cmd, env=self.env, stdout=log, stderr=subprocess.STDOUT)
-        self.procs[name] = proc
-        return proc
-
-    def log(self, name: str) -> str:
-        return (self.folder / f'{name}.log').read_text()
-
-    def wait(self, name: str, timeout: float = 90.0) -> int:
-        return self.procs[name].wait(timeout=timeout)
-
-    def close(self):
-        for proc in self.procs.values():
-            if proc.poll() is None:
-                proc.send_signal(signal.SIGINT)
-        for proc in self.procs.values():
-            try:
-                proc.wait(timeout=5)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
-
-
 @pytest.fixture
 def procs(ros_env, tmp_path):
-    p = Procs(ros_env, tmp_path)
+    p = NodeProcesses(tmp_path, ros_env)
     yield p
     p.close()
 
