@@ -42,6 +42,7 @@ import scipy.signal  # noqa: E402
 
 from fixtures.demo_model import demo_model  # noqa: E402
 from pentapod_damper.laws import strut_bending_damper, tcp_damper  # noqa: E402
+from pentapod_sim.nodes.answer_poll import usable_cpus  # noqa: E402
 from pentapod_sim.scenario.domain import isolation  # noqa: E402
 from pentapod_sim.sim.closed_loop import (  # noqa: E402
     closed_loop_matrices,
@@ -526,8 +527,11 @@ def ros_rows(quick: bool) -> list[dict]:
                                  higher_better=False, note='VmHWM of the process; the '
                                  'plant imports numpy, scipy and python-control'))
             note = (f'{steps} steps, 200 states; each step: strut_states out (the only '
-                    f'subscribed topic), {n_ctrl} answer(s) in; best of {rounds} rounds, '
-                    'interleaved with the baselines')
+                    f'subscribed topic), {n_ctrl} answer(s) in, taken by polling in '
+                    f'{res.get("answers_polled", 0) / steps:.0%} of the steps (the plant '
+                    'polls while every node that works each step has a CPU, '
+                    f'{usable_cpus()} here); best of {rounds} rounds, interleaved with the '
+                    'baselines')
             rows.append(_row(f'lockstep plant + {n_ctrl} controller node(s)', rate, 'steps/s',
                              'rclpy ping-pong, 2 processes, default executor', base,
                              note=note))

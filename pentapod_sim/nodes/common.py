@@ -188,9 +188,16 @@ def freeze_start_up() -> None:
     gc.freeze()
 
 
+def set_stamp(stamp: Time, ns: int) -> None:
+    """Fill a builtin_interfaces/Time in place from integer nanoseconds (pre-built messages)."""
+    stamp.sec, stamp.nanosec = divmod(ns, 1_000_000_000)
+
+
 def stamp_msg(ns: int) -> Time:
     """builtin_interfaces/Time from integer nanoseconds."""
-    return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+    stamp = Time()
+    set_stamp(stamp, ns)
+    return stamp
 
 
 def stamp_to_ns(stamp: Time) -> int:
@@ -224,6 +231,8 @@ def subscribers_of(node, publisher) -> tuple[set, bool]:
     return {info.node_name for info in graph}, publisher.get_subscription_count() >= len(graph)
 
 
+#: Wall time [s] between two checks of the plant's force topics' publishers during a run.
+GRAPH_CHECK_PERIOD = 0.25
 #: Wall time [s] a second publisher on a force topic gets to be discovered by node name.
 NAME_DISCOVERY = 2.0
 _UNKNOWN_NAME = '_NODE_NAME_UNKNOWN_'

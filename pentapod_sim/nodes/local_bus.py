@@ -173,6 +173,10 @@ class Drain:
     def _came_back(self, _msg) -> None:
         self._back = True
 
+    def ready(self) -> bool:
+        """True once the mark's subscription is matched (a drain then runs every queued event)."""
+        return self.pub.get_subscription_count() > 0
+
     def tick(self, executor) -> None:
         """Drain now if ``period`` s passed since the last drain."""
         now = time.monotonic()
@@ -187,7 +191,7 @@ class Drain:
         Returns the number of other events run (0: the executor had nothing queued).
         """
         self.drains += 1
-        if self.pub.get_subscription_count() == 0:            # not matched (yet): one event
+        if not self.ready():                                  # not matched (yet): one event
             executor.spin_once(timeout_sec=0.0)
             return 1
         self._back = False

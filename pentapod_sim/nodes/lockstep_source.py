@@ -15,6 +15,7 @@ run the plant's messages and the answers pass in-process (:meth:`LockstepSource.
 from __future__ import annotations
 
 import array
+import math
 import time
 from typing import Sequence
 
@@ -31,6 +32,7 @@ from pentapod_sim.nodes.common import (
     FORCE_QOS,
     INFO_QOS,
     node_args,
+    set_stamp,
     stamp_to_ns,
     STATE_SUB_QOS,
     subscribers_of,
@@ -70,7 +72,8 @@ class LockstepSource(Node):
             topic, joint, field = port_location(port)
             self.needs.setdefault(topic, []).append((slot, joint, field))
         self._pending: dict[int, dict[str, object]] = {}
-        self._cache: dict[tuple[str, tuple], list] = {}
+        # topic -> (joint names of the last message, [(slot, index in the message, field)])
+        self._picks: dict[str, tuple[list, list]] = {}
         self._last = (-1, None)   # (stamp ns, published message)
         self.force_pub = self.create_publisher(JointState, force_topic(self.source_name),
                                                FORCE_QOS)
@@ -181,13 +184,16 @@ class LockstepSource(Node):
             self.reset()
         if self.answered == 0 and self.wait_for and not self.subscribers_ready():
             return   # not answering yet: the plant re-sends this step after resend_period
-        pending = self._pending.setdefault(ns, {})
-        pending[topic] = msg
-        if len(pending) < max(1, len(self.needs)):
-            return
-        del self._pending[ns]
-        for old in [s for s in self._pending if s < ns]:
-            del self._pending[old]
+        if len(self.needs) > 1:              # wait for the step's message on every topic
+            pending = self._pending.setdefault(ns, {})
+            pending[topic] = msg
+            if len(pending) < len(self.needs):
+                return
+            del self._pending[ns]
+            for old in [s for s in self._pending if s < ns]:
+                del self._pending[old]
+        else:
+            pending = {topic: msg}
         sensors = np.empty(len(self.sensor_ports))
         for t, msg_t in pending.items():
             if t != CLOCK and not self._extract(t, msg_t, sensors):
@@ -195,7 +201,7 @@ class LockstepSource(Node):
         efforts = np.asarray(self.compute(ns, sensors), dtype=float)
         out = self._answer                 # one message object, refilled every step
         out.effort = array.array('d', efforts.tobytes())
-        out.header.stamp.sec, out.header.stamp.nanosec = divmod(ns, 1_000_000_000)
+        set_stamp(out.header.stamp, ns)
         self.force_out.publish(out)
         self._last = (ns, out)
         self.answered += 1
@@ -203,24 +209,28 @@ class LockstepSource(Node):
 
     def _extract(self, topic: str, msg: JointState, sensors: np.ndarray) -> bool:
         """Fill this topic's sensor slots; reject the step if a joint or value is bad."""
-        key = (topic, tuple(msg.name))
-        picks = self._cache.get(key)
-        if picks is None:
-            index = {n: i for i, n in enumerate(msg.name)}
+        # per step the names are only compared with the last message's (a list comparison:
+        # a few us less than hashing them, every step, for a per-step path that runs
+        # cache-cold; docs/nodes.md "Where a lockstep step's time goes")
+        names = msg.name
+        known = self._picks.get(topic)
+        if known is None or known[0] != names:
+            index = {n: i for i, n in enumerate(names)}
             missing = [j for _, j, _ in self.needs[topic] if j not in index]
             if missing:
                 self._reject(f'missing_joint: {topic} lacks {missing}')
                 return False
-            picks = [(slot, index[j], field) for slot, j, field in self.needs[topic]]
-            self._cache[key] = picks
-        for slot, i, field in picks:
+            known = (names, [(slot, index[j], field) for slot, j, field in self.needs[topic]])
+            self._picks[topic] = known
+        for slot, i, field in known[1]:
             values = msg.velocity if field == 'velocity' else msg.position
             if i >= len(values):
                 self._reject(f'length: {topic} has {len(values)} {field} values for '
-                             f'{len(msg.name)} names')
+                             f'{len(names)} names')
                 return False
-            sensors[slot] = values[i]
-        if not np.all(np.isfinite(sensors[[s for s, _, _ in picks]])):
-            self._reject(f'nonfinite: {topic} at stamp {stamp_to_ns(msg.header.stamp)} ns')
-            return False
+            value = values[i]
+            if not math.isfinite(value):
+                self._reject(f'nonfinite: {topic} at stamp {stamp_to_ns(msg.header.stamp)} ns')
+                return False
+            sensors[slot] = value
         return True

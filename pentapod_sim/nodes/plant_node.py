@@ -13,6 +13,7 @@ checks the sampled loop with its sources' linear models (``loop_check``,
 """
 from __future__ import annotations
 
+import array
 import time
 
 import numpy as np
@@ -24,15 +25,17 @@ from pentapod_sim import interface, shutdown
 from pentapod_sim.errors import ConfigError, RunError
 from pentapod_sim.interface import CLOCK, force_topic, stamp_ns, state_layouts, step_of
 from pentapod_sim.nodes import loop_check
+from pentapod_sim.nodes.answer_poll import AnswerPoller
 from pentapod_sim.nodes.common import (
     declare_param,
     declare_table,
     FORCE_SUB_QOS,
+    GRAPH_CHECK_PERIOD,
     node_args,
     run_node,
+    set_stamp,
     shared_topic_error,
     spin_until,
-    stamp_msg,
     stamp_to_ns,
     STATE_QOS,
     subscribers_of,
@@ -41,14 +44,12 @@ from pentapod_sim.nodes.common import (
 from pentapod_sim.nodes.fullrate import FullRateOutputs
 from pentapod_sim.nodes.local_bus import Outlet
 from pentapod_sim.nodes.parameter_tables import PLANT
-from pentapod_sim.nodes.realtime_stats import fault_in, LatenessStats, POLL_AHEAD
+from pentapod_sim.nodes.realtime_loop import run_realtime
 from pentapod_sim.nodes.run_status import RunStatusPublisher
 from pentapod_sim.plant.build import load_or_build_model
 from pentapod_sim.sim.multirate import MultiRatePlant
 from pentapod_sim.sim.stepping import ForceMixer, parse_sources
 from pentapod_sim.sim.trace import Trace
-
-GRAPH_CHECK_PERIOD = 0.25   # s of wall time between checks of the force topics' publishers
 
 
 class PlantNode(Node):
@@ -80,6 +81,11 @@ class PlantNode(Node):
         # in a composition in-process sources get their messages directly (.local_bus)
         self.clock_out = Outlet(self.clock_pub)
         self.state_outs = [(Outlet(pub), lay) for pub, lay in self.state_pubs]
+        # one message per topic, refilled every step: building a JointState costs several us
+        # (rosidl's checks of every joint name), refilling its arrays and stamp about 1 us;
+        # publishing serialises it and in-process callbacks must not keep it (.local_bus)
+        self._clock_msg = Clock()
+        self._state_msgs = {lay.topic: JointState(name=lay.joints) for lay in self.layouts}
         self.drain = None                 # local_bus.Drain of a composed plant
         self.fullrate = FullRateOutputs(self, self.core)
         self.force_subs = {name: self.create_subscription(
@@ -87,6 +93,8 @@ class PlantNode(Node):
             lambda msg, name=name: self._on_force(name, msg), FORCE_SUB_QOS)
             for name in self.mixer.sources}
         self.status = RunStatusPublisher(self, self.params.status_period)
+        self.poller = AnswerPoller(self, self.params.answer_poll_time
+                                   if self.params.timing == 'lockstep' else 0.0)
         self.loop_models = loop_check.ModelCollector(self, self.mixer.sources)
         self._last_warn = {}
         self._next_refresh = 0.0
@@ -123,19 +131,23 @@ class PlantNode(Node):
         self._active = [(out, lay) for out, lay in self.state_outs if out.refresh()]
         self._clock_active = self.clock_out.refresh()
         self.fullrate.refresh()
+        self.poller.refresh(self.output_topics(), [force_topic(s) for s in self.mixer.sources])
         self._next_refresh = time.monotonic() + 0.25
 
     def publish_outputs(self, y: np.ndarray) -> None:
         """Publish /clock and the state topics of step k (topics with subscribers only)."""
         if time.monotonic() > self._next_refresh:
             self.refresh_subscribers()
-        stamp = stamp_msg(stamp_ns(self.core.k, self.dt))
+        ns = stamp_ns(self.core.k, self.dt)
         if self._clock_active:
-            self.clock_out.publish(Clock(clock=stamp))
+            set_stamp(self._clock_msg.clock, ns)
+            self.clock_out.publish(self._clock_msg)
         for out, lay in self._active:
             pos, vel = lay.values(y)
-            msg = JointState(name=lay.joints, position=pos.tolist(), velocity=vel.tolist())
-            msg.header.stamp = stamp
+            msg = self._state_msgs[lay.topic]
+            msg.position = array.array('d', pos.tobytes())
+            msg.velocity = array.array('d', vel.tobytes())
+            set_stamp(msg.header.stamp, ns)
             out.publish(msg)
 
     def _on_force(self, source: str, msg: JointState) -> None:
@@ -175,6 +187,7 @@ class PlantNode(Node):
             raise RunError(f'force source(s) {", ".join(missing())} did not appear within '
                            f'startup_timeout = {self.params.startup_timeout} s')
         self.check_sources()
+        self.poller.prepare()
 
     def check_sources(self) -> list[str]:
         """
@@ -198,8 +211,9 @@ class PlantNode(Node):
         return gone
 
     def output_topics(self) -> list[str]:
-        """Topics the plant publishes every step (/clock and the state topics)."""
-        return [self.clock_pub.topic_name] + [pub.topic_name for pub, _ in self.state_pubs]
+        """Topics the plant publishes every step: /clock, the state topics, the full-rate one."""
+        return [self.clock_pub.topic_name] + [pub.topic_name for pub, _ in self.state_pubs] + (
+            [self.fullrate.pub.topic_name] if self.fullrate.pub is not None else [])
 
     def wait_for_subscribers(self, executor) -> None:
         """
@@ -254,6 +268,8 @@ class PlantNode(Node):
                 self.check_sources()
                 next_check = start + GRAPH_CHECK_PERIOD
             limit = self.params.startup_timeout if k == 0 else timeout
+            if k > 0 and self.poller.active:
+                self.poller.poll(k, mixer.missing)
             while mixer.missing(k):
                 executor.spin_once(timeout_sec=resend / 4)
                 if shutdown.requested():
@@ -277,71 +293,8 @@ class PlantNode(Node):
             core.advance(u)
             if self.drain is not None:
                 self.drain.tick(executor)
-
-    def run_realtime(self, executor, trace) -> LatenessStats:
-        """
-        Wall-clock periods with the lockstep contract kept whenever an answer is in time.
-
-        Period k starts at ``t0 + k dt``: the plant publishes y_k, then takes in answers until
-        every source answered step k or the period ends (the deadline). In time, u_k answers
-        y_k exactly as in lockstep, so a run without misses equals the lockstep run bit for
-        bit. A source that missed the deadline keeps its last force for step k and the miss is
-        counted; a source whose publisher left the graph gets ``lost_source_policy`` (zero or
-        hold) with a warning. Step 0 waits for every source as in lockstep (discovery).
-        """
-        core, mixer, dt = self.core, self.mixer, self.dt
-        stats = LatenessStats(self.n_steps, dt)
-        self.run_lockstep(executor, trace, n_steps=1)
-        fault_in(trace.y, trace.u, trace.full, stats.lateness, stats.misses)
-        t0 = time.monotonic() - dt
-        next_report = t0 + self.params.report_period
-        next_check = t0 + GRAPH_CHECK_PERIOD
-        for k in range(1, self.n_steps):
-            if shutdown.requested():
-                break
-            start = t0 + k * dt
-            now = time.monotonic()
-            while now < start:   # sleep in the executor, poll the clock for the last POLL_AHEAD
-                if start - now > POLL_AHEAD:
-                    executor.spin_once(timeout_sec=start - POLL_AHEAD - now)
-                now = time.monotonic()
-            stats.add(k, now - start)
-            y = core.outputs()
-            self.publish_outputs(y)
-            deadline = start + dt
-            while mixer.missing(k) and now < deadline:
-                executor.spin_once(timeout_sec=deadline - now)
-                now = time.monotonic()
-            late = [s for s in mixer.missing(k) if s not in self.lost]
-            for source in late:
-                self.misses[source] += 1
-            stats.missed(k, len(late))
-            u = mixer.total()
-            self.fullrate.record(k, y, u, trace)
-            core.advance(u)
-            if self.drain is not None:
-                self.drain.tick(executor)
-            if now > next_check:
-                self._watch_lost_sources()
-                next_check = now + GRAPH_CHECK_PERIOD
-            if now > next_report:
-                self.get_logger().info('realtime, last period: ' + stats.report(k + 1, now, t0))
-                next_report = now + self.params.report_period
-        stats.elapsed = time.monotonic() - t0
-        return stats
-
-    def _watch_lost_sources(self) -> None:
-        """Realtime: apply ``lost_source_policy`` to sources whose publisher left, warn once."""
-        for source in self.check_sources():
-            if source in self.lost:
-                continue
-            self.lost.add(source)
-            if self.params.lost_source_policy == 'zero':
-                self.mixer.drop(source)
-            self.get_logger().warning(
-                f'force source {source!r} left the ROS graph at step {self.core.k}; its force '
-                f'is {"set to zero" if self.params.lost_source_policy == "zero" else "held"} '
-                '(lost_source_policy)')
+            elif self.poller.active:
+                self.poller.tick(executor)
 
 
 def run(node: PlantNode, executor) -> None:
@@ -355,18 +308,22 @@ def run(node: PlantNode, executor) -> None:
     node.wait_for_sources(executor)
     loop_check.check_at_start(node, executor)
     node.wait_for_subscribers(executor)
+    node.announce(interface.RUN_RUNNING)
+    polling = bool(node.force_subs) and node.params.timing == 'lockstep'
     node.get_logger().info(f'{node.params.timing} run of {node.n_steps} steps with sources '
-                           f'{list(node.mixer.sources) or "none"}')
+                           f'{list(node.mixer.sources) or "none"}' + (
+                               f'; {node.poller.describe()}' if polling else ''))
+    node.poller.running = polling
     extra = {}
     end = 'finished'
     wall = time.monotonic()
-    node.announce(interface.RUN_RUNNING)
     node.status.start()
     try:
         if node.params.timing == 'lockstep':
             node.run_lockstep(executor, trace)
+            extra = {'answers_polled': node.poller.polled}
         else:
-            stats = node.run_realtime(executor, trace)
+            stats = run_realtime(node, executor, trace)
             node.get_logger().info('realtime final: ' + stats.summary(node.core.k,
                                                                        stats.elapsed))
             extra = dict(stats.as_dict(node.core.k), misses_per_source=str(node.misses),
@@ -383,9 +340,11 @@ def run(node: PlantNode, executor) -> None:
         node.announce(interface.RUN_FINISHED if node.core.k == node.n_steps
                       else interface.RUN_STOPPED)
         node.wait_for_acks()
+        polled = (f'answers of {node.poller.polled} steps polled; ' if node.poller.polled
+                  else '')
         node.get_logger().info(f'{end}: ran {node.core.k} of {node.n_steps} steps in '
                                f'{wall:.3f} s wall ({node.core.k / max(wall, 1e-9):.0f} '
-                               f'steps/s); ' + node.mixer.reject_summary())
+                               f'steps/s); ' + polled + node.mixer.reject_summary())
         if node.params.output_file:
             trace.save(node.params.output_file, node.core, node.mixer, node.n_steps,
                        dict(extra, wall_time=wall, end=end))

@@ -1,0 +1,151 @@
+"""
+Lockstep in separate processes: the plant polls for its sources' answers before it blocks.
+
+After publishing y_k the plant needs the answers u_k of its sources. Blocking in the executor
+until they come costs more than the message itself: rclpy's ``spin_once`` and the wake-up of
+a thread that slept. Taking the answers straight from the force subscriptions in a loop
+(``take_message``, under 1 us when nothing is there) for up to ``answer_poll_time`` seconds
+makes plant + 1 damper node about 1.4x faster here. The loop keeps one CPU busy, so it pays
+only while every node that works each step has a CPU of its own; with 3 damper nodes, or a
+damper and a recorder, on 2 CPUs it made the run slower (docs/nodes.md, "Where a lockstep
+step's time goes"). :func:`polling_pays` is that rule; :class:`AnswerPoller` re-applies it
+whenever the plant checks its subscribers, so a recorder or ``ros2 topic echo`` joining
+mid-run turns polling off.
+
+Answers taken here leave their event in rclpy's EventsExecutor, which then takes nothing
+(about 4 us each). While the plant polls, no ``spin_once`` may run for many steps, so the
+poller drains the executor every :data:`POLL_DRAIN_PERIOD` s as a composed plant does
+(:class:`~pentapod_sim.nodes.local_bus.Drain`): timers (run status), parameter services and
+graph events keep flowing. The values are those the executor would have delivered: how the
+plant waits never changes a trace.
+"""
+from __future__ import annotations
+
+import os
+import time
+from typing import Callable, Iterable
+
+from pentapod_sim.nodes.local_bus import Drain
+
+#: Wall time [s] between two drains of the executor while the plant polls (timers such as the
+#: run status, parameter services and graph events wait at most this long).
+POLL_DRAIN_PERIOD = 0.05
+
+
+def usable_cpus() -> int:
+    """CPUs this process may run on (its affinity mask, else the machine's count)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:        # not on Linux
+        return os.cpu_count() or 1
+
+
+def polling_pays(poll_time: float, cpus: int, peers: int) -> bool:
+    """
+    True if the plant should poll: ``poll_time`` > 0 and the plant and ``peers`` fit on ``cpus``.
+
+    ``peers``: the other nodes that work every step (the sources, the subscribers of the
+    plant's per-step topics).
+    """
+    return poll_time > 0 and peers + 1 <= cpus
+
+
+def busy_peers(node, output_topics: Iterable[str], force_topics: Iterable[str]) -> set:
+    """
+    Nodes other than ``node`` that work each step, as (name, namespace) pairs.
+
+    Those that subscribe to one of the per-step ``output_topics`` or publish on one of the
+    ``force_topics``; a node in another process counts once however many topics it has.
+    """
+    me = (node.get_name(), node.get_namespace())
+    peers = set()
+    for topic in output_topics:
+        peers |= {(i.node_name, i.node_namespace)
+                  for i in node.get_subscriptions_info_by_topic(topic)}
+    for topic in force_topics:
+        peers |= {(i.node_name, i.node_namespace)
+                  for i in node.get_publishers_info_by_topic(topic)}
+    peers.discard(me)
+    return peers
+
+
+class AnswerPoller:
+    """
+    The plant's polling for answers (lockstep, separate processes).
+
+    Parameters
+    ----------
+    node : PlantNode
+        Its ``force_subs`` (source -> subscription), ``mixer`` and ``_on_force`` are used.
+    poll_time : float
+        Longest poll per step [s] (parameter ``answer_poll_time``; 0: never).
+    """
+
+    def __init__(self, node, poll_time: float):
+        self.node = node
+        self.poll_time = poll_time
+        self.cpus = usable_cpus()
+        self.active = False
+        self.running = False     # the lockstep run started: changes are logged from then on
+        self.peers: set = set()
+        self.polled = 0          # steps whose answers all came by polling
+        self.drain: Drain | None = None
+
+    def prepare(self) -> None:
+        """
+        Create the drain (before the run: it must find its own subscription first).
+
+        Until it has, a drain runs one queued event only, and the events of the answers taken
+        by polling would bury the timers' (the run status stopped for whole runs so).
+        """
+        if (self.poll_time > 0 and self.node.force_subs and self.drain is None
+                and self.node.drain is None):     # a composed plant drains anyway
+            self.drain = Drain(self.node, POLL_DRAIN_PERIOD)
+
+    def refresh(self, output_topics: Iterable[str], force_topics: Iterable[str]) -> None:
+        """Apply :func:`polling_pays` to the graph as it is now (log a change during the run)."""
+        if self.poll_time <= 0 or not self.node.force_subs:
+            self.active = False
+            return
+        self.prepare()
+        was = self.active
+        self.peers = busy_peers(self.node, output_topics, force_topics)
+        self.active = (polling_pays(self.poll_time, self.cpus, len(self.peers))
+                       and self.drain is not None and self.drain.ready())
+        if self.running and self.active != was:
+            self.node.get_logger().info(f'from step {self.node.core.k} on, {self.describe()}')
+
+    def describe(self) -> str:
+        """One line for the log: polling or not, and why."""
+        if self.poll_time <= 0:
+            return 'answers: blocking (answer_poll_time = 0)'
+        how = 'polled' if self.active else 'blocking'
+        if not self.active and polling_pays(self.poll_time, self.cpus, len(self.peers)):
+            how += ' until the executor drain is matched'
+        return (f'answers: {how} ({len(self.peers)} other node(s) working each step, '
+                f'{self.cpus} CPU(s))')
+
+    def poll(self, step: int, missing: Callable[[int], list]) -> None:
+        """Take step ``step``'s answers from the subscriptions until all are in or time is up."""
+        subs, on_force = self.node.force_subs, self.node._on_force
+        end = time.perf_counter() + self.poll_time
+        while True:
+            waiting = missing(step)
+            if not waiting:
+                self.polled += 1
+                return
+            for name in waiting:
+                sub = subs.get(name)
+                if sub is None:
+                    continue
+                with sub.handle:
+                    taken = sub.handle.take_message(sub.msg_type, sub.raw)
+                if taken is not None:
+                    on_force(name, taken[0])
+            if time.perf_counter() > end:
+                return
+
+    def tick(self, executor) -> None:
+        """Let the executor run what queued up meanwhile (every DRAIN_PERIOD s)."""
+        if self.drain is not None:
+            self.drain.tick(executor)
