@@ -16,6 +16,10 @@ from __future__ import annotations
 import ctypes
 import os
 import signal
+import threading
+from typing import Callable, TypeVar
+
+T = TypeVar('T')
 
 #: The signals that request a clean stop.
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
@@ -72,3 +76,32 @@ def die_with_parent() -> None:
         return
     if os.getppid() != parent:      # the parent died before the request took effect
         os.kill(os.getpid(), signal.SIGTERM)
+
+
+def unless_requested(work: Callable[[], T], poll: float = 0.05) -> T | None:
+    """
+    ``work()``, or None as soon as a stop is requested while it runs.
+
+    For seconds of numerics that release the GIL (LAPACK): ``work`` runs in a daemon thread
+    and this (main) thread waits in slices of ``poll`` s, so the stop is noticed within one
+    slice. An abandoned ``work`` goes on until it ends or the process exits; it must not touch
+    what the caller goes on to use. An exception of ``work`` is raised here.
+    """
+    if requested():
+        return None
+    out: dict = {}
+
+    def run() -> None:
+        try:
+            out['value'] = work()
+        except BaseException as err:      # handed to the caller
+            out['error'] = err
+    worker = threading.Thread(target=run, name='unless_requested', daemon=True)
+    worker.start()
+    while worker.is_alive():
+        worker.join(poll)
+        if requested():
+            return None
+    if 'error' in out:
+        raise out['error']
+    return out['value']

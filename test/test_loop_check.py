@@ -146,3 +146,45 @@ def test_a_stop_during_the_truncation_check_skips_the_rest_of_it(monkeypatch, wh
     monkeypatch.setattr(loop_check, 'loop_result', solved)
     assert loop_check.check_at_start(node, executor=None) is None
     assert built == ([] if when == 'waiting for the models' else [True])
+
+
+@pytest.mark.usefixtures('stop_handlers')
+def test_a_stop_during_the_eigenvalue_problem_ends_the_check_at_once(monkeypatch, tmp_path):
+    """
+    SIGINT while the loop's eigenvalues are solved ends the check within a poll slice.
+
+    The stand-in solve sleeps 10 s without the GIL, as LAPACK does; the stop comes after 0.3 s.
+    """
+    import threading
+    import time
+    plant = demo_model(3, inputs=['tcp_force_x', 'tcp_force_y'])
+    law = DiscreteController.static(['tcp_velocity_x'], ['tcp_force_x'], [[-100.0]])
+    node = SimpleNamespace(params=SimpleNamespace(loop_check='refuse',
+                                                  model_cache_dir=str(tmp_path)),
+                           model=plant, dt=DT, get_logger=lambda: logging.getLogger('plant'),
+                           loop_models=_Models(law.to_json(), False))
+    solving = threading.Event()
+
+    def slow_check(*args):
+        solving.set()
+        time.sleep(10)
+        raise AssertionError('the check was waited for')
+    monkeypatch.setattr(loop_check, 'check_plant_model', lambda node: (plant, 'check.npz'))
+    monkeypatch.setattr(loop_check, 'check_loop', slow_check)
+    threading.Timer(0.3, lambda: shutdown.request(signal.SIGINT)).start()
+    start = time.monotonic()
+    assert loop_check.check_at_start(node, executor=None) is None
+    assert solving.is_set()
+    assert time.monotonic() - start < 2.0
+    assert not list(tmp_path.glob('loop_check_*.json'))     # nothing kept of an unsolved check
+
+
+@pytest.mark.usefixtures('stop_handlers')
+def test_unless_requested_gives_the_result_or_the_error_of_the_work():
+    assert shutdown.unless_requested(lambda: 42) == 42
+    with pytest.raises(ZeroDivisionError):
+        shutdown.unless_requested(lambda: 1 / 0)
+    ran = []
+    shutdown.request(signal.SIGTERM)
+    assert shutdown.unless_requested(lambda: ran.append(1)) is None
+    assert ran == []            # a stop already requested: the work does not start

@@ -197,7 +197,7 @@ def check_plant_model(node) -> tuple[PlantModel | None, str]:
 
 
 def loop_result(node, models: Mapping[str, DiscreteController], check: PlantModel | None,
-                check_name: str, label: str) -> tuple[LoopCheck, Path | None]:
+                check_name: str, label: str) -> tuple[LoopCheck | None, Path | None]:
     """
     The radii of the loop on plant and check model, computed once per loop and kept.
 
@@ -205,7 +205,8 @@ def loop_result(node, models: Mapping[str, DiscreteController], check: PlantMode
     ``model_cache_dir``, keyed by the plant's content hash, the check model's file name, dt and
     the models, so a scenario run again (or the study's runs of one scenario) does not solve the
     same eigenvalue problem twice (a plant checked on itself is quick and kept nowhere). Returns
-    the result and the file it was read from (None: computed now).
+    the result and the file it was read from (None: computed now); no result if a stop was
+    requested meanwhile (:func:`pentapod_sim.shutdown.unless_requested`).
     """
     doc = [node.model.content_hash(), check_name, repr(node.dt), label,
            [m.to_json() for m in models.values()]]
@@ -219,10 +220,13 @@ def loop_result(node, models: Mapping[str, DiscreteController], check: PlantMode
             pass                                    # unreadable: computed and written again
     quiet = logging.getLogger('pentapod_sim.sim.stability')
     was, quiet.disabled = quiet.disabled, True      # the policy is applied (and logged) here
-    try:
-        result = check_loop(node.model, check, list(models.values()), node.dt, 'warn', label)
+    try:    # seconds of LAPACK for a check model: a stop signal must not wait for them
+        result = shutdown.unless_requested(lambda: check_loop(
+            node.model, check, list(models.values()), node.dt, 'warn', label))
     finally:
         quiet.disabled = was
+    if result is None:
+        return None, None
     try:
         if path is not None:
             path.parent.mkdir(parents=True, exist_ok=True)
@@ -237,7 +241,8 @@ def check_at_start(node, executor) -> LoopCheck | None:
     The plant node's truncation check before step 0 (parameter ``loop_check``).
 
     A stop request (:mod:`pentapod_sim.shutdown`) that comes while the sources' models are
-    awaited or the check model is built skips the rest of the check (None).
+    awaited, the check model is built or the eigenvalue problem is solved skips the rest of
+    the check (None).
 
     Raises
     ------
@@ -267,6 +272,8 @@ def check_at_start(node, executor) -> LoopCheck | None:
         return None             # the plant ends before the runner's SIGKILL (5 s after SIGINT)
     result, kept = loop_result(node, models, check, check_name, f'loop of plant and '
                                f'{", ".join(models)}')
+    if result is None:          # stopped during the eigenvalue problem
+        return None
     if kept is not None:
         log.info(f'truncation check: result of an earlier run read from {kept}')
     try:
