@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import os
 import time
-from typing import Callable, Iterable
+from typing import Iterable
 
 from pentapod_sim.nodes.local_bus import Drain
 
@@ -125,12 +125,12 @@ class AnswerPoller:
         return (f'answers: {how} ({len(self.peers)} other node(s) working each step, '
                 f'{self.cpus} CPU(s))')
 
-    def poll(self, step: int, missing: Callable[[int], list]) -> None:
+    def poll(self, step: int) -> None:
         """Take step ``step``'s answers from the subscriptions until all are in or time is up."""
-        subs, on_force = self.node.force_subs, self.node._on_force
+        subs, on_force, mixer = self.node.force_subs, self.node._on_force, self.node.mixer
         end = time.perf_counter() + self.poll_time
         while True:
-            waiting = missing(step)
+            waiting = mixer.missing(step)
             if not waiting:
                 self.polled += 1
                 return

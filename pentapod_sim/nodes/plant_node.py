@@ -269,7 +269,7 @@ class PlantNode(Node):
                 next_check = start + GRAPH_CHECK_PERIOD
             limit = self.params.startup_timeout if k == 0 else timeout
             if k > 0 and self.poller.active:
-                self.poller.poll(k, mixer.missing)
+                self.poller.poll(k)
             while mixer.missing(k):
                 executor.spin_once(timeout_sec=resend / 4)
                 if shutdown.requested():
@@ -321,7 +321,6 @@ def run(node: PlantNode, executor) -> None:
     try:
         if node.params.timing == 'lockstep':
             node.run_lockstep(executor, trace)
-            extra = {'answers_polled': node.poller.polled}
         else:
             stats = run_realtime(node, executor, trace)
             node.get_logger().info('realtime final: ' + stats.summary(node.core.k,
@@ -345,6 +344,8 @@ def run(node: PlantNode, executor) -> None:
         node.get_logger().info(f'{end}: ran {node.core.k} of {node.n_steps} steps in '
                                f'{wall:.3f} s wall ({node.core.k / max(wall, 1e-9):.0f} '
                                f'steps/s); ' + polled + node.mixer.reject_summary())
+        if node.params.timing == 'lockstep':      # however the run ended
+            extra['answers_polled'] = node.poller.polled
         if node.params.output_file:
             trace.save(node.params.output_file, node.core, node.mixer, node.n_steps,
                        dict(extra, wall_time=wall, end=end))
