@@ -326,7 +326,8 @@ def run(node: PlantNode, executor) -> None:
             node.get_logger().info('realtime final: ' + stats.summary(node.core.k,
                                                                        stats.elapsed))
             extra = dict(stats.as_dict(node.core.k), misses_per_source=str(node.misses),
-                         missed_per_step=stats.misses[:node.core.k])
+                         missed_per_step=stats.misses[:node.core.k],
+                         lateness_per_step=stats.lateness[:node.core.k])
     except RunError as err:
         end = f'error: {err}'
         raise
