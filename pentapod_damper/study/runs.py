@@ -25,6 +25,7 @@ from pentapod_sim.errors import RunError
 from pentapod_sim.interface import EXCITATION, excitation_spec_topic, PMA_STATE, TCP_STATE
 from pentapod_sim.scenario.files import dump_params, read_scenario
 from pentapod_sim.scenario.runner import run_scenario
+from pentapod_sim.scenario.warm_start import WarmStarter
 
 LOG = logging.getLogger(__name__)
 
@@ -33,6 +34,9 @@ LOG = logging.getLogger(__name__)
 #: parameters let the analysis find periods and lines in the bag.
 RECORDED_TOPICS = [TCP_STATE, EXCITATION, PMA_STATE, excitation_spec_topic('exciter')]
 DIRECTIONS = {'x': [1.0, 0.0, 0.0], 'y': [0.0, 1.0, 0.0], 'z': [0.0, 0.0, 1.0]}
+#: The composed runs fork from one process that imported the nodes once (its server starts
+#: with the first run and ends with this process).
+WARM = WarmStarter()
 
 
 @dataclass
@@ -129,8 +133,8 @@ def run_on_testbed(scenario: str, position: str, model_file: Path, model_hash: s
     Run one scenario at one position in lockstep and record it.
 
     ``composed`` (default) runs every node in one process on one executor
-    (:mod:`pentapod_sim.nodes.composed`): the same node classes and, bit for bit, the same run
-    as separate processes, but faster.
+    (:mod:`pentapod_sim.nodes.composed`), forked from :data:`WARM`: the same node classes
+    and, bit for bit, the same run as separate processes, but faster.
 
     Raises
     ------
@@ -151,7 +155,7 @@ def run_on_testbed(scenario: str, position: str, model_file: Path, model_hash: s
     env = dict(os.environ, ROS_LOG_DIR=str(run_dir / 'ros_log'))
     t0 = time.perf_counter()
     code = run_scenario(params_file, {}, timeout, env, log_dir=run_dir / 'logs',
-                        composed=composed)
+                        composed=composed, warm=WARM)
     wall = time.perf_counter() - t0
     if code != 0:
         errors = [line.strip() for log in sorted((run_dir / 'logs').glob('*.log'))

@@ -33,8 +33,12 @@ from pentapod_sim import shutdown
 from pentapod_sim.errors import ConfigError, RunError
 from pentapod_sim.scenario.domain import DOMAIN_VAR, isolated_env, RANGE_VAR
 from pentapod_sim.scenario.files import dump_params, read_scenario, resolve, Scenario, ScenarioNode
+from pentapod_sim.scenario.warm_start import WarmRun, WarmStarter
 
 LOG = logging.getLogger(__name__)
+
+#: A node's process: started fresh, or forked warm (a composed run)
+Proc = subprocess.Popen | WarmRun
 
 #: Wall time [s] the plant gets to end by itself after another node died.
 EARLY_EXIT_GRACE = 10.0
@@ -49,7 +53,7 @@ def node_command(node: ScenarioNode, params_files: list[Path]) -> list[str]:
     return cmd
 
 
-def stop(procs: dict[str, subprocess.Popen], grace: float = 5.0) -> None:
+def stop(procs: dict[str, Proc], grace: float = 5.0) -> None:
     """SIGINT every running process, SIGKILL (named) those still alive after ``grace`` s."""
     for proc in procs.values():
         if proc.poll() is None:
@@ -64,7 +68,7 @@ def stop(procs: dict[str, subprocess.Popen], grace: float = 5.0) -> None:
             proc.wait()
 
 
-def drain_recorders(scenario: Scenario, procs: dict[str, subprocess.Popen],
+def drain_recorders(scenario: Scenario, procs: dict[str, Proc],
                     limit: float = 120.0) -> None:
     """
     Let the recorders write every step before the run is stopped.
@@ -89,7 +93,7 @@ def drain_recorders(scenario: Scenario, procs: dict[str, subprocess.Popen],
 
 def run_scenario(path: Path, plant_overrides: dict, timeout: float,
                  env: dict | None = None, log_dir: Path | None = None,
-                 composed: bool = False) -> int:
+                 composed: bool = False, warm: WarmStarter | None = None) -> int:
     """
     Start the nodes of a scenario, wait for the plant, stop the rest; return exit code.
 
@@ -98,12 +102,13 @@ def run_scenario(path: Path, plant_overrides: dict, timeout: float,
     (default ``os.environ``) sets ``ROS_AUTOMATIC_DISCOVERY_RANGE`` or ``ROS_DOMAIN_ID``.
     With ``log_dir`` each node's stdout and stderr go to ``log_dir/<node>.log`` instead of
     this process's terminal. ``composed`` runs every node in one process on one executor
-    (:mod:`pentapod_sim.nodes.composed`).
+    (:mod:`pentapod_sim.nodes.composed`), forked from ``warm`` if given
+    (:mod:`pentapod_sim.scenario.warm_start`).
     """
     with isolated_env(env) as run_env:
         LOG.info('%s=%s, %s=%s', DOMAIN_VAR, run_env.get(DOMAIN_VAR),
                  RANGE_VAR, run_env.get(RANGE_VAR, '(unset)'))
-        return _run_nodes(path, plant_overrides, timeout, run_env, log_dir, composed)
+        return _run_nodes(path, plant_overrides, timeout, run_env, log_dir, composed, warm)
 
 
 def describe_exit(code: int | None) -> str:
@@ -133,11 +138,12 @@ def _start(node: ScenarioNode, files: list[Path], env: dict, out) -> subprocess.
 
 
 def _run_nodes(path: Path, plant_overrides: dict, timeout: float,
-               env: dict, log_dir: Path | None, composed: bool = False) -> int:
+               env: dict, log_dir: Path | None, composed: bool = False,
+               warm: WarmStarter | None = None) -> int:
     """Body of :func:`run_scenario`, in the environment ``env``."""
     scenario = read_scenario(path)
     nodes = scenario.nodes
-    procs: dict[str, subprocess.Popen] = {}
+    procs: dict[str, Proc] = {}
     logs: list = []
     forwarded = False
     code: int | None = None
@@ -153,10 +159,14 @@ def _run_nodes(path: Path, plant_overrides: dict, timeout: float,
                 files[-1].write_text(dump_params(
                     {node.name: {'ros__parameters': plant_overrides}}))
             LOG.info('starting %s (%s)', node.name, node.module)
-            out = None
-            if log_dir is not None:
-                Path(log_dir).mkdir(parents=True, exist_ok=True)
-                out = open(Path(log_dir) / f'{node.name}.log', 'w')  # noqa: SIM115
+            log = None if log_dir is None else Path(log_dir) / f'{node.name}.log'
+            if log is not None:
+                log.parent.mkdir(parents=True, exist_ok=True)
+            if composed and warm is not None:
+                procs[node.name] = warm.start(node_command(node, files)[1:], env, log)
+                continue
+            out = None if log is None else open(log, 'w')  # noqa: SIM115
+            if out is not None:
                 logs.append(out)
             procs[node.name] = _start(node, files, env, out)
         plant = procs[nodes[-1].name]
@@ -213,7 +223,7 @@ def _composition(path: Path, scenario: Scenario, plant_overrides: dict,
     return merged, [ScenarioNode('composition', 'pentapod_sim.nodes.composed', 'plant')]
 
 
-def _forward(procs: dict[str, subprocess.Popen], name: str) -> None:
+def _forward(procs: dict[str, Proc], name: str) -> None:
     """Send the stop signal this process received to every running node."""
     LOG.warning('%s received: stopping the nodes', name)
     for proc in procs.values():

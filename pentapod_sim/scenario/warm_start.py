@@ -1,0 +1,116 @@
+"""
+Composed runs started warm: forked from a process that imported the node modules once.
+
+A composed run in a fresh process (``python -m pentapod_sim.nodes.composed``) spends about
+3 s on imports (numpy, scipy, python-control with matplotlib, rclpy) before its first step;
+the study starts 28 such runs. A :class:`WarmStarter` keeps a :mod:`multiprocessing`
+forkserver that imported the modules of every node kind (:data:`PRELOAD`) when it started;
+each run is a child forked from it. The child takes the run's environment (ROS domain, log
+folder, ...) before rclpy starts, writes its output to the run's log file and then runs the
+module as ``python -m`` would (:func:`runpy.run_module`): the same entry point as the fresh
+process, so the same nodes, stop signals and exit codes, and bit for bit the same traces and
+bags (``test/test_warm_start.py``). bench/RESULTS.md, ``study: composed run started warm``,
+has the time it saves.
+
+The forkserver is a child of the process that made the starter and ends with it; each run
+gets SIGTERM from the kernel if the forkserver dies (no orphan keeps answering on a domain).
+"""
+from __future__ import annotations
+
+import multiprocessing
+import os
+from pathlib import Path
+import runpy
+import subprocess
+import sys
+import threading
+
+from pentapod_sim import shutdown
+from pentapod_sim.executables import COMPONENTS
+
+#: Modules the forkserver imports once: the composition and every node kind's module.
+PRELOAD = ['pentapod_sim.nodes.composed'] + sorted(
+    {target.split(':')[0] for target in COMPONENTS.values()})
+
+
+def _child(module: str, args: list[str], env: dict[str, str], log: str | None) -> None:
+    """The forked run: its environment and log, then ``python -m module args``."""
+    shutdown.die_with_parent()            # the parent is the forkserver
+    os.environ.clear()                    # before rclpy reads ROS_DOMAIN_ID, ROS_LOG_DIR, ...
+    os.environ.update(env)
+    if log is not None:
+        fd = os.open(log, os.O_WRONLY | os.O_APPEND)
+        os.dup2(fd, 1)
+        os.dup2(fd, 2)
+        os.close(fd)
+    sys.argv = [module] + args
+    try:
+        runpy.run_module(module, run_name='__main__', alter_sys=True)
+    finally:
+        sys.stdout.flush()
+        sys.stderr.flush()
+
+
+class WarmRun:
+    """A run forked by a :class:`WarmStarter`, used like :class:`subprocess.Popen`."""
+
+    def __init__(self, process, args: list[str]):
+        self._process = process
+        self.args = args
+        self.pid = process.pid
+
+    @property
+    def returncode(self) -> int | None:
+        return self._process.exitcode
+
+    def poll(self) -> int | None:
+        """Exit code (negative: killed by that signal), None while running."""
+        return self._process.exitcode
+
+    def wait(self, timeout: float | None = None) -> int:
+        """Exit code; :class:`subprocess.TimeoutExpired` if still running after ``timeout``."""
+        self._process.join(timeout)
+        if self._process.exitcode is None:
+            raise subprocess.TimeoutExpired(self.args, timeout or 0.0)
+        return self._process.exitcode
+
+    def send_signal(self, sig: int) -> None:
+        if self._process.exitcode is None:
+            os.kill(self.pid, sig)
+
+    def kill(self) -> None:
+        self._process.kill()
+
+
+class WarmStarter:
+    """
+    Start composed runs as children of a forkserver that preloaded :data:`PRELOAD`.
+
+    The forkserver starts with the first run (with this process's environment and
+    ``sys.path``); its imports then take their time once.
+    """
+
+    _lock = threading.Lock()
+
+    def __init__(self):
+        self._context = multiprocessing.get_context('forkserver')
+
+    def start(self, command: list[str], env: dict[str, str], log: Path | None = None
+              ) -> WarmRun:
+        """
+        Fork a run of ``python -m MODULE ARGS...``; ``command`` is ``['-m', MODULE, ARGS...]``.
+
+        ``env`` replaces the run's environment; with ``log`` its stdout and stderr go to that
+        file (created or emptied), else to this process's.
+        """
+        if command[:1] != ['-m'] or len(command) < 2:
+            raise ValueError(f'not a "-m MODULE ..." command: {command!r}')
+        if log is not None:
+            Path(log).write_bytes(b'')        # there (and empty) once this returns
+        with self._lock:      # the preload list is the context's, set before its server runs
+            self._context.set_forkserver_preload(PRELOAD)
+            process = self._context.Process(
+                target=_child, name=command[1],
+                args=(command[1], list(command[2:]), dict(env), None if log is None else str(log)))
+            process.start()
+        return WarmRun(process, list(command))
