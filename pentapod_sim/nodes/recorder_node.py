@@ -45,6 +45,9 @@ from pentapod_sim.recording import BagWriter, qos_profile
 from pentapod_sim.recording.msgdefs import has_header_stamp
 from pentapod_sim.recording.run_end import RunStatus, shortfalls, StepLedger
 
+#: A recorder stops waiting for topics whose publishers all left once it took no message for
+#: this long [s]: what their publishers sent before leaving is taken first.
+ORPHAN_QUIET = 0.5
 #: Name of the MCAP metadata record (and custom_data key) with expected vs recorded counts.
 RECORDING_RECORD = 'pentapod_recording'
 
@@ -262,12 +265,16 @@ class RecorderNode(Node):
         """
         True once the run ended and every per-step topic holds its last step.
 
-        Also after ``drain_timeout`` s of wall time since the end announcement; never without
+        Also once every topic still short of it has no publisher left (nothing more can come:
+        after a stop signal a source may end without answering the last step), and after
+        ``drain_timeout`` s of wall time since the end announcement; never without
         ``stop_at_run_end``.
         """
         if not self.params.stop_at_run_end or self.end is None:
             return False
-        if self.ledger.drained(self.end, self.expected_topics()):
+        waiting = self.ledger.pending(self.end, self.expected_topics())
+        if not waiting or (time.monotonic() - self.ledger.noted > ORPHAN_QUIET
+                           and not any(self.count_publishers(t) for t in waiting)):
             return True
         if time.monotonic() - self.end_seen > self.params.drain_timeout:
             self.get_logger().warning(f'drain_timeout = {self.params.drain_timeout} s after '

@@ -11,6 +11,7 @@ wall time without messages. See docs/recording.md.
 from __future__ import annotations
 
 from dataclasses import dataclass
+import time
 from typing import Callable, Iterable, Mapping
 
 from pentapod_sim.errors import BagError
@@ -86,9 +87,11 @@ class StepLedger:
     def __init__(self, selected: Callable[[str], bool]) -> None:
         self.selected = selected
         self.newest: dict[str, int] = {}
+        self.noted = time.monotonic()         # wall time [s] of the last note
 
     def note(self, topic: str, stamp_ns: int) -> None:
         """Record that a message of ``topic`` with stamp ``stamp_ns`` was written."""
+        self.noted = time.monotonic()
         if stamp_ns > self.newest.get(topic, -1):
             self.newest[topic] = stamp_ns
 
@@ -107,7 +110,11 @@ class StepLedger:
 
     def drained(self, end: RunStatus, topics: Iterable[str]) -> bool:
         """True once every topic of ``topics`` holds the stamp of the last step."""
-        return all(self.newest.get(t, -1) >= end.last_stamp_ns for t in topics)
+        return not self.pending(end, topics)
+
+    def pending(self, end: RunStatus, topics: Iterable[str]) -> list[str]:
+        """The topics of ``topics`` that do not hold the stamp of the last step yet."""
+        return [t for t in topics if self.newest.get(t, -1) < end.last_stamp_ns]
 
     def report(self, end: RunStatus, topics: Iterable[str],
                counts: Mapping[str, int]) -> dict[str, dict[str, int]]:

@@ -1,0 +1,73 @@
+"""
+A recorder does not wait for steps that no publisher is left to send.
+
+After a stop signal a source may end without answering the plant's last step; the recorder
+then waited ``drain_timeout`` s (30 by default) for that answer, longer than a runner or a
+launch gives it, and was killed with its bag unfinished. It must close its bag as soon as every
+topic still short of the last step has lost its publishers, after taking what they sent.
+"""
+import signal
+import time
+import warnings
+
+import pytest
+import yaml
+
+from fixtures.demo_model import demo_model
+from fixtures.processes import NodeProcesses
+from pentapod_sim.analysis.bag_file import BagDamageWarning
+from pentapod_sim.analysis.bag_reader import open_bag
+
+pytestmark = [pytest.mark.ros]
+
+DRAIN_TIMEOUT = 60.0
+
+
+def test_a_recorder_closes_once_the_missing_steps_have_no_publisher(tmp_path):
+    model_file = demo_model(6, seed=4).save(tmp_path / 'model.npz')
+    procs = NodeProcesses(tmp_path)
+    try:
+        recorder = procs.start('recorder', 'pentapod_sim.nodes.recorder_node',
+                               f"output_dir:='{tmp_path}'", 'bag_name:=run',
+                               f'drain_timeout:={DRAIN_TIMEOUT}')
+        exciter = procs.start('exciter', 'pentapod_sim.nodes.exciter_node', 'kind:=sine',
+                              'amplitude:=20.0', 'frequency:=7.0', 'duration:=1000.0',
+                              'sample_rate:=2000.0')
+        plant = procs.start('plant', 'pentapod_sim.nodes.plant_node',
+                            f'model_file:={model_file}', 'steps:=2000000',
+                            'sample_rate:=2000.0', 'sources:=[exciter]',
+                            'wait_for_subscribers:=[recorder]', 'startup_timeout:=60.0')
+        end = time.monotonic() + 60
+        while 'lockstep run of' not in procs.log('plant'):
+            assert plant.poll() is None and time.monotonic() < end, procs.log('plant')
+            time.sleep(0.05)
+        time.sleep(1.0)
+        recorder.send_signal(signal.SIGSTOP)   # the recorder lags: messages wait for it
+        time.sleep(0.5)
+        exciter.send_signal(signal.SIGINT)     # leaves with its last messages undelivered
+        assert procs.wait('exciter', 30) == 130, procs.log('exciter')
+        recorder.send_signal(signal.SIGCONT)
+        assert procs.wait('plant', 30) == 1, procs.log('plant')
+        assert 'exciter' in procs.log('plant')
+        stopped = time.monotonic()
+        code = procs.wait('recorder', DRAIN_TIMEOUT + 30)
+        waited = time.monotonic() - stopped
+    finally:
+        procs.close()
+    log = procs.log('recorder')
+    assert code == 0 and waited < 10.0, (waited, log)
+    assert 'drain_timeout' not in log, log
+    meta = yaml.safe_load((tmp_path / 'run' / 'metadata.yaml').read_text())
+    counts = {e['topic_metadata']['name']: int(e['message_count'])
+              for e in meta['rosbag2_bagfile_information']['topics_with_message_count']}
+    # the plant's steps are all there (it waited for the recorder's acknowledgements); the
+    # exciter's last ones went with it, and the report says how many
+    steps = counts['/pentapod/tcp_state']
+    lost = steps - 1 - counts['/pentapod/excitation']
+    assert steps > 1000 and lost > 0, counts
+    assert f"MISSING {{'/pentapod/forces/exciter': {lost}, '/pentapod/excitation': {lost}}}" \
+        in log, log
+    with warnings.catch_warnings():
+        warnings.simplefilter('error', BagDamageWarning)     # closed: summary and footer
+        bag = open_bag(tmp_path / 'run')
+    assert bag.topic('/pentapod/tcp_state').count == steps
