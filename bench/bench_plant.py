@@ -428,7 +428,7 @@ def multirate_realtime_rows(folder: Path, model_file: Path, seconds: float,
     Separate processes and composed (one process, one executor); per run the share of
     exchanges with a missed deadline (target < 0.1 %), the share of overruns and the lateness
     of the period starts p50 / p99 against the exchange period. A missed deadline is a
-    source's answer not in by the period's end, or by half a period after y_k went out if
+    source's answer not in by the period's end, or by half a period after the step began if
     the plant was late (:data:`pentapod_sim.nodes.realtime_loop.ANSWER_WINDOW`); it leaves
     out the plant's own lateness, which the overruns count (a period started more than one
     period late). The node processes run at SCHED_FIFO priority
@@ -464,8 +464,9 @@ def multirate_realtime_rows(folder: Path, model_file: Path, seconds: float,
             rows += [
                 _row(f'{label}: missed deadlines', res['missed_steps'] / n, 'share',
                      'target', MISS_TARGET, higher_better=False,
-                     note=note + '; a miss: an answer later than the period end or half a '
-                     'period after y_k went out; the plant being late is counted as overruns'),
+                     note=note + '; a miss: an answer later than the period end or, for a '
+                     'late step, half a period after it began; the plant being late is counted '
+                     'as overruns'),
                 _row(f'{label}: overruns', res['overruns'] / n, 'share', 'target',
                      MISS_TARGET, higher_better=False,
                      note=note + '; an overrun: a period that started more than one period '
