@@ -51,6 +51,19 @@ def scenario(tmp_path: Path, steps: int = LONG, record: bool = True, timing='loc
     return path
 
 
+def random_scenario(folder: Path, steps: int, **sources: dict) -> Path:
+    """:func:`scenario` with 0.2 s of random TCP force and more sources (name: parameters)."""
+    path = scenario(folder, steps=steps)
+    doc = yaml.safe_load(path.read_text())
+    doc['exciter']['ros__parameters'].update(kind='random', seed=3, duration=0.2,
+                                             f_start=5.0, f_end=300.0)
+    for name, params in sources.items():
+        doc[name] = {'ros__parameters': params}
+        doc['plant']['ros__parameters']['sources'].append(name)
+    path.write_text(dump_params(doc))
+    return path
+
+
 class Runner:
     """The scenario runner as a user starts it: its own process group, output to a file."""
 
@@ -288,14 +301,8 @@ def test_composed_run_equals_separate_processes(tmp_path, runner_of):
     for mode in ('separate', 'composed'):
         folder = folders[mode] = tmp_path / mode
         folder.mkdir()
-        path = scenario(folder, steps=600)
-        doc = yaml.safe_load(path.read_text())
-        doc['exciter']['ros__parameters'].update(kind='random', seed=3, duration=0.2,
-                                                 f_start=5.0, f_end=300.0)
-        doc['pma'] = {'ros__parameters': {'directions': ['x'], 'proof_mass': 2.0,
-                                          'gain': 1000.0}}
-        doc['plant']['ros__parameters']['sources'] = ['exciter', 'damper', 'pma']
-        path.write_text(dump_params(doc))
+        path = random_scenario(folder, 600, pma={'directions': ['x'], 'proof_mass': 2.0,
+                                                 'gain': 1000.0})
         run = runner_of(path, *(['--composed'] if mode == 'composed' else []))
         assert run.proc.wait(timeout=180) == 0, run.text()
         if mode == 'composed':

@@ -14,7 +14,7 @@ import time
 from mcap.reader import make_reader
 import numpy as np
 import pytest
-from test_stopping import metadata_counts, scenario
+from test_stopping import metadata_counts, random_scenario, scenario
 import yaml
 
 from pentapod_sim.interface import RUN_STATUS
@@ -42,11 +42,7 @@ def test_a_warm_run_equals_a_fresh_one_bit_for_bit(tmp_path):
     for mode in ('fresh', 'warm'):
         folder = folders[mode] = tmp_path / mode
         folder.mkdir()
-        path = scenario(folder, steps=600)
-        doc = yaml.safe_load(path.read_text())
-        doc['exciter']['ros__parameters'].update(kind='random', seed=3, duration=0.2,
-                                                 f_start=5.0, f_end=300.0)
-        path.write_text(dump_params(doc))
+        path = random_scenario(folder, 600)
         env = dict(os.environ, ROS_LOG_DIR=str(folder / 'ros_log'))
         code = run_scenario(path, {}, 180.0, env, log_dir=folder / 'logs', composed=True,
                             warm=warm if mode == 'warm' else None)
