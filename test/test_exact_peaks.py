@@ -67,3 +67,27 @@ def test_band_edge_wins_when_the_function_grows_out_of_the_band():
     assert peak.freq_hz == 10.0 and peak.value == pytest.approx(0.1)
     with pytest.raises(ConfigError, match='0 <= low < high'):
         maximise_near_poles(lambda f: f, poles, 10.0, 10.0)
+
+
+def test_the_bound_is_above_the_frf_and_skipping_by_it_keeps_the_peak():
+    """The triangle bound holds on dense samples; skipping resonances by it changes nothing."""
+    plant = demo_model(40, seed=7)
+    dampers = {'tcp_force_x': 3.0e3, 'tcp_force_y': 1.0e3}
+    frf = plant_pair_frf(plant, 'tcp_displacement_x', 'tcp_force_x', dampers)
+    rng = np.random.default_rng(2)
+    for lo in rng.uniform(1.0, 390.0, 40):
+        hi = lo + rng.uniform(0.01, 10.0)
+        dense = np.abs(frf(np.linspace(lo, hi, 2001))).max()
+        assert frf.bound(lo, hi) >= dense
+    grid = np.linspace(0.5, 400.0, 800)
+    calls = {}
+
+    def counted(tag):
+        def fun(f):
+            calls[tag] = calls.get(tag, 0) + 1
+            return np.abs(frf(f))
+        return fun
+    every = maximise_near_poles(counted('every'), frf.poles, 2.0, 400.0, grid)
+    skipped = maximise_near_poles(counted('skipped'), frf.poles, 2.0, 400.0, grid, frf.bound)
+    assert skipped == every == exact_peak(frf, 2.0, 400.0, grid)
+    assert calls['skipped'] < calls['every'] / 2, calls      # it skips most searches
