@@ -516,17 +516,18 @@ def warm_start_rows(folder: Path, model_file: Path, steps: int, rounds: int) -> 
     path = folder / 'warm_start.yaml'
     path.write_text(dump_params(doc))
     best = {'fresh': np.inf, 'warm': np.inf}
-    warm_up = run_scenario(path, {}, 120.0, log_dir=folder / 'warm_logs', composed=True,
-                           warm=warm)             # the forkserver's own start: not timed
+    def run(starter) -> float:
+        shutil.rmtree(folder / 'warm_bags', ignore_errors=True)
+        t0 = time.perf_counter()
+        code = run_scenario(path, {}, 120.0, log_dir=folder / 'warm_logs', composed=True,
+                            warm=starter)
+        if code != 0:
+            raise RuntimeError((folder / 'warm_logs' / 'composition.log').read_text())
+        return time.perf_counter() - t0
+    run(warm)                           # the forkserver's own start: not timed
     for _ in range(rounds):
         for mode in best:
-            shutil.rmtree(folder / 'warm_bags', ignore_errors=True)
-            t0 = time.perf_counter()
-            code = run_scenario(path, {}, 120.0, log_dir=folder / 'warm_logs', composed=True,
-                                warm=warm if mode == 'warm' else None)
-            best[mode] = min(best[mode], time.perf_counter() - t0)
-            if code != 0 or warm_up != 0:
-                raise RuntimeError((folder / 'warm_logs' / 'composition.log').read_text())
+            best[mode] = min(best[mode], run(warm if mode == 'warm' else None))
     return [_row('study: composed run started warm', best['warm'], 's',
                  'the same run started fresh', best['fresh'], higher_better=False,
                  note=f'{steps} lockstep steps, plant + 1 damper + recorder, 200 states, '

@@ -99,9 +99,9 @@ def test_run_status_parsing_and_ledger():
     for k in range(3):
         ledger.note('/clock', k * 1_000_000)
         ledger.note('/pentapod/forces/a', k * 1_000_000)
-    assert not ledger.drained(end, topics)          # no excitation yet
+    assert ledger.pending(end, topics) == ['/pentapod/excitation']     # not yet
     ledger.note('/pentapod/excitation', 2_000_000)  # the last step (earlier ones lost)
-    assert ledger.drained(end, topics)
+    assert not ledger.pending(end, topics)
     report = ledger.report(end, topics, {'/clock': 3, '/pentapod/forces/a': 3,
                                          '/pentapod/excitation': 1})
     assert shortfalls(report) == {'/pentapod/excitation': 2}

@@ -108,10 +108,6 @@ class StepLedger:
                          if is_step_topic(t) and self.selected(t))
         return topics
 
-    def drained(self, end: RunStatus, topics: Iterable[str]) -> bool:
-        """True once every topic of ``topics`` holds the stamp of the last step."""
-        return not self.pending(end, topics)
-
     def pending(self, end: RunStatus, topics: Iterable[str]) -> list[str]:
         """The topics of ``topics`` that do not hold the stamp of the last step yet."""
         return [t for t in topics if self.newest.get(t, -1) < end.last_stamp_ns]

@@ -59,10 +59,6 @@ class WarmRun:
         self.args = args
         self.pid = process.pid
 
-    @property
-    def returncode(self) -> int | None:
-        return self._process.exitcode
-
     def poll(self) -> int | None:
         """Exit code (negative: killed by that signal), None while running."""
         return self._process.exitcode
