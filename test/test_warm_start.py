@@ -9,12 +9,14 @@ parameter in one line.
 import os
 from pathlib import Path
 import signal
+import subprocess
+import sys
 import time
 
 from mcap.reader import make_reader
 import numpy as np
 import pytest
-from test_stopping import metadata_counts, random_scenario, scenario
+from test_stopping import alive, metadata_counts, random_scenario, scenario
 import yaml
 
 from pentapod_sim.interface import RUN_STATUS
@@ -101,3 +103,40 @@ def test_a_bad_parameter_ends_a_warm_run_with_one_error_line(tmp_path):
     errors = [line for line in text.splitlines() if line.startswith('error:')]
     assert len(errors) == 1 and "'sample_rat'" in errors[0], text
     assert 'Traceback' not in text
+
+
+STARTER = r"""
+import sys, time
+from pentapod_sim.scenario.warm_start import WarmStarter
+if __name__ == '__main__':
+    run = WarmStarter().start(['-m', 'pentapod_sim.nodes.composed', sys.argv[1]],
+                              dict(__import__('os').environ), sys.argv[2])
+    print(run.pid, flush=True)
+    time.sleep(600)
+"""
+
+
+def test_a_warm_run_stops_when_the_process_that_started_it_is_killed(tmp_path):
+    """SIGKILL to the starter: its run stops cleanly (the forkserver would keep it alive)."""
+    path = scenario(tmp_path)                                   # an endless run
+    log = tmp_path / 'composition.log'
+    with isolated_env(dict(os.environ)) as env:
+        starter = subprocess.Popen([sys.executable, '-c', STARTER, str(path), str(log)],
+                                   env=env, stdout=subprocess.PIPE, text=True)
+        pid = int(starter.stdout.readline())
+        try:
+            end = time.monotonic() + 90
+            while 'lockstep run of' not in log.read_text():
+                assert time.monotonic() < end, log.read_text()
+                time.sleep(0.05)
+            starter.kill()
+            starter.wait()
+            end = time.monotonic() + 20
+            while alive(pid):
+                assert time.monotonic() < end, f'the run outlived its starter:\n{log.read_text()}'
+                time.sleep(0.1)
+        finally:
+            if alive(pid):
+                os.kill(pid, signal.SIGKILL)
+    assert 'stopped by SIGTERM' in log.read_text()
+    assert metadata_counts(tmp_path / 'bags' / 'run')['/pentapod/tcp_state'] > 0

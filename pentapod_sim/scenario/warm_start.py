@@ -12,8 +12,11 @@ process, so the same nodes, stop signals and exit codes, and bit for bit the sam
 bags (``test/test_warm_start.py``). bench/RESULTS.md, ``study: composed run started warm``,
 has the time it saves.
 
-The forkserver is a child of the process that made the starter and ends with it; each run
-gets SIGTERM from the kernel if the forkserver dies (no orphan keeps answering on a domain).
+Each run gets SIGTERM when the process that started it ends, even by SIGKILL, and stops
+cleanly (no orphan keeps answering on a domain whose lease died with that process); the
+forkserver ends once that process and its runs have. As with every multiprocessing start
+method but fork, a script that starts warm runs must keep its main code under
+``if __name__ == '__main__':`` (the runs import the script's module).
 """
 from __future__ import annotations
 
@@ -21,6 +24,8 @@ import multiprocessing
 import os
 from pathlib import Path
 import runpy
+import select
+import signal
 import subprocess
 import sys
 import threading
@@ -33,9 +38,33 @@ PRELOAD = ['pentapod_sim.nodes.composed'] + sorted(
     {target.split(':')[0] for target in COMPONENTS.values()})
 
 
-def _child(module: str, args: list[str], env: dict[str, str], log: str | None) -> None:
+def _die_with(pid: int) -> None:
+    """
+    SIGTERM to this process once process ``pid`` ends (Linux ``pidfd``; elsewhere nothing).
+
+    A forked run's parent is the forkserver, which lives as long as any of its runs does
+    (each holds its "alive" pipe), so the kernel's parent-death signal never comes when the
+    process that started the run is killed; this watches that process instead.
+    """
+    try:
+        fd = os.pidfd_open(pid)
+    except ProcessLookupError:            # already gone
+        os.kill(os.getpid(), signal.SIGTERM)
+        return
+    except (AttributeError, OSError):     # no pidfd here
+        return
+
+    def watch() -> None:
+        select.select([fd], [], [])
+        os.kill(os.getpid(), signal.SIGTERM)
+    threading.Thread(target=watch, name='die_with_starter', daemon=True).start()
+
+
+def _child(module: str, args: list[str], env: dict[str, str], log: str | None,
+           starter: int) -> None:
     """The forked run: its environment and log, then ``python -m module args``."""
     shutdown.die_with_parent()            # the parent is the forkserver
+    _die_with(starter)                    # and the process that started the run
     os.environ.clear()                    # before rclpy reads ROS_DOMAIN_ID, ROS_LOG_DIR, ...
     os.environ.update(env)
     if log is not None:
@@ -44,7 +73,8 @@ def _child(module: str, args: list[str], env: dict[str, str], log: str | None) -
         os.dup2(fd, 2)
         os.close(fd)
     sys.argv = [module] + args
-    try:
+    sys.modules.pop(module, None)   # run as __main__ (runpy warns of a preloaded copy); its
+    try:                            # imports stay loaded
         runpy.run_module(module, run_name='__main__', alter_sys=True)
     finally:
         sys.stdout.flush()
@@ -107,6 +137,7 @@ class WarmStarter:
             self._context.set_forkserver_preload(PRELOAD)
             process = self._context.Process(
                 target=_child, name=command[1],
-                args=(command[1], list(command[2:]), dict(env), None if log is None else str(log)))
+                args=(command[1], list(command[2:]), dict(env), None if log is None else str(log),
+                      os.getpid()))
             process.start()
         return WarmRun(process, list(command))
