@@ -10,6 +10,7 @@ import ast
 import os
 from pathlib import Path
 import re
+import subprocess
 
 import control
 from diagnostic_msgs.msg import DiagnosticStatus
@@ -93,7 +94,10 @@ def start(tmp_path):
 
 
 def finish(run, timeout: float = 120.0) -> tuple[int, str]:
-    code = run.proc.wait(timeout=timeout)
+    try:
+        code = run.proc.wait(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        pytest.fail(f'the runner had not ended after {timeout} s:\n{run.text()}')
     return code, run.text()
 
 
