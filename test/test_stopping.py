@@ -164,6 +164,19 @@ def test_a_stop_signal_ends_every_process_cleanly(tmp_path, runner_of, sig, targ
     assert counts['/pentapod/tcp_state'] >= n - 1
 
 
+def test_a_stop_signal_during_start_up_ends_the_wait_at_once(tmp_path, runner_of):
+    """Ctrl-C while the plant waits for a subscriber that never comes: stopped, not timed out."""
+    run = runner_of(scenario(tmp_path, record=False, wait_for_subscribers=['nobody']))
+    run.wait_for('waiting for subscriber node(s) nobody (startup_timeout = 60.0 s)')
+    time.sleep(0.5)
+    run.proc.send_signal(signal.SIGINT)
+    code = run.proc.wait(timeout=20)      # the wait itself would last startup_timeout = 60 s
+    out = run.text()
+    assert code == 130 and f'stopped by SIGINT: ran 0 of {LONG} steps' in out, out
+    assert 'did not appear' not in out and 'run of' not in out, out
+    assert int(np.load(tmp_path / 'trace.npz')['steps_run']) == 0
+
+
 def test_nodes_die_with_a_killed_runner(tmp_path, runner_of):
     """SIGKILL to the runner alone: its nodes get SIGTERM from the kernel and stop."""
     run = runner_of(scenario(tmp_path, record=False))

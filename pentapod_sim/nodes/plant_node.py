@@ -221,7 +221,8 @@ class PlantNode(Node):
 
         Then spin ``subscriber_settle`` seconds more, so that the node's other subscriptions
         (to this plant and to the sources) are matched too: a recorder started with the run
-        thus receives step 0. RunError names a node that did not appear.
+        thus receives step 0. RunError names a node that did not appear. A stop signal ends
+        the wait at once.
         """
         wanted = self.params.wait_for_subscribers
 
@@ -237,10 +238,13 @@ class PlantNode(Node):
             return [n for n in wanted if n not in seen] + [f'match on {t}' for t in unmatched]
         if not wanted:
             return
-        if not spin_until(executor, lambda: not missing(), self.params.startup_timeout):
+        self.get_logger().info(f'waiting for subscriber node(s) {", ".join(wanted)} '
+                               f'(startup_timeout = {self.params.startup_timeout} s)')
+        if not spin_until(executor, lambda: not missing() or shutdown.requested(),
+                          self.params.startup_timeout):
             raise RunError(f'subscriber node(s) {", ".join(missing())} did not appear within '
                            f'startup_timeout = {self.params.startup_timeout} s')
-        spin_until(executor, lambda: False, self.params.subscriber_settle)
+        spin_until(executor, shutdown.requested, self.params.subscriber_settle)
         self.refresh_subscribers()
 
     def wait_for_acks(self) -> None:
@@ -308,11 +312,12 @@ def run(node: PlantNode, executor) -> None:
     node.wait_for_sources(executor)
     loop_check.check_at_start(node, executor)
     node.wait_for_subscribers(executor)
-    node.announce(interface.RUN_RUNNING)
     polling = bool(node.force_subs) and node.params.timing == 'lockstep'
-    node.get_logger().info(f'{node.params.timing} run of {node.n_steps} steps with sources '
-                           f'{list(node.mixer.sources) or "none"}' + (
-                               f'; {node.poller.describe()}' if polling else ''))
+    if not shutdown.requested():     # else stopped during start-up: no run to announce
+        node.announce(interface.RUN_RUNNING)
+        node.get_logger().info(f'{node.params.timing} run of {node.n_steps} steps with '
+                               f'sources {list(node.mixer.sources) or "none"}' + (
+                                   f'; {node.poller.describe()}' if polling else ''))
     node.poller.running = polling
     extra = {}
     end = 'finished'
