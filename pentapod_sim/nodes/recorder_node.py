@@ -32,7 +32,6 @@ import rclpy
 from rclpy.clock import Clock, ClockType
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
 import yaml
 
@@ -40,14 +39,27 @@ from pentapod_sim import interface, shutdown
 from pentapod_sim.errors import BagError, ConfigError
 from pentapod_sim.nodes.common import declare_table, node_args, run_node
 from pentapod_sim.nodes.parameter_tables import RECORDER
+from pentapod_sim.nodes.recorder_qos import (
+    BEST_EFFORT,
+    LATE_JOINER,
+    level_for,
+    LEVELS,
+    offered_qos,
+    subscription_qos,
+)
 from pentapod_sim.nodes.wire_cdr import serializer, type_name
-from pentapod_sim.recording import BagWriter, qos_profile
+from pentapod_sim.recording import BagWriter
 from pentapod_sim.recording.msgdefs import has_header_stamp
 from pentapod_sim.recording.run_end import RunStatus, shortfalls, StepLedger
 
 #: A recorder stops waiting for topics whose publishers all left once it took no message for
 #: this long [s]: what their publishers sent before leaving is taken first.
 ORPHAN_QUIET = 0.5
+#: After the end of the run a recorder waits up to this long [s, wall time] for the message of
+#: each latched topic it found with a publisher (an exciter's signal, a controller's model):
+#: one discovered only at the end of a short run is subscribed then, and its writer's kept
+#: message takes a moment to arrive.
+LATCHED_WAIT = 2.0
 #: Name of the MCAP metadata record (and custom_data key) with expected vs recorded counts.
 RECORDING_RECORD = 'pentapod_recording'
 
@@ -88,7 +100,7 @@ class RecorderNode(Node):
         self.depth = params.queue_depth
         self.writer = BagWriter(Path(params.output_dir) / name, run_info=run_info,
                                 flush_period_s=0.0)
-        self.subs = {}  # topic -> (subscription or None, msg_type, level: _reach)
+        self.subs = {}  # topic -> (subscription or None, msg_type, level: level_for)
         self.from_bus = set()    # topics taken from a composition's bus (take_from_bus)
         self._records = {}       # topic -> callback writing one message's CDR bytes
         for topic, msg_type in KNOWN_TOPICS.items():
@@ -109,7 +121,7 @@ class RecorderNode(Node):
         """
         Subscribe to new selected topics with a publisher; follow what publishers offer.
 
-        A topic is first subscribed as :func:`_reach` says for the publishers known then; a
+        A topic is first subscribed as :func:`level_for` says for the publishers known then; a
         later publisher that offers less (volatile, best effort) cannot match that reader, so
         the topic is subscribed again at that publisher's level, with a warning (its messages
         before the new subscription matched are lost). The level never goes back up.
@@ -123,40 +135,36 @@ class RecorderNode(Node):
             publishers = self.get_publishers_info_by_topic(topic)
             if not publishers:
                 continue
-            reach = _reach(topic, publishers)
-            if known is not None and reach >= known[2]:
+            level = level_for(topic, publishers)
+            if known is not None and level >= known[2]:
                 continue
             if known is not None:  # the reader asks more than a publisher offers
                 self.destroy_subscription(known[0])
-                self.get_logger().warning(f'{topic}: a publisher offers only {LEVELS[reach]}; '
+                self.get_logger().warning(f'{topic}: a publisher offers only {LEVELS[level]}; '
                                           're-subscribed, messages may be lost')
             try:
-                self._subscribe(topic, types[0], reach)
+                self._subscribe(topic, types[0], level)
             except (BagError, ImportError, AttributeError, ValueError) as err:
                 self.get_logger().error(f'cannot record {topic} [{types[0]}]: {err}')
                 self.subs[topic] = (None, types[0], BEST_EFFORT)  # do not retry every period
 
-    def _subscribe(self, topic: str, msg_type: str, reach: int | None = None) -> None:
-        """Subscribe at level ``reach`` (:func:`_reach`; None: the topic's own, no publisher)."""
-        if reach is None:
-            reach = _reach(topic, [])
+    def _subscribe(self, topic: str, msg_type: str, level: int | None = None) -> None:
+        """Subscribe at ``level`` (:func:`level_for`; None: the topic's own, no publisher)."""
+        if level is None:
+            level = level_for(topic, [])
         status = topic == interface.RUN_STATUS
         # transient local (per-step streams, run status, excitation spec): a recorder that
         # matched a writer late gets what the writer still holds
-        qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=self.depth,
-                         reliability=(ReliabilityPolicy.BEST_EFFORT if reach == BEST_EFFORT
-                                      else ReliabilityPolicy.RELIABLE),
-                         durability=(DurabilityPolicy.TRANSIENT_LOCAL if reach == LATE_JOINER
-                                     else DurabilityPolicy.VOLATILE))
+        qos = subscription_qos(level, self.depth)
         callback = self._record(topic, msg_type)
         if status:
             callback = self._status_callback(callback)
         else:
             callback = self._from_dds(topic, callback)
         sub = self.create_subscription(message_class(msg_type), topic, callback, qos, raw=True)
-        self.subs[topic] = (sub, msg_type, reach)
+        self.subs[topic] = (sub, msg_type, level)
         self.get_logger().info(f'subscribed {topic} [{msg_type}]'
-                               f'{" best effort" if reach == BEST_EFFORT else ""}')
+                               f'{" best effort" if level == BEST_EFFORT else ""}')
 
     def _register(self, topic: str, msg_type: str) -> None:
         """Add the topic to the bag at its first message, with the publishers' offered QoS."""
@@ -219,6 +227,7 @@ class RecorderNode(Node):
                 self.end, self.end_seen = status, time.monotonic()
                 self.get_logger().info(f'run {status.state} after {status.steps} steps; '
                                        'draining')
+                self.discover()      # what appeared since the last look is recorded too
         return on_status
 
     def _callback(self, topic: str, msg_type: str, stamped: bool, selected: bool = True):
@@ -268,19 +277,34 @@ class RecorderNode(Node):
         Also once every topic still short of it has no publisher left (nothing more can come:
         after a stop signal a source may end without answering the last step), and after
         ``drain_timeout`` s of wall time since the end announcement; never without
-        ``stop_at_run_end``.
+        ``stop_at_run_end``. Each latched topic with a publisher must hold its message too,
+        or :data:`LATCHED_WAIT` s have passed since the end announcement.
         """
         if not self.params.stop_at_run_end or self.end is None:
             return False
         waiting = self.ledger.pending(self.end, self.expected_topics())
         if not waiting or (time.monotonic() - self.ledger.noted > ORPHAN_QUIET
                            and not any(self.count_publishers(t) for t in waiting)):
-            return True
+            unheard = self.unheard_latched()
+            if not unheard:
+                return True
+            if time.monotonic() - self.end_seen > min(LATCHED_WAIT, self.params.drain_timeout):
+                self.get_logger().warning(f'no message on {", ".join(unheard)} within '
+                                          f'{LATCHED_WAIT} s after the end of the run')
+                return True
+            return False
         if time.monotonic() - self.end_seen > self.params.drain_timeout:
             self.get_logger().warning(f'drain_timeout = {self.params.drain_timeout} s after '
                                       'the end of the run; closing with steps missing')
             return True
         return False
+
+    def unheard_latched(self) -> list[str]:
+        """Latched topics subscribed as such, with a publisher, that gave no message yet."""
+        counts = self.writer.topic_counts()
+        return [t for t, (sub, _, level) in self.subs.items()
+                if sub is not None and level == LATE_JOINER and t not in counts
+                and self.count_publishers(t)]
 
     def store_report(self) -> None:
         """Log expected vs recorded counts per topic and store them in the bag."""
@@ -312,48 +336,9 @@ class RecorderNode(Node):
             self.get_logger().info(f'closed {self.writer.path}: {self.writer.topic_counts()}')
 
 
-def offered_qos(topic: str, profile) -> dict:
-    """
-    The rosbag2 QoS entry of one publisher of ``topic``.
-
-    Reliability and durability come from discovery. DDS discovery does not carry the history
-    depth (rmw reports 0, history unknown), so a testbed topic gets the depth its publishers
-    use (:data:`pentapod_sim.interface.QOS`), another topic rosbag2's unknown/0.
-    """
-    kind = interface.qos_class(topic)
-    entry = qos_profile(profile.reliability.name.lower(),
-                        interface.QOS[kind].depth if kind else 0,
-                        profile.durability.name.lower())
-    if kind is None:
-        entry['history'] = 'unknown'
-    return entry
-
-
 def _flow(mapping: dict) -> str:
     return yaml.safe_dump(mapping, default_flow_style=True, sort_keys=False,
                           width=1 << 20).strip()
-
-
-#: Levels of a recorder subscription, each matching every publisher the next one matches:
-#: best effort and volatile (any publisher), reliable and volatile, reliable and transient
-#: local (gets a writer's history when it matches late; only transient-local writers).
-BEST_EFFORT, RELIABLE, LATE_JOINER = 0, 1, 2
-LEVELS = {BEST_EFFORT: 'best effort', RELIABLE: 'volatile', LATE_JOINER: 'transient local'}
-
-
-def _reach(topic: str, publishers) -> int:
-    """
-    The highest level that matches every one of ``publishers`` (no publisher: the topic's).
-
-    Transient local only for topics whose testbed writers offer it
-    (:func:`pentapod_sim.interface.is_latched`) and only while every publisher does.
-    """
-    if any(p.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT for p in publishers):
-        return BEST_EFFORT
-    if interface.is_latched(topic) and all(
-            p.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL for p in publishers):
-        return LATE_JOINER
-    return RELIABLE
 
 
 #: After a stop signal the recorder waits this long [s, wall time] for the plant's end

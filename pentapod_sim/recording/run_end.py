@@ -5,8 +5,8 @@ The plant publishes its run status on :data:`pentapod_sim.interface.RUN_STATUS` 
 pairs :data:`pentapod_sim.interface.RUN_STATUS_KEYS`): ``running`` at the start, ``finished``
 or ``stopped`` with the number of steps run at the end. Reliable delivery is in order per
 publisher, so once a per-step topic holds the stamp of the last step, everything before it that
-was not lost is in as well: the recorder stops then (:meth:`StepLedger.drained`), not after a
-wall time without messages. See docs/recording.md.
+was not lost is in as well: the recorder stops once no topic is short of it
+(:meth:`StepLedger.pending`), not after a wall time without messages. See docs/recording.md.
 """
 from __future__ import annotations
 
