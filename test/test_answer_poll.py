@@ -4,7 +4,7 @@ The plant polls for its sources' answers (lockstep, separate processes) only whi
 Polling (:mod:`pentapod_sim.nodes.answer_poll`) takes the answers straight from the force
 subscriptions; it must change nothing in a trace, keep the plant's timers running (the run
 status) although the executor no longer waits, and stop as soon as another node that works
-each step joins (its CPU is then needed).
+each step joins (its CPU is then needed). The nodes of one process count once.
 """
 import threading
 import time
@@ -40,7 +40,8 @@ def test_polling_pays_only_while_every_busy_node_has_a_cpu():
 class Listener:
     """An rclpy node in this process, spun in a thread, that keeps what it receives."""
 
-    def __init__(self, env):
+    def __init__(self, env, *others):
+        """``others``: node factories ``f(context)``, spun with the listener."""
         import rclpy
         from rclpy.node import Node
 
@@ -49,7 +50,8 @@ class Listener:
         rclpy.init(context=self.ctx, domain_id=int(env['ROS_DOMAIN_ID']))
         self.node = Node('poll_test_listener', context=self.ctx)
         self.executor = make_executor(self.ctx)
-        self.executor.add_node(self.node)
+        for node in [self.node, *(make(self.ctx) for make in others)]:
+            self.executor.add_node(node)
         self.received: dict[str, list] = {}
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._spin, daemon=True)
@@ -155,13 +157,13 @@ def test_a_node_subscribing_mid_run_turns_polling_off(tmp_path):
         if not polling_pays(1e-3, usable_cpus(), 1):
             assert 'answers: blocking' in procs.log('plant')   # one CPU: never polls
             return
-        while 'answers: polled (1 other node(s)' not in procs.log('plant'):
+        while 'answers: polled (1 other process(es)' not in procs.log('plant'):
             assert time.monotonic() < end, procs.log('plant')
             time.sleep(0.1)
         listener = Listener(procs.env)
         listener.subscribe(JointState, interface.TCP_STATE, STATE_SUB_QOS)
         end = time.monotonic() + 30
-        while 'on, answers: blocking (2 other node(s)' not in procs.log('plant'):
+        while 'on, answers: blocking (2 other process(es)' not in procs.log('plant'):
             assert time.monotonic() < end, procs.log('plant')
             time.sleep(0.1)
         while not listener.received[interface.TCP_STATE]:   # and it does get the states
@@ -172,3 +174,32 @@ def test_a_node_subscribing_mid_run_turns_polling_off(tmp_path):
         procs.close()
         if listener is not None:
             listener.close()
+
+
+def test_the_nodes_of_one_process_count_once(tmp_path):
+    """The exciter and a subscriber of the states in one process: one busy peer, still polled."""
+    from sensor_msgs.msg import JointState
+
+    from pentapod_sim.nodes.common import STATE_SUB_QOS
+    from pentapod_sim.nodes.exciter_node import ExciterNode
+    model_file = demo_model(8, seed=5).save(tmp_path / 'model.npz')
+    procs = NodeProcesses(tmp_path)
+    args = ['--ros-args'] + [a for p in EXCITER for a in ('-p', p)]
+    listener = Listener(procs.env, lambda ctx: ExciterNode(context=ctx, cli_args=args))
+    try:
+        listener.subscribe(JointState, interface.TCP_STATE, STATE_SUB_QOS)
+        _plant(procs, model_file, 10 ** 7, tmp_path / 'trace.npz')
+        end = time.monotonic() + 60
+        while not listener.received.get(interface.TCP_STATE):
+            assert time.monotonic() < end and procs.procs['plant'].poll() is None, \
+                procs.log('plant')
+            time.sleep(0.1)
+        time.sleep(1.0)                      # several looks at the graph (every 0.25 s)
+        log = procs.log('plant')
+    finally:
+        procs.close()
+        listener.close()
+    # the exciter's node and the listener's: two nodes, one process
+    expected = ('answers: polled (1 other process(es)' if polling_pays(1e-3, usable_cpus(), 1)
+                else 'answers: blocking (1 other process(es)')
+    assert expected in log and 'answers: blocking (2' not in log, log

@@ -6,7 +6,7 @@ until they come costs more than the message itself: rclpy's ``spin_once`` and th
 a thread that slept. Taking the answers straight from the force subscriptions in a loop
 (``take_message``, under 1 us when nothing is there) for up to ``answer_poll_time`` seconds
 makes plant + 1 damper node about 1.4x faster here. The loop keeps one CPU busy, so it pays
-only while every node that works each step has a CPU of its own; with 3 damper nodes, or a
+only while every process that works each step has a CPU of its own; with 3 damper nodes, or a
 damper and a recorder, on 2 CPUs it made the run slower (docs/nodes.md, "Where a lockstep
 step's time goes"). :func:`polling_pays` is that rule; :class:`AnswerPoller` re-applies it
 whenever the plant checks its subscribers, so a recorder or ``ros2 topic echo`` joining
@@ -44,29 +44,38 @@ def polling_pays(poll_time: float, cpus: int, peers: int) -> bool:
     """
     True if the plant should poll: ``poll_time`` > 0 and the plant and ``peers`` fit on ``cpus``.
 
-    ``peers``: the other nodes that work every step (the sources, the subscribers of the
-    plant's per-step topics).
+    ``peers``: the other processes that work every step (those of the sources and of the
+    subscribers of the plant's per-step topics).
     """
     return poll_time > 0 and peers + 1 <= cpus
 
 
+def process_of(info) -> bytes:
+    """
+    The DDS participant of a graph endpoint (``TopicEndpointInfo``): its process, in ROS 2.
+
+    Every node of an rclpy context shares one participant, and a participant's endpoints share
+    the 12-byte prefix of their GUIDs (the first bytes of ``endpoint_gid``).
+    """
+    return bytes(info.endpoint_gid[:12])
+
+
 def busy_peers(node, output_topics: Iterable[str], force_topics: Iterable[str]) -> set:
     """
-    Nodes other than ``node`` that work each step, as (name, namespace) pairs.
+    Processes other than ``node``'s that work each step, as DDS participants (:func:`process_of`).
 
-    Those that subscribe to one of the per-step ``output_topics`` or publish on one of the
-    ``force_topics``; a node in another process counts once however many topics it has.
+    Those with a node that subscribes to one of the per-step ``output_topics`` or publishes on
+    one of the ``force_topics``. A process counts once however many such nodes and topics it
+    has: two controllers spun by one executor share a CPU.
     """
+    output_topics = list(output_topics)
     me = (node.get_name(), node.get_namespace())
-    peers = set()
-    for topic in output_topics:
-        peers |= {(i.node_name, i.node_namespace)
-                  for i in node.get_subscriptions_info_by_topic(topic)}
-    for topic in force_topics:
-        peers |= {(i.node_name, i.node_namespace)
-                  for i in node.get_publishers_info_by_topic(topic)}
-    peers.discard(me)
-    return peers
+    infos = [i for t in output_topics for i in node.get_subscriptions_info_by_topic(t)]
+    infos += [i for t in force_topics for i in node.get_publishers_info_by_topic(t)]
+    mine = {process_of(i) for t in output_topics[:1]
+            for i in node.get_publishers_info_by_topic(t)
+            if (i.node_name, i.node_namespace) == me}
+    return {process_of(i) for i in infos} - mine
 
 
 class AnswerPoller:
@@ -122,7 +131,7 @@ class AnswerPoller:
         how = 'polled' if self.active else 'blocking'
         if not self.active and polling_pays(self.poll_time, self.cpus, len(self.peers)):
             how += ' until the executor drain is matched'
-        return (f'answers: {how} ({len(self.peers)} other node(s) working each step, '
+        return (f'answers: {how} ({len(self.peers)} other process(es) working each step, '
                 f'{self.cpus} CPU(s))')
 
     def poll(self, step: int) -> None:

@@ -57,7 +57,7 @@ PLANT = ParameterTable('plant', [
           'without all answers', 's', 1e-3, 60.0),
     Param('answer_poll_time', 'float', 1e-3, 'lockstep: poll for the answers this long after '
           'publishing y_k before blocking in the executor, while the plant and every other '
-          'node that works each step have a CPU each (0: never poll)', 's', 0.0, 1.0),
+          'process that works each step have a CPU each (0: never poll)', 's', 0.0, 1.0),
     Param('max_state_norm', 'float', DEFAULT_MAX_STATE_NORM, 'instability bound on the norm '
           'of the modal state ||x||; larger or NaN stops the run', '', 1e-12, 1e150),
     Param('report_period', 'float', 2.0, 'realtime: log timing every this wall time', 's',
