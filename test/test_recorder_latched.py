@@ -41,7 +41,10 @@ def wait_for(procs: NodeProcesses, name: str, needle: str, timeout: float = 60.0
         time.sleep(0.05)
 
 
-def test_a_latched_topic_found_only_at_the_end_of_a_run_is_recorded(tmp_path):
+@pytest.mark.parametrize('selection', [(), ('/clock', excitation_spec_topic('probe'))],
+                         ids=['every-topic', 'chosen-topics'])
+def test_a_latched_topic_found_only_at_the_end_of_a_run_is_recorded(tmp_path, selection):
+    """Also with chosen topics: the run status (latched, always subscribed) is not awaited."""
     model_file = demo_model(4).save(tmp_path / 'model.npz')
     topic = excitation_spec_topic('probe')
     ctx = rclpy.Context()
@@ -51,7 +54,8 @@ def test_a_latched_topic_found_only_at_the_end_of_a_run_is_recorded(tmp_path):
     try:
         procs.start('recorder', 'pentapod_sim.nodes.recorder_node',
                     f"output_dir:='{tmp_path}'", 'bag_name:=run', 'discovery_period:=3600.0',
-                    'drain_timeout:=60.0')
+                    'drain_timeout:=60.0', *([f'topics:=[{",".join(selection)}]'] if selection
+                                             else []))
         wait_for(procs, 'recorder', 'recording to')      # its first look is over
         pub = node.create_publisher(String, topic, qos('spec'))
         procs.start('plant', 'pentapod_sim.nodes.plant_node', f'model_file:={model_file}',
@@ -74,4 +78,6 @@ def test_a_latched_topic_found_only_at_the_end_of_a_run_is_recorded(tmp_path):
     assert log.index(f'subscribed {topic}') > log.index(f'run finished after {STEPS} steps'), log
     assert 'none missing' in log and 'no message on' not in log, log
     assert excitation_of(tmp_path / 'run', 'probe') == (SPEC, 1 / RATE)
-    assert open_bag(tmp_path / 'run').topic('/clock').count == STEPS
+    bag = open_bag(tmp_path / 'run')
+    assert bag.topic('/clock').count == STEPS
+    assert not selection or set(bag.topics) == set(selection), bag.topics

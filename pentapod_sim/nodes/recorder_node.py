@@ -300,11 +300,11 @@ class RecorderNode(Node):
         return False
 
     def unheard_latched(self) -> list[str]:
-        """Latched topics subscribed as such, with a publisher, that gave no message yet."""
+        """Recorded latched topics, subscribed as such, with a publisher and no message yet."""
         counts = self.writer.topic_counts()
         return [t for t, (sub, _, level) in self.subs.items()
                 if sub is not None and level == LATE_JOINER and t not in counts
-                and self.count_publishers(t)]
+                and self._selected(t) and self.count_publishers(t)]
 
     def store_report(self) -> None:
         """Log expected vs recorded counts per topic and store them in the bag."""
