@@ -33,14 +33,6 @@ STEPS = 600
 SPEC = ExcitationSpec('multisine', amplitude=3.0, period=0.1, f_start=10.0, f_end=400.0)
 
 
-def wait_for(procs: NodeProcesses, name: str, needle: str, timeout: float = 60.0) -> None:
-    end = time.monotonic() + timeout
-    while needle not in procs.log(name):
-        assert procs.procs[name].poll() is None, procs.log(name)
-        assert time.monotonic() < end, f'{needle!r} not seen:\n{procs.log(name)}'
-        time.sleep(0.05)
-
-
 @pytest.mark.parametrize('selection', [(), ('/clock', excitation_spec_topic('probe'))],
                          ids=['every-topic', 'chosen-topics'])
 def test_a_latched_topic_found_only_at_the_end_of_a_run_is_recorded(tmp_path, selection):
@@ -56,12 +48,12 @@ def test_a_latched_topic_found_only_at_the_end_of_a_run_is_recorded(tmp_path, se
                     f"output_dir:='{tmp_path}'", 'bag_name:=run', 'discovery_period:=3600.0',
                     'drain_timeout:=60.0', *([f'topics:=[{",".join(selection)}]'] if selection
                                              else []))
-        wait_for(procs, 'recorder', 'recording to')      # its first look is over
+        procs.wait_for('recorder', 'recording to')      # its first look is over
         pub = node.create_publisher(String, topic, qos('spec'))
         procs.start('plant', 'pentapod_sim.nodes.plant_node', f'model_file:={model_file}',
                     f'steps:={STEPS}', f'sample_rate:={RATE}', "loop_check:='off'",
                     'wait_for_subscribers:=[recorder]', 'startup_timeout:=60.0')
-        wait_for(procs, 'recorder', f'subscribed {topic}')
+        procs.wait_for('recorder', f'subscribed {topic}')
         # the kept message comes a moment after the subscription (a slow match, made slower:
         # the recorder had its steps in 0.4 s after the end; LATCHED_WAIT is 2 s)
         time.sleep(0.8)

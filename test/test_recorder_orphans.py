@@ -33,14 +33,10 @@ def test_a_recorder_closes_once_the_missing_steps_have_no_publisher(tmp_path):
         exciter = procs.start('exciter', 'pentapod_sim.nodes.exciter_node', 'kind:=sine',
                               'amplitude:=20.0', 'frequency:=7.0', 'duration:=1000.0',
                               'sample_rate:=2000.0')
-        plant = procs.start('plant', 'pentapod_sim.nodes.plant_node',
-                            f'model_file:={model_file}', 'steps:=2000000',
-                            'sample_rate:=2000.0', 'sources:=[exciter]',
-                            'wait_for_subscribers:=[recorder]', 'startup_timeout:=60.0')
-        end = time.monotonic() + 60
-        while 'lockstep run of' not in procs.log('plant'):
-            assert plant.poll() is None and time.monotonic() < end, procs.log('plant')
-            time.sleep(0.05)
+        procs.start('plant', 'pentapod_sim.nodes.plant_node', f'model_file:={model_file}',
+                    'steps:=2000000', 'sample_rate:=2000.0', 'sources:=[exciter]',
+                    'wait_for_subscribers:=[recorder]', 'startup_timeout:=60.0')
+        procs.wait_for('plant', 'lockstep run of')
         time.sleep(1.0)
         recorder.send_signal(signal.SIGSTOP)   # the recorder lags: messages wait for it
         time.sleep(0.5)
