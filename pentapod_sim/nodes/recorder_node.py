@@ -288,9 +288,10 @@ class RecorderNode(Node):
             unheard = self.unheard_latched()
             if not unheard:
                 return True
-            if time.monotonic() - self.end_seen > min(LATCHED_WAIT, self.params.drain_timeout):
+            wait = min(LATCHED_WAIT, self.params.drain_timeout)
+            if time.monotonic() - self.end_seen > wait:
                 self.get_logger().warning(f'no message on {", ".join(unheard)} within '
-                                          f'{LATCHED_WAIT} s after the end of the run')
+                                          f'{wait} s after the end of the run')
                 return True
             return False
         if time.monotonic() - self.end_seen > self.params.drain_timeout:
