@@ -17,7 +17,7 @@ import scipy.sparse as sp
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))   # run from a checkout
 from pentapod_sim.fe import beam  # noqa: E402
 from pentapod_sim.fe.assembly import build_model  # noqa: E402
-from pentapod_sim.fe.params import load_machine  # noqa: E402
+from pentapod_sim.fe.machine_data import load_machine  # noqa: E402
 
 PAPER_SCALE_ELEMENT_SIZE = 0.00037   # m, gives about 803,000 DOF
 

@@ -41,8 +41,8 @@ STATE, EXCITATION = '/pentapod/tcp_state', '/pentapod/excitation'
 OURS = r"""
 import sys, time
 import numpy as np
-from pentapod_sim.analysis.bag_reader import open_bag
-from pentapod_sim.analysis.estimation import frf_from_series
+from pentapod_sim.analysis.bag.reader import open_bag
+from pentapod_sim.analysis.frf.estimation import frf_from_series
 t0 = time.perf_counter()
 bag = open_bag(sys.argv[1], ['/pentapod/excitation', '/pentapod/tcp_state'])
 res = frf_from_series(bag.series('/pentapod/excitation.force.x'),
@@ -59,7 +59,7 @@ from pathlib import Path
 import numpy as np
 from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_typestore
-from pentapod_sim.analysis.estimation import estimate_frf
+from pentapod_sim.analysis.frf.estimation import estimate_frf
 t0 = time.perf_counter()
 force, disp = [], []
 with AnyReader([Path(sys.argv[1])], default_typestore=get_typestore(Stores.ROS2_JAZZY)) as r:

@@ -20,7 +20,7 @@ import control  # noqa: E402
 import scipy.signal as signal  # noqa: E402
 
 from pentapod_sim.fe.assembly import build_model  # noqa: E402
-from pentapod_sim.fe.params import load_machine  # noqa: E402
+from pentapod_sim.fe.machine_data import load_machine  # noqa: E402
 from pentapod_sim.plant import frf, frf_peaks  # noqa: E402
 from pentapod_sim.plant.build import load_reduction_config, plant_from_fe
 

@@ -3,7 +3,7 @@ Run every benchmark and print one table of figures and ratios.
 
 Usage::
 
-    python bench/run_all.py [--quick] [--only modal,plant]
+    python bench/run_all.py [--quick] [--only modes,plant]
     python bench/run_all.py --tables      # run nothing: rebuild the tables from bench/results
 
 The rows of each topic are kept in ``bench/results/<topic>.json``. ``bench/RESULTS.md`` and the
@@ -206,7 +206,7 @@ def main(argv: list[str] | None = None) -> int:
     """Run the selected benchmarks; return 1 if any of them failed to run."""
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--quick', action='store_true', help='short smoke version (CI)')
-    parser.add_argument('--only', default='', help='comma-separated topics, e.g. modal,plant')
+    parser.add_argument('--only', default='', help='comma-separated topics, e.g. modes,plant')
     parser.add_argument('--tables', action='store_true',
                         help='run nothing; rebuild bench/RESULTS.md and the README table')
     args = parser.parse_args(argv)

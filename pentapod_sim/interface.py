@@ -69,7 +69,7 @@ NO_LINEAR_MODEL = 'no linear model'
 #: ``EXCITATION_SPEC_PREFIX + <name>`` (std_msgs/String, reliable, transient local, depth 1, so a
 #: recorder started later still records it): the JSON text of
 #: :func:`pentapod_sim.sim.excitation_spec.spec_message`, which
-#: :func:`pentapod_sim.analysis.excitation_record.excitation_of` reads back from a bag.
+#: :func:`pentapod_sim.analysis.bag.excitation_record.excitation_of` reads back from a bag.
 EXCITATION_SPEC_PREFIX = '/pentapod/excitation_spec/'
 #: Channels only the live view serves (Foxglove WebSocket, not ROS topics): its derived data;
 #: and the plant's display batches, ROS topics only the live view reads (a recorder skips them).

@@ -10,7 +10,7 @@ from pentapod_sim.errors import ConfigError, UnreachablePoseError
 from pentapod_sim.fe.assembly import build_model, GROUPS
 from pentapod_sim.fe.beam import rhs_section
 from pentapod_sim.fe.geometry import inverse_kinematics, layout_from_params
-from pentapod_sim.fe.params import load_machine, load_positions
+from pentapod_sim.fe.machine_data import load_machine, load_positions
 
 COARSE = 0.35                                     # m, element size for dense eigen checks
 

@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 
 from fixtures.bags import chunk_table, N_STEPS, recorded, returned_messages, write_bag
-from pentapod_sim.analysis.bag_file import BagDamageWarning
-from pentapod_sim.analysis.bag_reader import open_bag
+from pentapod_sim.analysis.bag.file_content import BagDamageWarning
+from pentapod_sim.analysis.bag.reader import open_bag
 from pentapod_sim.errors import BagError
 
 ALLOCATION_BOUND = 16 << 20  # [bytes]; the bag is about 60 kB, a damaged length asks for TBs

@@ -27,9 +27,9 @@ from fixtures.bags import (
     write_bag,
 )
 from fixtures.cdr import encode_clock
-from pentapod_sim.analysis import bag_reader
-from pentapod_sim.analysis.bag_file import BagDamageWarning, McapInternalsWarning
-from pentapod_sim.analysis.bag_reader import open_bag
+from pentapod_sim.analysis.bag import reader as bag_reader
+from pentapod_sim.analysis.bag.file_content import BagDamageWarning, McapInternalsWarning
+from pentapod_sim.analysis.bag.reader import open_bag
 from pentapod_sim.cli import analyze
 from pentapod_sim.errors import BagError
 

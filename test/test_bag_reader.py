@@ -11,8 +11,8 @@ from numpy.testing import assert_allclose, assert_array_equal
 import pytest
 
 from fixtures.cdr import encode_joint_state, encode_wrench_stamped
-from pentapod_sim.analysis.bag_reader import joint_unit, open_bag, Series
-from pentapod_sim.analysis.estimation import aligned
+from pentapod_sim.analysis.bag.reader import joint_unit, open_bag, Series
+from pentapod_sim.analysis.frf.estimation import aligned
 from pentapod_sim.errors import BagError
 from pentapod_sim.recording import BagWriter
 

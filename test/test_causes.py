@@ -8,7 +8,7 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 
 from pentapod_sim.fe.model import FEModel
-from pentapod_sim.modal.causes import (
+from pentapod_sim.modes.causes import (
     analyse_causes,
     mass_mac,
     neuber_frequencies,
@@ -18,7 +18,7 @@ from pentapod_sim.modal.causes import (
     strain_energy_shares,
     tcp_directions,
 )
-from pentapod_sim.modal.solver import solve_modes
+from pentapod_sim.modes.solver import solve_modes
 
 M1, M2 = 50.0, 20.0            # kg
 K_SOFT, K_STIFF = 1.0e5, 1.0e8  # N/m: ground - m1 (soft), m1 - m2 (stiff)
@@ -205,13 +205,13 @@ class TestModesCommand:
         import scipy.sparse.linalg as spla
 
         from pentapod_sim.cli.modes import main
-        from pentapod_sim.fe import assembly, params
+        from pentapod_sim.fe import assembly, machine_data
 
         assert main(['--position', 'P2', '--out', str(tmp_path), '--rows', '12']) == 0
         text = capsys.readouterr().out
         with open(tmp_path / 'modes.csv') as fh:
             rows = list(csv.DictReader(fh))
-        model = assembly.build_model(params.load_machine(), 'P2')
+        model = assembly.build_model(machine_data.load_machine(), 'P2')
         lam = spla.eigsh(model.K, len(rows) + 3, model.M, sigma=0, return_eigenvectors=False)
         f_ref = np.sort(np.sqrt(lam)) / (2 * np.pi)
         # every mode below 750 Hz and no other: the next one is above the band
@@ -227,14 +227,14 @@ class TestModesCommand:
         import scipy.sparse.linalg as spla
 
         from pentapod_sim.cli.modes import main
-        from pentapod_sim.fe import assembly, params
+        from pentapod_sim.fe import assembly, machine_data
 
         assert main(['--position', 'P1', '--out', str(tmp_path), '--n-modes', '60',
                      '--modes-per-window', '12', '--workers', '2', '--no-neuber']) == 0
         assert '2 window process(es)' in capsys.readouterr().out
         with open(tmp_path / 'modes.csv') as fh:
             f = [float(r['frequency_hz']) for r in csv.DictReader(fh)]
-        model = assembly.build_model(params.load_machine(), 'P1')
+        model = assembly.build_model(machine_data.load_machine(), 'P1')
         lam = spla.eigsh(model.K, 60, model.M, sigma=0, return_eigenvectors=False)
         assert_allclose(f, np.sort(np.sqrt(lam)) / (2 * np.pi), rtol=1e-8)
         assert main(['--position', 'P1', '--workers', '0']) == 2

@@ -16,7 +16,7 @@ import yaml
 
 from pentapod_damper.study.config import load_study_config
 from pentapod_sim.errors import ConfigError
-from pentapod_sim.fe.params import load_machine, load_positions
+from pentapod_sim.fe.machine_data import load_machine, load_positions
 from pentapod_sim.plant.build import load_reduction_config
 from pentapod_sim.plant.ports import INPUT_NAMES, OUTPUT_NAMES
 from pentapod_sim.schema import build, NON_NEGATIVE, POSITIVE, read_mapping, spec

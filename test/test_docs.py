@@ -322,17 +322,17 @@ def test_signatures_in_the_docs_match_the_code():
 
 
 def _defaults_stated():
-    from pentapod_sim.modal import slicing, window_pool
-    from pentapod_sim.modal.causes import DEFAULT_ALPHA
+    from pentapod_sim.modes import slicing, window_pool
+    from pentapod_sim.modes.causes import DEFAULT_ALPHA
     from pentapod_sim.scenario.runner import stop
     grace = inspect.signature(stop).parameters['grace'].default
-    return [('modal.md', r'alpha = (\S+) \(default\)', DEFAULT_ALPHA),
+    return [('modes.md', r'alpha = (\S+) \(default\)', DEFAULT_ALPHA),
             ('nodes.md', r'SIGKILL after (\S+) s\)', grace),
             ('statespace.md', r'SIGKILL (\S+) s after its SIGINT', grace),
-            ('modal.md', r'(?:From|core from|of at least) ([0-9,]+) DOF',
+            ('modes.md', r'(?:From|core from|of at least) ([0-9,]+) DOF',
              window_pool.PARALLEL_MIN_DOF),
-            ('modal.md', r'at most (\d+), for problems', window_pool.MAX_DEFAULT_WORKERS),
-            ('modal.md', r'`AHEAD_SPACING = ([0-9.]+)`', slicing.AHEAD_SPACING)]
+            ('modes.md', r'at most (\d+), for problems', window_pool.MAX_DEFAULT_WORKERS),
+            ('modes.md', r'`AHEAD_SPACING = ([0-9.]+)`', slicing.AHEAD_SPACING)]
 
 
 @pytest.mark.parametrize('doc,pattern,value', _defaults_stated(), ids=lambda v: str(v)[:20])

@@ -18,8 +18,8 @@ from numpy.testing import assert_allclose
 import pytest
 
 from fixtures.demo_model import demo_model
-from pentapod_sim.analysis.bag_reader import open_bag
-from pentapod_sim.analysis.excitation_record import excitation_of, excitations_of
+from pentapod_sim.analysis.bag.excitation_record import excitation_of, excitations_of
+from pentapod_sim.analysis.bag.reader import open_bag
 from pentapod_sim.errors import BagError
 from pentapod_sim.interface import excitation_spec_topic
 from pentapod_sim.scenario.files import dump_params

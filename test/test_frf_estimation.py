@@ -6,8 +6,8 @@ from numpy.testing import assert_allclose
 import pytest
 from scipy import linalg, signal
 
-from pentapod_sim.analysis.estimation import amplitude_spectrum, estimate_frf
-from pentapod_sim.analysis.peaks import find_resonances, peak_reductions
+from pentapod_sim.analysis.frf.estimation import amplitude_spectrum, estimate_frf
+from pentapod_sim.analysis.frf.peaks import find_resonances, peak_reductions
 
 FS = 1000.0  # Hz
 F_MODES = (20.0, 50.0)  # Hz, natural frequencies of the test structure

@@ -10,7 +10,7 @@ from pentapod_sim.fe.geometry import (
     rotation,
     solve_pose,
 )
-from pentapod_sim.fe.params import load_machine, load_positions
+from pentapod_sim.fe.machine_data import load_machine, load_positions
 
 
 @pytest.fixture(scope='module')

@@ -13,7 +13,7 @@ STAGES = [
      'pentapod_sim.parameters'),
     ('pentapod_sim.paths',),
     ('pentapod_sim.fe',),
-    ('pentapod_sim.modal',),
+    ('pentapod_sim.modes',),
     ('pentapod_sim.plant',),
     ('pentapod_sim.sim', 'pentapod_sim.interface'),
     ('pentapod_sim.recording', 'pentapod_sim.analysis', 'pentapod_sim.scenario',

@@ -28,7 +28,7 @@ from fixtures.demo_model import demo_model
 from fixtures.foxglove_client import decoder, FoxgloveClient
 from fixtures.processes import NodeProcesses
 from pentapod_sim import interface
-from pentapod_sim.analysis.bag_reader import open_bag
+from pentapod_sim.analysis.bag.reader import open_bag
 from pentapod_sim.live.layout import build_layout, message_paths
 from pentapod_sim.live.status import STATUS_NAMES
 from pentapod_sim.scenario.files import dump_params

@@ -27,7 +27,7 @@ from test_stopping import Runner
 from fixtures.demo_model import demo_model
 from pentapod_damper.nodes.damper_node import DamperNode
 from pentapod_sim import interface
-from pentapod_sim.analysis.bag_reader import open_bag
+from pentapod_sim.analysis.bag.reader import open_bag
 from pentapod_sim.nodes.common import spin_until
 from pentapod_sim.nodes.loop_check import MODEL_QOS
 from pentapod_sim.plant.model import PlantModel

@@ -18,7 +18,7 @@ import pytest
 
 from fixtures.demo_model import demo_model
 from pentapod_damper.scenario_laws import scenario_laws
-from pentapod_sim.analysis.bag_reader import open_bag
+from pentapod_sim.analysis.bag.reader import open_bag
 from pentapod_sim.interface import TCP_STATE_FULLRATE
 from pentapod_sim.scenario.files import dump_params, read_scenario
 from pentapod_sim.sim.closed_loop import closed_loop_system, excitation_matrix, simulate

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 import scipy.signal
 
-from pentapod_sim.analysis.periodic_frf import synchronous_frf
-from pentapod_sim.analysis.stepped_sine import stepped_sine_frf
+from pentapod_sim.analysis.frf.periodic import synchronous_frf
+from pentapod_sim.analysis.frf.stepped_sine import stepped_sine_frf
 
 DT = 1e-3  # s
 

@@ -155,7 +155,7 @@ def test_select_unknown_port(full):
 
 def test_build_plant_static_gain_equals_fe_compliance():
     from pentapod_sim.fe.assembly import build_model
-    from pentapod_sim.fe.params import load_machine
+    from pentapod_sim.fe.machine_data import load_machine
     from pentapod_sim.plant.build import load_reduction_config
     cfg = load_reduction_config()
     cfg = dataclasses.replace(
@@ -176,16 +176,16 @@ def test_build_plant_static_gain_equals_fe_compliance():
 
 @pytest.mark.parametrize('fmt', ['npz', 'csv'])
 def test_external_modal_data_gives_the_same_plant(full, tmp_path, fmt):
-    from pentapod_sim.plant import modal_data
+    from pentapod_sim.plant import external_modes
     model, omega, phi, plant = full
-    data = modal_data.from_fe_modes(model.points, model.strut_frames, omega / (2 * np.pi), phi)
+    data = external_modes.from_fe_modes(model.points, model.strut_frames, omega / (2 * np.pi), phi)
     if fmt == 'npz':
-        path, frames = modal_data.save_npz(data, tmp_path / 'modes.npz'), None
+        path, frames = external_modes.save_npz(data, tmp_path / 'modes.npz'), None
     else:
-        path = modal_data.save_csv(data, tmp_path / 'modes.csv')
+        path = external_modes.save_csv(data, tmp_path / 'modes.csv')
         frames = tmp_path / 'frames.yaml'
         frames.write_text(f'strut_frames: {model.strut_frames.tolist()}\n')
-    back = modal_data.load_modal_data(path, frames)
+    back = external_modes.load_modal_data(path, frames)
     again = from_modal_data(back.frequencies_hz, back.point_shapes, back.strut_frames,
                             INPUTS, OUTPUTS, zeta=0.02)
     np.testing.assert_allclose(again.b, plant.b, rtol=1e-12, atol=1e-15)
@@ -194,23 +194,23 @@ def test_external_modal_data_gives_the_same_plant(full, tmp_path, fmt):
 
 
 def test_external_modal_data_errors(full, tmp_path):
-    from pentapod_sim.plant import modal_data
+    from pentapod_sim.plant import external_modes
     model, omega, phi, _ = full
-    data = modal_data.from_fe_modes(model.points, model.strut_frames, omega / (2 * np.pi), phi)
-    path = modal_data.save_csv(data, tmp_path / 'modes.csv')
+    data = external_modes.from_fe_modes(model.points, model.strut_frames, omega / (2 * np.pi), phi)
+    path = external_modes.save_csv(data, tmp_path / 'modes.csv')
     lines = path.read_text().splitlines()
     (tmp_path / 'gap.csv').write_text('\n'.join(lines[:-1]) + '\n')   # one row missing
     with pytest.raises(ModelFileError, match='non-finite'):
-        modal_data.load_modal_data(tmp_path / 'gap.csv')
+        external_modes.load_modal_data(tmp_path / 'gap.csv')
     (tmp_path / 'cols.csv').write_text('mode,frequency_hz,point,ux\n1,2.0,tcp,0.1\n')
     with pytest.raises(ModelFileError, match='missing columns'):
-        modal_data.load_modal_data(tmp_path / 'cols.csv')
-    no_frames = modal_data.load_modal_data(path)
+        external_modes.load_modal_data(tmp_path / 'cols.csv')
+    no_frames = external_modes.load_modal_data(path)
     with pytest.raises(ModelFileError, match='strut frames'):
         from_modal_data(no_frames.frequencies_hz, no_frames.point_shapes, None,
                         ['strut1_axial_force'], ['tcp_displacement_x'])
     with pytest.raises(ModelFileError, match='format'):
-        modal_data.load_modal_data(tmp_path / 'modes.unv')
+        external_modes.load_modal_data(tmp_path / 'modes.unv')
 
 
 def test_relevance_rules_are_united(full):

@@ -19,8 +19,8 @@ from std_msgs.msg import String
 
 from fixtures.demo_model import demo_model
 from fixtures.processes import NodeProcesses
-from pentapod_sim.analysis.bag_reader import open_bag
-from pentapod_sim.analysis.excitation_record import excitation_of
+from pentapod_sim.analysis.bag.excitation_record import excitation_of
+from pentapod_sim.analysis.bag.reader import open_bag
 from pentapod_sim.interface import excitation_spec_topic
 from pentapod_sim.nodes.common import qos
 from pentapod_sim.sim.excitation import ExcitationSpec

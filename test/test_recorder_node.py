@@ -17,7 +17,7 @@ from numpy.testing import assert_allclose
 import pytest
 import yaml
 
-from pentapod_sim.analysis.bag_reader import open_bag
+from pentapod_sim.analysis.bag.reader import open_bag
 
 N_STEPS = 300
 DT_NS = 1_000_000  # 1 ms sim-time step

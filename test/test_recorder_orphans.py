@@ -15,8 +15,8 @@ import yaml
 
 from fixtures.demo_model import demo_model
 from fixtures.processes import NodeProcesses
-from pentapod_sim.analysis.bag_file import BagDamageWarning
-from pentapod_sim.analysis.bag_reader import open_bag
+from pentapod_sim.analysis.bag.file_content import BagDamageWarning
+from pentapod_sim.analysis.bag.reader import open_bag
 
 pytestmark = [pytest.mark.ros]
 

@@ -10,8 +10,8 @@ import pytest
 import yaml
 
 from fixtures.cdr import encode_clock, encode_joint_state, encode_wrench_stamped
-from pentapod_sim.analysis.bag_reader import open_bag
-from pentapod_sim.analysis.cdr_arrays import joint_state_arrays, joint_state_layout
+from pentapod_sim.analysis.bag.cdr_arrays import joint_state_arrays, joint_state_layout
+from pentapod_sim.analysis.bag.reader import open_bag
 from pentapod_sim.errors import BagError
 from pentapod_sim.recording import BagWriter, message_definition, QOS_BEST_EFFORT
 from pentapod_sim.recording.msgdefs import has_header_stamp

@@ -18,7 +18,7 @@ import pytest
 import yaml
 
 from fixtures.demo_model import demo_model
-from pentapod_sim.analysis.bag_reader import open_bag
+from pentapod_sim.analysis.bag.reader import open_bag
 from pentapod_sim.scenario.files import dump_params
 from pentapod_sim.sim.stepping import ForceMixer, ForceSource
 

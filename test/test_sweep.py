@@ -22,7 +22,7 @@ from pentapod_damper.sweep.store import as_arrays, ResultStore
 from pentapod_damper.sweep.sweep_plot import all_figures, claim_fractions
 from pentapod_sim.errors import ConfigError
 from pentapod_sim.fe.geometry import inverse_kinematics, layout_from_params
-from pentapod_sim.fe.params import load_machine
+from pentapod_sim.fe.machine_data import load_machine
 from pentapod_sim.plant.build import build_plant
 from pentapod_sim.plant.frf import damper_feedback
 from pentapod_sim.plant.model import PlantModel

@@ -5,8 +5,8 @@ import numpy as np
 from numpy.testing import assert_allclose
 import pytest
 
-from pentapod_sim.analysis.estimation import FrfResult
-from pentapod_sim.analysis.export import uff58_block, write_csv, write_uff58
+from pentapod_sim.analysis.frf.estimation import FrfResult
+from pentapod_sim.analysis.frf.export import uff58_block, write_csv, write_uff58
 from pentapod_sim.errors import BagError
 
 

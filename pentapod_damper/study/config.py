@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from pentapod_sim.errors import ConfigError
-from pentapod_sim.fe.params import load_positions
+from pentapod_sim.fe.machine_data import load_positions
 from pentapod_sim.paths import config_dir
 from pentapod_sim.plant.config import FrequencyGrid
 from pentapod_sim.scenario.files import scenario_names

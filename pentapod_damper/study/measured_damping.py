@@ -5,7 +5,7 @@ A damping run excites the TCP with a periodic multisine (:func:`runs.damping_exc
 for a settling time that follows from the loop's analytic poles
 (:func:`pentapod_damper.study.damping.settling_time`), then
 for whole periods that the analysis averages synchronously. The bag's FRFs are identified by
-pLSCF + LSFD (:mod:`pentapod_sim.analysis.modal_ema`) and each dominant mode of the analytic
+pLSCF + LSFD (:mod:`pentapod_sim.analysis.ema.identify`) and each dominant mode of the analytic
 table (:mod:`pentapod_damper.study.damping`) is paired with the identified pole nearest in
 frequency. Peaks compare the identified model's FRF with the analytic sampled-loop FRF, both
 maximised at the resonance (:func:`pentapod_sim.plant.frf_peaks.maximise_near_poles`).
@@ -21,10 +21,10 @@ import numpy as np
 
 from pentapod_damper.study import damping
 from pentapod_damper.study.analytic import SampledLoop, SampledPairFrf
-from pentapod_sim.analysis import modal_plots
-from pentapod_sim.analysis.modal_ema import identify_modes, ModalModel
-from pentapod_sim.analysis.modal_id import Tolerances
-from pentapod_sim.analysis.run_frf import frfs_from_bag, RunFrfs
+from pentapod_sim.analysis.ema import plots as ema_plots
+from pentapod_sim.analysis.ema.identify import identify_modes, ModalModel
+from pentapod_sim.analysis.ema.poles import Tolerances
+from pentapod_sim.analysis.frf.from_run import frfs_from_bag, RunFrfs
 from pentapod_sim.errors import BagError
 from pentapod_sim.interface import TCP_STATE
 from pentapod_sim.plant.frf_peaks import maximise_near_poles
@@ -147,9 +147,9 @@ def compare(rows: Sequence[dict], ident: Identified, plant: PlantModel, laws: Se
 def figures(ident: Identified, folder: Path, tag: str) -> tuple[Path, Path]:
     """Stability diagram and identified-vs-measured FRF of a damping run (PNG files)."""
     run, model = ident.run, ident.model
-    return (modal_plots.stability_plot(model, run.freq, run.H, folder / f'stability_{tag}.png',
+    return (ema_plots.stability_plot(model, run.freq, run.H, folder / f'stability_{tag}.png',
                                        title=f'{tag}: stability diagram ({run.estimator})'),
-            modal_plots.synthesis_plot(model, run.freq, run.H, run.labels, run.units[0],
+            ema_plots.synthesis_plot(model, run.freq, run.H, run.labels, run.units[0],
                                        folder / f'identified_frf_{tag}.png',
                                        title=f'{tag}: measured and identified FRF'))
 

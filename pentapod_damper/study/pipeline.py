@@ -31,8 +31,8 @@ from pentapod_damper.study.analytic import (
 from pentapod_damper.study.config import StudyConfig
 from pentapod_damper.study.pma import pma_design, PmaDesign
 from pentapod_damper.study.runs import RunResult
-from pentapod_sim.analysis.bag_reader import open_bag
-from pentapod_sim.analysis.estimation import frf_from_series
+from pentapod_sim.analysis.bag.reader import open_bag
+from pentapod_sim.analysis.frf.estimation import frf_from_series
 from pentapod_sim.errors import ConfigError
 from pentapod_sim.interface import EXCITATION, PMA_STATE, TCP_STATE
 from pentapod_sim.plant.build import build_plant

@@ -20,8 +20,8 @@ from pentapod_damper.sweep.poses import AXES, UNITS
 from pentapod_damper.sweep.settings import SweepSettings
 from pentapod_sim.errors import UnreachablePoseError
 from pentapod_sim.fe.assembly import build_model
-from pentapod_sim.modal.causes import strain_energy_shares, tcp_directions
-from pentapod_sim.modal.solver import solve_modes
+from pentapod_sim.modes.causes import strain_energy_shares, tcp_directions
+from pentapod_sim.modes.solver import solve_modes
 from pentapod_sim.plant.build import plant_from_fe, reduce_plant
 
 #: Stiffness groups whose modes count as frame modes (the paper's frame modes are caused by
@@ -91,7 +91,7 @@ def first_modes(fe, f_max: float) -> dict:
 
     A mode's cause is the set of groups (:data:`FRAME_GROUPS` or :data:`STRUT_GROUPS`, or
     another group) with the largest modal strain energy
-    (:func:`pentapod_sim.modal.causes.strain_energy_shares`). Modes below ``f_max`` are
+    (:func:`pentapod_sim.modes.causes.strain_energy_shares`). Modes below ``f_max`` are
     searched; NaN and ``-`` if none is found there.
     """
     modes = solve_modes(fe.K, fe.M, f_max=f_max)

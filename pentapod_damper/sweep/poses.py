@@ -17,7 +17,7 @@ from typing import Iterable, Sequence
 import numpy as np
 
 from pentapod_sim.errors import ConfigError
-from pentapod_sim.fe.params import load_positions
+from pentapod_sim.fe.machine_data import load_positions
 
 #: Pose components, in order, with their units.
 AXES = ('x', 'y', 'z', 'a', 'b')

@@ -17,7 +17,7 @@ from typing import Any, Sequence
 from pentapod_damper.study.config import load_study_config
 from pentapod_sim import __version__
 from pentapod_sim.errors import ConfigError
-from pentapod_sim.fe.params import load_machine, machine_path
+from pentapod_sim.fe.machine_data import load_machine, machine_path
 from pentapod_sim.plant.config import load_reduction_config
 from pentapod_sim.scenario.files import read_scenario
 

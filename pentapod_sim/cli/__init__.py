@@ -96,13 +96,13 @@ def model_from_args(args: argparse.Namespace):
     """
     from pentapod_sim.fe import (
         assembly,
-        params,  # heavy imports only when a model is built
+        machine_data,  # heavy imports only when a model is built
     )
     from pentapod_sim.schema import closest
 
-    machine = params.load_machine(args.machine)
-    path = params.positions_path(args.positions)
-    positions = params.load_positions(path)
+    machine = machine_data.load_machine(args.machine)
+    path = machine_data.positions_path(args.positions)
+    positions = machine_data.load_positions(path)
     if args.position not in positions:
         near = closest(args.position, positions)
         raise ConfigError(f'{path}: no position {args.position!r}'

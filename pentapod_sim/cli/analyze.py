@@ -21,15 +21,15 @@ import warnings
 
 import numpy as np
 
-from pentapod_sim.analysis import plots
-from pentapod_sim.analysis.bag_file import BagDamageWarning, UnreadableBagError
-from pentapod_sim.analysis.bag_reader import open_bag
-from pentapod_sim.analysis.estimation import amplitude_spectrum, EXCITATIONS, frf_from_series
-from pentapod_sim.analysis.export import write_csv, write_uff58
-from pentapod_sim.analysis.peaks import find_resonances, peak_reductions
+from pentapod_sim.analysis.bag.file_content import BagDamageWarning, UnreadableBagError
+from pentapod_sim.analysis.bag.reader import open_bag
+from pentapod_sim.analysis.frf import plots
+from pentapod_sim.analysis.frf.estimation import amplitude_spectrum, EXCITATIONS, frf_from_series
+from pentapod_sim.analysis.frf.export import write_csv, write_uff58
+from pentapod_sim.analysis.frf.peaks import find_resonances, peak_reductions
 from pentapod_sim.cli import run_command
-from pentapod_sim.cli.analyze_modes import add_parser as add_modes_parser
-from pentapod_sim.cli.analyze_modes import cmd_modes
+from pentapod_sim.cli.analyze_ema import add_parser as add_modes_parser
+from pentapod_sim.cli.analyze_ema import cmd_modes
 from pentapod_sim.errors import BagError
 from pentapod_sim.interface import PMA_STATE
 

@@ -24,16 +24,16 @@ import time
 
 from pentapod_sim.cli import add_model_arguments, configure_logging, model_from_args, run_command
 from pentapod_sim.errors import ModalError
-from pentapod_sim.modal.causes import (
+from pentapod_sim.modes.causes import (
     analyse_causes,
     DEFAULT_ALPHA,
     DEFAULT_ROTATION_LENGTH,
     plot_energy_shares,
     plot_mode_distribution,
 )
-from pentapod_sim.modal.solver import solve_modes
-from pentapod_sim.modal.sturm import sturm_count
-from pentapod_sim.modal.window_pool import PARALLEL_MIN_DOF
+from pentapod_sim.modes.solver import solve_modes
+from pentapod_sim.modes.sturm import sturm_count
+from pentapod_sim.modes.window_pool import PARALLEL_MIN_DOF
 
 LOGGER = logging.getLogger('modes')
 #: Frequency band of the paper's mode count [Hz].

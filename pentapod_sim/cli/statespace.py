@@ -290,7 +290,7 @@ def cmd_closed_loop(args) -> int:
 def cmd_build(args) -> int:
     """Build and save plant model files (from the FE model or from external modal data)."""
     if args.modal_data:
-        from pentapod_sim.plant.modal_data import load_modal_data
+        from pentapod_sim.plant.external_modes import load_modal_data
         data = load_modal_data(args.modal_data, args.strut_frames)
         zeta = data.zeta if data.zeta is not None else modal_damping(
             data.frequencies_hz, args.cfg.damping_ratio, args.cfg.damping_groups)

@@ -31,8 +31,8 @@ import scipy.sparse as sp
 from pentapod_sim.errors import ConfigError
 from pentapod_sim.fe import beam
 from pentapod_sim.fe.geometry import layout_from_params, N_STRUTS, solve_pose, StrutState
+from pentapod_sim.fe.machine_data import load_positions, MachineParams, RhsSection
 from pentapod_sim.fe.model import FEModel
-from pentapod_sim.fe.params import load_positions, MachineParams, RhsSection
 
 LOG = logging.getLogger(__name__)
 Array = npt.NDArray[np.float64]
@@ -303,7 +303,7 @@ def build_model(machine: MachineParams, pose: npt.ArrayLike | str,
     Parameters
     ----------
     machine : MachineParams
-        Machine parameters (:func:`pentapod_sim.fe.params.load_machine`).
+        Machine parameters (:func:`pentapod_sim.fe.machine_data.load_machine`).
     pose : (5,) array_like or str
         TCP pose x, y, z [m], a, b [rad], or a position name of ``config/positions.yaml``.
     element_size : float, optional

@@ -24,7 +24,7 @@ import numpy.typing as npt
 import scipy.optimize
 
 from pentapod_sim.errors import UnreachablePoseError
-from pentapod_sim.fe.params import MachineParams
+from pentapod_sim.fe.machine_data import MachineParams
 
 N_STRUTS = 5
 Array = npt.NDArray[np.float64]

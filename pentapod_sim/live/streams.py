@@ -4,7 +4,7 @@ One subscribed topic of the live view: raw CDR in, deduplicated samples and enve
 The node's subscriptions are polled by the live view's worker thread, which hands every message
 to :meth:`TopicStream.offer` (append the bytes, count the messages lost before it or a drop when
 the backlog is full); once per pass the worker takes the backlog, decodes it in one
-vectorised pass (:mod:`pentapod_sim.analysis.cdr_arrays`), drops the copies of a step that a
+vectorised pass (:mod:`pentapod_sim.analysis.bag.cdr_arrays`), drops the copies of a step that a
 lockstep plant re-sends while it waits, notices a new run (stamps going back) and feeds the
 envelope downsampler. Supported types: sensor_msgs/JointState (columns: the joints' position,
 then velocity, then effort values, for the fields the messages carry) and
@@ -25,7 +25,7 @@ import numpy as np
 import numpy.typing as npt
 
 from pentapod_sim import interface
-from pentapod_sim.analysis.cdr_arrays import (
+from pentapod_sim.analysis.bag.cdr_arrays import (
     joint_state_arrays,
     JOINT_STATE_FIELDS,
     joint_state_layout,

@@ -1,7 +1,7 @@
 """
 From the FE model to the reduced plant of a machine position, and the cache of built plants.
 
-The chain is FE model (:mod:`pentapod_sim.fe`) -> modes (:mod:`pentapod_sim.modal`) -> ports
+The chain is FE model (:mod:`pentapod_sim.fe`) -> modes (:mod:`pentapod_sim.modes`) -> ports
 -> relevance-based reduction with static correction (:mod:`pentapod_sim.plant.reduction`),
 configured by config/reduction.yaml. :func:`build_plant` runs it for one position;
 :func:`load_or_build_model` caches the result per configuration.
@@ -19,8 +19,8 @@ import numpy.typing as npt
 from pentapod_sim import __version__
 from pentapod_sim.errors import ConfigError, ModelFileError
 from pentapod_sim.fe.assembly import build_model
-from pentapod_sim.fe.params import load_machine
-from pentapod_sim.modal.solver import solve_modes
+from pentapod_sim.fe.machine_data import load_machine
+from pentapod_sim.modes.solver import solve_modes
 from pentapod_sim.paths import config_dir
 from pentapod_sim.plant.config import (
     load_reduction_config,
@@ -222,7 +222,7 @@ def build_plant(position: str | npt.ArrayLike, machine=None,
     position : str or (5,) array_like
         Position name of config/positions.yaml or a pose x, y, z [m], a, b [rad].
     machine : MachineParams, optional
-        Default :func:`pentapod_sim.fe.params.load_machine`.
+        Default :func:`pentapod_sim.fe.machine_data.load_machine`.
     reduction_cfg : ReductionConfig, optional
         Default :func:`load_reduction_config`.
     progress : callable, optional

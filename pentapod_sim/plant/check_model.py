@@ -19,7 +19,7 @@ import numpy as np
 
 from pentapod_sim.errors import ConfigError, ModelFileError
 from pentapod_sim.fe.assembly import build_model
-from pentapod_sim.fe.params import load_machine
+from pentapod_sim.fe.machine_data import load_machine
 from pentapod_sim.plant.build import load_reduction_config, model_cache_key, plant_from_fe
 from pentapod_sim.plant.model import PlantModel
 

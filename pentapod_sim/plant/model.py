@@ -5,7 +5,7 @@ State order: ``x = [q_1..q_m, dq_1..dq_m]`` (modal displacements [sqrt(kg) m] an
 rates), so that ``A = [[0, I], [-W^2, -2 Z W]]``, ``B = [0; b]``, ``C = [c_disp, c_vel]``.
 External modal data (frequencies plus mass-normalised shapes at the named points) enters
 through :func:`pentapod_sim.plant.build.from_modal_data` (files:
-:mod:`pentapod_sim.plant.modal_data`); the whole chain for a machine position is
+:mod:`pentapod_sim.plant.external_modes`); the whole chain for a machine position is
 :func:`pentapod_sim.plant.build.build_plant`.
 """
 from __future__ import annotations

@@ -8,7 +8,7 @@ metadata.yaml holds, because rosbags matches connections on it (a mismatch reads
 Crash safety: messages go into small chunks; :meth:`BagWriter.flush` (called every
 ``flush_period_s`` of wall time by :meth:`BagWriter.write`) closes the chunk, flushes it to
 the file and rewrites metadata.yaml, so after a SIGKILL everything up to the last flush is
-readable by :mod:`pentapod_sim.analysis.bag_reader` (which tolerates a missing summary).
+readable by :mod:`pentapod_sim.analysis.bag.reader` (which tolerates a missing summary).
 Run information (model hash, pose, scenario, version) is stored in ``custom_data`` of
 metadata.yaml and as an MCAP metadata record named ``pentapod_run`` at the start of the file.
 """

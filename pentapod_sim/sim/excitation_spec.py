@@ -6,7 +6,7 @@ Parameters of an excitation signal: the spec, its checks and its JSON form (stor
 :func:`spec_from_dict` turn a spec into plain JSON-safe data and back (non-finite numbers
 as the strings ``'inf'``, ``'-inf'``, ``'nan'``); :func:`spec_message` / :func:`parse_spec_message`
 are the text the exciter node publishes once per run (docs/nodes.md) and the analysis reads
-back from a bag (:mod:`pentapod_sim.analysis.excitation_record`).
+back from a bag (:mod:`pentapod_sim.analysis.bag.excitation_record`).
 """
 from __future__ import annotations
 

@@ -1,0 +1,1 @@
+"""Reading recorded bags (rosbag2 MCAP) into arrays, ROS-free."""

@@ -1,0 +1,1 @@
+"""Experimental modal analysis of measured FRFs: pLSCF poles, LSFD residues, tables, plots."""

@@ -1,0 +1,251 @@
+"""
+Experimental modal analysis: poles by poly-reference LSCF, stability diagram, pole selection.
+
+Chain: FRFs ``H[o, i, k]`` (output o, input i, frequency k) in a band ->
+:func:`plscf` poles for every model order -> :func:`stability_diagram` classes ->
+:func:`select_poles` (automatic, for the non-interactive CLI) -> residues by LSFD
+(:mod:`pentapod_sim.analysis.ema.lsfd`). :func:`identify_modes` runs the chain.
+
+pLSCF (Peeters, Van der Auweraer, Guillaume, Leuridan, Shock Vib. 11 (2004) 395-409): a right
+matrix-fraction model ``H_o(w) = B_o(z) A(z)^-1`` with ``z = exp(j w dt_m)``,
+``dt_m = 1 / (2 f_max)`` of the band, matrix polynomial ``A(z) = sum_p z^p alpha_p`` of order n
+(``alpha_n = I``, so the poles are the eigenvalues of its block companion matrix and the
+eigenvectors' first block holds the participation factors). The numerator coefficients are
+eliminated from the (real-valued) normal equations, so every order costs only a small solve;
+orders 1..n_max reuse one set of matrices. Each output row is weighted by ``1 / sigma_o`` (noise
+standard deviation per line if known, floored at 1e-3 of its median and 1e-8 of the row's RMS
+so that a noise-free record gets even weights; else ``1 / RMS`` of the row over the band).
+
+Stability (order n against order n-1; nearest pole in frequency): ``f`` if the frequency moves
+less than ``tol_freq`` (relative), ``d`` if the damping ratio also moves less than
+``tol_damping`` (relative), ``s`` if in addition ``1 - MAC`` of the participation factors is
+below ``tol_mac`` (with one input the factors are scalars and this test always passes), ``o``
+otherwise. Only poles in the band with 0 < zeta < ``max_damping`` are kept.
+
+Automatic selection (:func:`select_poles`): the ``s`` poles of all orders are sorted by
+frequency and chained into clusters where neighbours differ by less than ``tol_freq``
+(relative). A cluster that contains ``s`` poles from at least ``min_stable`` different orders, and
+from at least ``min_stable_fraction`` times as many orders as the best-supported cluster, is a
+physical mode (spurious poles of an over-fitted noise model stay stable over a few orders
+only). Its pole is the member closest to the cluster's median frequency and damping (distance
+normalised by the tolerances). Clusters that merge two modes are avoided by the
+tolerance being far below the relative spacing of lightly damped modes.
+"""
+from __future__ import annotations
+
+import dataclasses
+from typing import Optional, Sequence
+
+import numpy as np
+import numpy.typing as npt
+
+CLASSES = ('o', 'f', 'd', 's')
+
+
+@dataclasses.dataclass
+class Tolerances:
+    """Stability tolerances and selection settings (see the module docstring)."""
+
+    tol_freq: float = 0.005
+    tol_damping: float = 0.05
+    tol_mac: float = 0.02
+    max_damping: float = 0.2
+    min_stable: int = 8
+    min_stable_fraction: float = 0.3
+
+
+@dataclasses.dataclass
+class OrderPoles:
+    """Poles of one model order in the band: pole [rad/s], f [Hz], zeta [-], class, factors."""
+
+    order: int
+    poles: np.ndarray
+    freq: np.ndarray
+    damping: np.ndarray
+    factors: np.ndarray
+    classes: Optional[np.ndarray] = None
+
+
+def pole_frequency_damping(poles: npt.ArrayLike) -> tuple:
+    """Natural frequency [Hz] and damping ratio [-] of continuous poles ``s`` [rad/s]."""
+    poles = np.asarray(poles, dtype=complex)
+    wn = np.abs(poles)
+    with np.errstate(divide='ignore', invalid='ignore'):
+        return wn / (2 * np.pi), np.where(wn > 0, -poles.real / wn, np.nan)
+
+
+def plscf(freq: npt.ArrayLike, H: npt.ArrayLike, orders: Sequence[int],
+          sigma: Optional[npt.ArrayLike] = None, max_damping: float = 0.2) -> list:
+    """
+    Poles of the (poly-reference) least-squares complex frequency-domain estimator.
+
+    Parameters
+    ----------
+    freq : (F,) array_like
+        Frequencies [Hz] of the FRF lines (any spacing), all inside the analysed band.
+    H : (No, Ni, F) array_like
+        FRFs (output o, input i). A (F,) or (No, F) array is one input.
+    orders : sequence of int
+        Model orders n >= 1 (poles per order: n * Ni).
+    sigma : (No, Ni, F) or (No, F) array_like, optional
+        Noise standard deviation per line (weights ``1 / sigma`` per output row).
+    max_damping : float
+        Poles with damping ratio outside (0, max_damping) are dropped.
+
+    Returns
+    -------
+    list of OrderPoles
+        One entry per order, poles with f in [freq.min(), freq.max()] sorted by frequency.
+    """
+    freq = np.asarray(freq, dtype=float)
+    H = as_frf_array(H, len(freq))
+    n_out, n_in, _ = H.shape
+    n_max = int(max(orders))
+    dt_m = 0.5 / freq.max()
+    powers = np.exp(1j * 2 * np.pi * freq[:, None] * dt_m * np.arange(n_max + 1)[None, :])
+    weights = _weights(H, sigma)
+    size = (n_max + 1) * n_in
+    big_r = np.zeros((n_out, n_max + 1, n_max + 1))
+    big_s = np.zeros((n_out, n_max + 1, size))
+    big_t = np.zeros((n_out, size, size))
+    for o in range(n_out):
+        gamma = weights[o][:, None] * powers  # (F, n+1); one weight per output row and line
+        upsilon = -(gamma[:, :, None] * H[o].T[:, None, :]).reshape(len(freq), size)
+        big_r[o] = np.real(gamma.conj().T @ gamma)
+        big_s[o] = np.real(gamma.conj().T @ upsilon)
+        big_t[o] = np.real(upsilon.conj().T @ upsilon)
+    band = (freq.min(), freq.max())
+    result = []
+    for n in orders:
+        k = (n + 1) * n_in
+        m = np.zeros((k, k))
+        for o in range(n_out):
+            r, s = big_r[o, :n + 1, :n + 1], big_s[o, :n + 1, :k]
+            m += big_t[o, :k, :k] - s.T @ np.linalg.solve(r, s)
+        result.append(_order_poles(m, n, n_in, dt_m, band, max_damping))
+    return result
+
+
+def as_frf_array(H: npt.ArrayLike, n_freq: int) -> np.ndarray:
+    """Return H as a complex (No, Ni, F) array; (F,) and (No, F) mean one input."""
+    H = np.asarray(H, dtype=complex)
+    if H.ndim == 1:
+        H = H[None, None, :]
+    elif H.ndim == 2:
+        H = H[:, None, :]
+    if H.ndim != 3 or H.shape[2] != n_freq:
+        raise ValueError(f'FRF array of shape {H.shape} does not match {n_freq} frequencies')
+    return H
+
+
+def _weights(H: np.ndarray, sigma) -> np.ndarray:
+    """Weight per output and line (F,) from the noise std, or 1/RMS of the output's FRFs."""
+    rms = np.maximum(np.sqrt(np.mean(np.abs(H) ** 2, axis=(1, 2))), 1e-300)[:, None]
+    if sigma is None:
+        return np.repeat(1.0 / rms, H.shape[2], axis=1)
+    sig = np.sqrt(np.sum(as_frf_array(sigma, H.shape[2]).real ** 2, axis=1))
+    # floor: 1e-3 of the median noise, and 1e-8 of the FRF level (noise-free records)
+    floor = np.maximum(1e-3 * np.median(sig, axis=1, keepdims=True), 1e-8 * rms)
+    return 1.0 / np.maximum(sig, floor)
+
+
+def _order_poles(m: np.ndarray, n: int, n_in: int, dt_m: float, band: tuple,
+                 max_damping: float) -> OrderPoles:
+    k = n * n_in
+    alpha = np.vstack([-np.linalg.lstsq(m[:k, :k], m[:k, k:], rcond=None)[0],
+                       np.eye(n_in)])  # ((n+1) Ni, Ni), alpha_n = I
+    companion = np.zeros((k, k))
+    companion[:k - n_in, n_in:] = np.eye(k - n_in)
+    for p in range(n):  # last block row: -alpha_p^T
+        companion[k - n_in:, p * n_in:(p + 1) * n_in] = -alpha[p * n_in:(p + 1) * n_in].T
+    z, vectors = np.linalg.eig(companion)
+    with np.errstate(divide='ignore', invalid='ignore'):
+        poles = np.log(z.astype(complex)) / dt_m
+    f, zeta = pole_frequency_damping(poles)
+    keep = (poles.imag > 0) & (zeta > 0) & (zeta < max_damping) & (f >= band[0]) \
+        & (f <= band[1])
+    order = np.argsort(f[keep])
+    factors = vectors[:n_in][:, keep][:, order].T  # (poles, Ni)
+    return OrderPoles(n, poles[keep][order], f[keep][order], zeta[keep][order], factors)
+
+
+def _mac(a: np.ndarray, b: np.ndarray) -> float:
+    return float(abs(np.vdot(a, b)) ** 2 / max(np.vdot(a, a).real * np.vdot(b, b).real, 1e-300))
+
+
+def stability_diagram(orders: list, tol: Tolerances = Tolerances()) -> list:
+    """
+    Label every pole of every order 'o', 'f', 'd' or 's' against the previous order.
+
+    Parameters
+    ----------
+    orders : list of OrderPoles
+        From :func:`plscf`, ascending order.
+    tol : Tolerances
+        Stability tolerances.
+
+    Returns
+    -------
+    list of OrderPoles
+        The same objects with ``classes`` set.
+    """
+    previous = None
+    for entry in orders:
+        classes = np.full(len(entry.poles), 'o')
+        if previous is not None and len(previous.poles):
+            for j, (f, zeta) in enumerate(zip(entry.freq, entry.damping)):
+                i = int(np.argmin(np.abs(previous.freq - f)))
+                if abs(previous.freq[i] - f) >= tol.tol_freq * f:
+                    continue
+                classes[j] = 'f'
+                if abs(previous.damping[i] - zeta) >= tol.tol_damping * zeta:
+                    continue
+                classes[j] = 'd'
+                if 1.0 - _mac(entry.factors[j], previous.factors[i]) < tol.tol_mac:
+                    classes[j] = 's'
+        entry.classes = classes
+        previous = entry
+    return orders
+
+
+def select_poles(orders: list, tol: Tolerances = Tolerances()) -> np.ndarray:
+    """
+    Pick the physical poles from a labelled stability diagram (module docstring).
+
+    Parameters
+    ----------
+    orders : list of OrderPoles
+        With ``classes`` set by :func:`stability_diagram`.
+    tol : Tolerances
+        ``tol_freq`` (cluster width), ``tol_damping``, ``min_stable`` and
+        ``min_stable_fraction`` are used.
+
+    Returns
+    -------
+    (R,) complex ndarray
+        Selected poles [rad/s] (positive imaginary part), sorted by frequency; may be empty.
+    """
+    rows = [(f, z, e.order, p) for e in orders
+            for f, z, p, c in zip(e.freq, e.damping, e.poles, e.classes) if c == 's']
+    rows.sort(key=lambda row: row[0])
+    clusters: list[list[tuple]] = []
+    current: list[tuple] = []
+    for row in rows:
+        if current and row[0] - current[-1][0] >= tol.tol_freq * row[0]:
+            clusters.append(current)
+            current = []
+        current.append(row)
+    if current:
+        clusters.append(current)
+    support = [len({row[2] for row in cluster}) for cluster in clusters]
+    needed = max([tol.min_stable] + [tol.min_stable_fraction * max(support, default=0)])
+    selected = []
+    for cluster, count in zip(clusters, support):
+        if count < needed:
+            continue
+        f_med = np.median([row[0] for row in cluster])
+        z_med = np.median([row[1] for row in cluster])
+        dist = [((row[0] - f_med) / (tol.tol_freq * f_med)) ** 2
+                + ((row[1] - z_med) / (tol.tol_damping * z_med)) ** 2 for row in cluster]
+        selected.append(cluster[int(np.argmin(dist))][3])
+    return np.array(selected, dtype=complex)

@@ -1,0 +1,1 @@
+"""FRF estimation from recorded runs: Welch H1/H2, periodic, stepped sine; peaks, export, plots."""
