@@ -204,6 +204,39 @@ def test_committed_study_tables_are_what_the_current_code_computes(study_analyti
                         value, rel=1e-6), (name, _key(row), column, STALE)
 
 
+# --- figures --------------------------------------------------------------------------------
+
+def _dataflow():
+    spec = importlib.util.spec_from_file_location('dataflow', ROOT / 'docs' / 'dataflow.py')
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_the_dataflow_figure_is_drawn_from_the_current_code():
+    """The spec stored in the committed PNG is what docs/dataflow.py makes now."""
+    dataflow = _dataflow()
+    assert dataflow.stored_spec() == dataflow.spec(), 'run python docs/dataflow.py'
+
+
+def test_the_dataflow_figure_names_what_exists():
+    spec = _dataflow().spec()
+    topics = set(interface.TOPIC_TYPES) | {interface.force_topic('<source>')}
+    for arrow in spec['arrows']:
+        assert set(arrow['topics']) <= topics, arrow
+        for topic in arrow['topics']:
+            assert topic in arrow['label'], arrow
+    for box in spec['boxes']:
+        where = box['where']
+        if where.startswith('run:'):
+            assert where[4:] in EXECUTABLES, box
+        else:
+            assert (ROOT / where).is_dir() == where.endswith('/') and (ROOT / where).exists(), box
+    keys = {box['key'] for box in spec['boxes']} | {'sources'}
+    assert all(a['from'] in keys and a['to'] in keys for a in spec['arrows'])
+    assert set(spec['sources']) < keys
+
+
 # --- facts stated in the docs ------------------------------------------------------------------
 
 def _qos_cell(topic: str) -> str:
