@@ -83,11 +83,11 @@ def spec() -> dict:
 
 
 #: (x, y) of each box's centre in figure units (0..100 wide, -2.5..56 high)
-PLACES = {'config': (11.25, 45), 'fe': (11.25, 34), 'modes': (11.25, 23),
-          'plant_model': (11.25, 12), 'plant': (50, 45), 'exciter': (40.5, 26),
-          'damper': (59.5, 26), 'pma': (40.5, 16.5), 'controller': (59.5, 16.5),
-          'live_view': (42, 4.4), 'recorder': (58, 4.4), 'bag': (88.75, 45),
-          'frf': (88.75, 34), 'ema': (88.75, 23), 'study': (88.75, 12)}
+PLACES: dict[str, tuple[float, float]] = {
+    'config': (11.25, 45), 'fe': (11.25, 34), 'modes': (11.25, 23), 'plant_model': (11.25, 12),
+    'plant': (50, 45), 'exciter': (40.5, 26), 'damper': (59.5, 26), 'pma': (40.5, 16.5),
+    'controller': (59.5, 16.5), 'live_view': (42, 4.4), 'recorder': (58, 4.4),
+    'bag': (88.75, 45), 'frf': (88.75, 34), 'ema': (88.75, 23), 'study': (88.75, 12)}
 #: (left, width) of each lane
 LANE_SPANS = {'model': (0.5, 21.5), 'run': (24, 52), 'analysis': (78, 21.5)}
 SMALL = ('recorder', 'live_view')
@@ -145,7 +145,7 @@ def draw(path: Path = FIGURE) -> Path:
 
 
 #: polyline of each arrow (the last point is the arrowhead) and where its label goes
-ROUTES = {
+ROUTES: dict[tuple[str, str], list[tuple[float, float]]] = {
     ('config', 'fe'): [(11.25, 40.6), (11.25, 38.4)],
     ('fe', 'modes'): [(11.25, 29.6), (11.25, 27.4)],
     ('modes', 'plant_model'): [(11.25, 18.6), (11.25, 16.4)],
@@ -162,11 +162,11 @@ ROUTES = {
     ('plant_model', 'study'): [(11.25, 7.6), (11.25, -1.2), (88.75, -1.2), (88.75, 7.6)],
 }
 #: (x, y, horizontal alignment, rotation) of an arrow's label
-LABELS = {('plant', 'sources'): (45.3, 36.9, 'right', 0),
-          ('sources', 'plant'): (54.7, 36.9, 'left', 0),
-          ('plant_model', 'plant'): (22.3, 28, 'center', 90),
-          ('plant', 'recorder'): (73.9, 27, 'center', 90),
-          ('plant_model', 'study'): (14, -0.95, 'left', 0)}
+LABELS: dict[tuple[str, str], tuple[float, float, str, int]] = {
+    ('plant', 'sources'): (45.3, 36.9, 'right', 0), ('sources', 'plant'): (54.7, 36.9, 'left', 0),
+    ('plant_model', 'plant'): (22.3, 28, 'center', 90),
+    ('plant', 'recorder'): (73.9, 27, 'center', 90),
+    ('plant_model', 'study'): (14, -0.95, 'left', 0)}
 
 
 def _arrows(ax, data: dict) -> None:
@@ -192,7 +192,7 @@ def stored_spec(path: Path = FIGURE) -> dict:
     """The spec a drawn figure holds (its PNG text chunk), read with Pillow."""
     from PIL import Image
     with Image.open(path) as image:
-        return json.loads(image.text[CHUNK])
+        return json.loads(image.info[CHUNK])
 
 
 if __name__ == '__main__':
