@@ -1,13 +1,16 @@
 """
 Docs that cannot drift: generated tables equal their generators, stated facts equal the code.
 
-* README's benchmark table and bench/RESULTS.md are what ``python bench/run_all.py --tables``
-  makes from the committed bench/results (no benchmark runs here).
-* README's study tables are what ``python -m pentapod_damper.study.readme`` makes from
-  docs/results/*.csv, and the analytic columns of those CSV copies are what the current code
-  and config/study.yaml compute (the recorded columns need the ROS runs of the study).
-* Topic tables, module paths, commands and stated defaults in README.md and docs/*.md exist
-  in, and agree with, the code.
+* bench/RESULTS.md is what ``python bench/run_all.py --tables`` makes from the committed
+  bench/results (no benchmark runs here).
+* docs/results.md's study tables and the README's result sentences are what
+  ``python -m pentapod_damper.study.readme`` makes from docs/results/*.csv, and the analytic
+  columns of those CSV copies are what the current code and config/study.yaml compute (the
+  recorded columns need the ROS runs of the study).
+* The README stays a newcomer's page: short, the two commands, its figure drawn from the
+  current code (docs/dataflow.py), its example's options taken as written.
+* Topic tables, module paths, links, commands and stated defaults in README.md and docs/*.md
+  exist in, and agree with, the code.
 """
 import ast
 import importlib
@@ -38,6 +41,8 @@ ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / 'README.md'
 MARKDOWN = [README, *sorted((ROOT / 'docs').glob('*.md'))]
 RESULTS = ROOT / 'docs' / 'results'
+RESULTS_MD = ROOT / 'docs' / 'results.md'
+BENCH_MD = ROOT / 'bench' / 'RESULTS.md'
 STALE = ('docs/results/ is stale: run tools/study.sh, then '
          'python -m pentapod_damper.study.readme --from out/study')
 
@@ -74,18 +79,17 @@ def _number(cell: str) -> float:
 
 # --- benchmark tables --------------------------------------------------------------------------
 
-def test_readme_benchmark_table_and_results_md_are_made_from_the_results():
+def test_results_md_is_made_from_the_results():
     run_all = _run_all()
-    topics = run_all.load_results()
-    assert _section(README.read_text(), 'bench-table') == run_all.readme_table(topics).strip()
-    assert (ROOT / 'bench' / 'RESULTS.md').read_text() == run_all.results_markdown(topics)
+    assert BENCH_MD.read_text() == run_all.results_markdown(run_all.load_results())
 
 
-def test_readme_benchmark_figures_are_those_of_the_json_files():
-    """Read back from the README table and compared with the JSON, not with the formatter."""
-    rows = _table_rows(_section(README.read_text(), 'bench-table'), 'benchmark')
+def test_benchmark_figures_are_those_of_the_json_files():
+    """Read back from bench/RESULTS.md and compared with the JSON, not with the formatter."""
+    rows = _table_rows(BENCH_MD.read_text().split('Runs:')[0], 'benchmark')
     # a row is named by its benchmark and its baseline (one benchmark may have two baselines)
-    shown = {(row[0], row[2].rsplit(':', 1)[0]): row for row in rows}
+    shown = {(row[0], row[2]): row for row in rows}
+    assert len(shown) == len(rows)
     retired = 0
     for path in sorted((ROOT / 'bench' / 'results').glob('*.json')):
         for r in json.loads(path.read_text())['rows']:
@@ -97,13 +101,15 @@ def test_readme_benchmark_figures_are_those_of_the_json_files():
                 assert _number(row[1]) == pytest.approx(r['value'], rel=1e-3), row
             else:                                 # no figure, e.g. a solver that was stopped
                 assert row[1] == '-', row
+            if r.get('baseline_value') is not None and math.isfinite(r['baseline_value']):
+                assert _number(row[3]) == pytest.approx(r['baseline_value'], rel=1e-3), row
             if r.get('ratio') is not None and math.isfinite(r['ratio']):
-                assert _number(row[3]) == pytest.approx(r['ratio'], abs=0.006), row
+                assert _number(row[4]) == pytest.approx(r['ratio'], abs=0.006), row
             elif r.get('ratio') is not None:     # e.g. no missed deadline against a target
-                assert row[3] == '-', row
+                assert row[4] == '-', row
     assert len(shown) > 10
     # the lfilter fast path (simulate_linear) was deleted from bench_plant.py
-    assert not any('lfilter' in name for name in shown)
+    assert not any('lfilter' in name for name, _ in shown)
     assert retired == sum(len(t['retired']) for t in _run_all().load_results())
 
 
@@ -145,8 +151,8 @@ def test_replace_section_names_a_missing_or_doubled_marker():
 
 # --- study tables ------------------------------------------------------------------------------
 
-def test_readme_study_tables_are_made_from_the_committed_csv():
-    section = _section(README.read_text(), study_readme.SECTION)
+def test_results_md_study_tables_are_made_from_the_committed_csv():
+    section = _section(RESULTS_MD.read_text(), study_readme.SECTION)
     assert section == study_readme.study_section(RESULTS, load_study_config()).strip()
     csv_rows = {(r['position'], r['scenario']): r
                 for r in study_readme.read_csv(RESULTS / 'summary.csv')}
@@ -158,6 +164,42 @@ def test_readme_study_tables_are_made_from_the_committed_csv():
         shown_row = dict(zip([c[0] for c in study_readme.COLUMNS['summary']], row))
         for column in ('peak_um_per_N', 'peak_reduction', 'rms_reduction'):
             assert _number(shown_row[column]) == pytest.approx(float(ref[column]), rel=5e-3)
+
+
+def test_readme_result_sentences_are_made_from_the_committed_csv():
+    """The README's sentences equal the generator's, and their figures the CSV's, read back."""
+    cfg = load_study_config()
+    section = _section(README.read_text(), study_readme.SUMMARY)
+    assert section == study_readme.summary_section(RESULTS, cfg).strip()
+    text = ' '.join(section.split())
+    summary = {(r['position'], r['scenario']): r
+               for r in study_readme.read_csv(RESULTS / 'summary.csv')}
+    stated = re.findall(r'([\d.]+) / ([\d.]+)-fold with the ([\w\s]+?)(?:,|\s\()', text)
+    labels = {label: scn for scn, label in study_readme.SUMMARY_SCENARIOS}
+    assert [labels[name] for *_, name in stated] == [
+        scn for scn, _ in study_readme.SUMMARY_SCENARIOS]
+    for p1, p2, name in stated:
+        for value, pos in ((p1, 'P1'), (p2, 'P2')):
+            assert float(value) == pytest.approx(
+                float(summary[(pos, labels[name])]['peak_reduction']), rel=5e-3), name
+    share = {r['position']: r for r in study_readme.read_csv(RESULTS / 'struts12_share.csv')}
+    peak = re.search(r'alone give (\d+)% \(P1\) and (\d+)% \(P2\) of the peak', text)
+    rms = re.search(r'and (\d+)% and (\d+)% of the RMS improvement', text)
+    for match, column in ((peak, 'peak_share'), (rms, 'rms_share')):
+        for value, pos in zip(match.groups(), ('P1', 'P2')):
+            assert int(value) == round(100 * float(share[pos][column])), (column, pos)
+    # the verdict on the paper's 70 %, worked out here from the shares
+    for name, column in (('peak', 'peak_share'), ('RMS', 'rms_share')):
+        holds = [p for p in ('P1', 'P2') if float(share[p][column]) >= 0.7]
+        verdict = {0: 'at neither position', 2: 'at both positions'}.get(
+            len(holds), f'at {holds[0] if holds else ""} only')
+        assert f'by {name} {verdict}' in text, (name, holds)
+    stable = sum(r['sampled_loop'] == 'stable' for r in summary.values())
+    assert (f'All {stable} sampled loops' if stable == len(summary)
+            else f'{stable} of the {len(summary)} sampled loops') in text
+    worst = max(float(r['deviation_db']) for r in summary.values())
+    assert float(re.search(r'by at most ([\d.]+) dB', text).group(1)) == pytest.approx(
+        worst, rel=0.05)
 
 
 def _analytic_results(out_dir: Path) -> StudyResults:
@@ -204,6 +246,85 @@ def test_committed_study_tables_are_what_the_current_code_computes(study_analyti
                         value, rel=1e-6), (name, _key(row), column, STALE)
 
 
+# --- the README ---------------------------------------------------------------------------------
+
+def _dataflow():
+    spec = importlib.util.spec_from_file_location('dataflow', ROOT / 'docs' / 'dataflow.py')
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_readme_is_a_newcomers_page():
+    """Short; the two commands as they are; its figure; a link to every page of docs/."""
+    text = README.read_text()
+    assert len(text.splitlines()) < 150
+    commands = text.split('## Two commands')[1].split('```bash\n')[1].split('```')[0]
+    assert [line.split('#')[0].strip() for line in commands.splitlines()] == [
+        'bash tools/study.sh', 'bash tools/test.sh']
+    assert '](docs/figures/dataflow.png)' in text
+    linked = set(re.findall(r'\]\(docs/(\w+\.md)', text))
+    assert linked == {p.name for p in (ROOT / 'docs').glob('*.md')}
+    assert '<!-- bench-table:begin -->' not in text and '<!-- study-tables:begin -->' not in text
+
+
+def test_the_dataflow_figure_is_drawn_from_the_current_code():
+    """The spec stored in the committed PNG is what docs/dataflow.py makes now."""
+    dataflow = _dataflow()
+    assert dataflow.stored_spec() == dataflow.spec(), 'run python docs/dataflow.py'
+
+
+def test_the_dataflow_figure_names_what_exists():
+    spec = _dataflow().spec()
+    topics = set(interface.TOPIC_TYPES) | {interface.force_topic('<source>')}
+    for arrow in spec['arrows']:
+        assert set(arrow['topics']) <= topics, arrow
+        for topic in arrow['topics']:
+            assert topic in arrow['label'], arrow
+    for box in spec['boxes']:
+        where = box['where']
+        if where.startswith('run:'):
+            assert where[4:] in EXECUTABLES, box
+        else:
+            assert (ROOT / where).is_dir() == where.endswith('/') and (ROOT / where).exists(), box
+    keys = {box['key'] for box in spec['boxes']} | {'sources'}
+    assert all(a['from'] in keys and a['to'] in keys for a in spec['arrows'])
+    assert set(spec['sources']) < keys
+
+
+def _example_lines() -> list[list[str]]:
+    """Command lines (split as the shell would, variables kept) of the README's example."""
+    import shlex
+    block = README.read_text().split('## A run and its analysis')[1].split('```bash\n')[1]
+    block = block.split('```')[0].replace('\\\n', ' ')
+    return [shlex.split(line, comments=True) for line in block.splitlines()]
+
+
+def test_the_readme_example_is_taken_as_written():
+    """Every option of the example reaches the option it names (no abbreviation taken)."""
+    from pentapod_sim.cli.analyze import build_parser
+    from pentapod_sim.scenario import runner
+    lines = [words for words in _example_lines() if words]
+    assert [w[0] for w in lines].count('scenario') == 2
+    for words in lines:
+        if words[0] == 'scenario':
+            assert runner.main([*words[1:], '--list']) == 0, words
+        elif words[0] == 'analyze':
+            args = build_parser().parse_args(words[1:])
+            given: dict = {}
+            for word, value in zip(words, words[1:]):
+                if word.startswith('--'):
+                    given.setdefault(word[2:].replace('-', '_'), []).append(value)
+            for name, values in given.items():
+                got = getattr(args, name)
+                if isinstance(got, list):             # --output may be repeated
+                    assert got == values, (name, got)
+                else:
+                    assert [got] == [type(got)(v) for v in values], (name, got)
+        else:
+            assert words[0] == 'source' or re.fullmatch(r'[A-Z]+=\$\(.*', ' '.join(words))
+
+
 # --- facts stated in the docs ------------------------------------------------------------------
 
 def _qos_cell(topic: str) -> str:
@@ -213,7 +334,11 @@ def _qos_cell(topic: str) -> str:
     return f'{spec.reliability}{durability}, depth {spec.depth}'
 
 
-@pytest.mark.parametrize('path', [README, ROOT / 'docs' / 'nodes.md'], ids=lambda p: p.name)
+def test_the_topic_table_lives_in_interface_md():
+    assert [p.name for p in MARKDOWN if '\n| topic |' in p.read_text()] == ['interface.md']
+
+
+@pytest.mark.parametrize('path', [ROOT / 'docs' / 'interface.md'], ids=lambda p: p.name)
 def test_topic_tables_match_the_interface(path):
     rows = _table_rows(path.read_text(), 'topic')
     types = dict(interface.TOPIC_TYPES, **{interface.RUN_STATUS: interface.DIAGNOSTIC_STATUS,
@@ -275,6 +400,30 @@ def test_named_modules_paths_and_executables_exist(path):
         for exe in re.findall(r'ros2 run pentapod_testbed ([\w|\\]+)', token):
             missing += [e for e in exe.replace('\\', '').split('|') if e not in EXECUTABLES]
     assert missing == []
+
+
+def _anchors(path: Path) -> set[str]:
+    """The anchors GitHub gives the headings of a Markdown file (lower case, punctuation out)."""
+    found: set[str] = set()
+    text = re.sub(r'```.*?```', '', path.read_text(), flags=re.S)
+    for heading in re.findall(r'^#+ (.+)$', text, flags=re.M):
+        slug = re.sub(r'[^\w\- ]', '', heading.lower()).replace(' ', '-')
+        anchor, n = slug, 0
+        while anchor in found:
+            n += 1
+            anchor = f'{slug}-{n}'
+        found.add(anchor)
+    return found
+
+
+@pytest.mark.parametrize('path', MARKDOWN, ids=lambda p: p.name)
+def test_links_to_sections_find_their_heading(path):
+    wrong = []
+    for target, anchor in re.findall(r'\]\(([^)#\s]*)#([^)\s]+)\)', path.read_text()):
+        file = (path.parent / target) if target else path
+        if not file.is_file() or anchor not in _anchors(file):
+            wrong.append(f'{target}#{anchor}')
+    assert wrong == []
 
 
 def _public_functions() -> dict:

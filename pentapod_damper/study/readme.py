@@ -1,13 +1,14 @@
 """
-The README's study tables, made from the study's CSV tables (no hand-typed result in the README).
+The study's generated docs: the tables of docs/results.md and the result sentences of the README.
 
-``python -m pentapod_damper.study.readme --from out/study`` copies ``summary.csv``,
-``struts12_share.csv`` and ``pma.csv`` of a study run (``python -m pentapod_damper.study``) to
-``docs/results/``, refreshes the study figures that ``docs/figures/`` holds, and rewrites the
-README section between ``<!-- study-tables:begin -->`` and ``<!-- study-tables:end -->`` from
-the copies. Without ``--from`` it only rewrites the section. test/test_docs.py checks that the
-README equals what this makes from ``docs/results/`` and that the analytic columns there equal
-what the current code and ``config/study.yaml`` compute.
+``python -m pentapod_damper.study.readme --from out/study`` copies the CSV tables of a study run
+(``python -m pentapod_damper.study``) to ``docs/results/``, refreshes the study figures that
+``docs/figures/`` holds, and rewrites, from the copies, the section between
+``<!-- study-tables:begin -->`` and ``<!-- study-tables:end -->`` of docs/results.md and the
+README's ``study-summary`` section (no hand-typed result in either). Without ``--from`` it only
+rewrites the two sections. test/test_docs.py checks that both equal what this makes from
+``docs/results/`` and that the analytic columns there equal what the current code and
+``config/study.yaml`` compute.
 """
 from __future__ import annotations
 
@@ -22,10 +23,17 @@ import textwrap
 from pentapod_damper.study.config import load_study_config, StudyConfig
 from pentapod_damper.study.measured_damping import SETTLE_MODES
 
-SECTION = 'study-tables'
+#: section of docs/results.md with the tables, section of the README with the sentences
+SECTION, SUMMARY = 'study-tables', 'study-summary'
+#: scenarios the README's sentence on peak reductions names, and how
+SUMMARY_SCENARIOS = (('tcp_damping', 'TCP damper'), ('pma_5kg', '5 kg PMA'),
+                     ('strut_damping_all', 'bending dampers on all struts'),
+                     ('axial_damping', 'axial dampers'))
+#: the paper's claim: struts 1 and 2 give at least this share of the all-strut improvement
+PAPER_SHARE = 0.7
 TABLES = ('summary', 'struts12_share', 'pma', 'pma_highpass', 'damping')
 COMMAND = 'python -m pentapod_damper.study.readme'
-#: (CSV column, README header, format) of each table; columns a run lacks show '-'.
+#: (CSV column, header in docs/results.md, format) of each table; columns a run lacks show '-'.
 COLUMNS = {
     'summary': (('position', 'position', 's'), ('scenario', 'scenario', 'code'),
                 ('peak_um_per_N', 'peak [um/N]', '.3g'), ('peak_hz', 'at [Hz]', '.3g'),
@@ -106,7 +114,7 @@ def _damping_rows(rows: list[dict[str, str]], cfg: StudyConfig) -> list[dict[str
 
 
 def markdown_table(rows: list[dict[str, str]], columns: tuple) -> str:
-    """Selected CSV columns as a Markdown table with the README's headers and formats."""
+    """Selected CSV columns as a Markdown table with the headers and formats of COLUMNS."""
     lines = ['| ' + ' | '.join(c[1] for c in columns) + ' |', '|' + '---|' * len(columns)]
     lines += ['| ' + ' | '.join(_cell(r.get(key), kind) for key, _, kind in columns) + ' |'
               for r in rows]
@@ -114,7 +122,7 @@ def markdown_table(rows: list[dict[str, str]], columns: tuple) -> str:
 
 
 def study_section(results: Path, cfg: StudyConfig) -> str:
-    """The README's study tables from the CSV copies in ``results``."""
+    """The study tables of docs/results.md from the CSV copies in ``results``."""
     tables = {name: read_csv(results / f'{name}.csv') for name in TABLES}
     d, (lo, _) = cfg.direction, cfg.band
     return '\n\n'.join([
@@ -161,8 +169,58 @@ def study_section(results: Path, cfg: StudyConfig) -> str:
         markdown_table(_damping_rows(tables['damping'], cfg), COLUMNS['damping']),
         _prose('Stability diagram and identified FRF of the damping run of `tcp_damping` at P2 '
                "(every run's are in the study's `figures/`):"),
-        '![stability diagram](docs/figures/stability_P2_tcp_damping.png)\n'
-        '![identified FRF](docs/figures/identified_frf_P2_tcp_damping.png)'])
+        '![stability diagram](figures/stability_P2_tcp_damping.png)\n'
+        '![identified FRF](figures/identified_frf_P2_tcp_damping.png)'])
+
+
+def _where(holding: list[str], positions: list[str]) -> str:
+    if not holding:
+        return 'at neither position' if len(positions) == 2 else 'at no position'
+    if len(holding) == len(positions):
+        return 'at both positions' if len(positions) == 2 else 'at every position'
+    return 'at ' + ' and '.join(holding) + ' only'
+
+
+def summary_section(results: Path, cfg: StudyConfig) -> str:
+    """The README's sentences on the study's results, made from the CSV copies in ``results``."""
+    summary = read_csv(results / 'summary.csv')
+    share = {r['position']: r for r in read_csv(results / 'struts12_share.csv')}
+    positions, d = list(cfg.positions), cfg.direction
+    reduction = {(r['position'], r['scenario']): float(r['peak_reduction']) for r in summary}
+    named = [(scn, label) for scn, label in SUMMARY_SCENARIOS
+             if all((pos, scn) in reduction for pos in positions)]
+    sentences = [
+        f'The peak of the TCP {d}{d} compliance in {cfg.band[0]:g}-{cfg.f_max:g} Hz falls, '
+        f'baseline over damped at {" / ".join(positions)}, '
+        + ', '.join(f'{" / ".join(format(reduction[(pos, scn)], ".3g") for pos in positions)}-'
+                    f'fold with the {label}' for scn, label in named)
+        + ' (the dampers as the scenarios ship them).']
+    by = {m: [float(share[pos][f'{m}_share']) for pos in positions] for m in ('peak', 'rms')}
+    verdict = ', '.join(
+        f'by {name} {_where([p for p, v in zip(positions, by[m]) if v >= PAPER_SHARE], positions)}'
+        for m, name in (('peak', 'peak'), ('rms', 'RMS')))
+    sentences.append(
+        'With these strut dampers, struts 1 and 2 alone give ' + ' and '.join(
+            f'{v:.0%} ({p})' for p, v in zip(positions, by['peak']))
+        + ' of the peak improvement of damping all five struts, and '
+        + ' and '.join(f'{v:.0%}' for v in by['rms']) + ' of the RMS improvement: the '
+        f'paper\'s "at least {PAPER_SHARE:.0%}" holds {verdict}.')
+    stable = sum(r['sampled_loop'] == 'stable' for r in summary)
+    sentences.append(
+        (f'All {stable}' if stable == len(summary) else f'{stable} of the {len(summary)}')
+        + ' sampled loops '
+        'pass the truncation check (stable with every FE mode up to the check frequency, not '
+        'only with the modes the plant keeps).')
+    if _has_testbed_runs(summary):
+        dev = [float(r['deviation_db']) for r in summary]
+        used = [float(r['compared_share']) for r in summary]
+        sentences.append(
+            'The FRFs estimated from the recorded runs differ from the analytic FRFs of the '
+            f'sampled loops by at most {max(dev):.2g} dB, over the bins with coherence >= '
+            f'{cfg.coherence_min:g} ({min(used):.0%} to {max(used):.0%} of the bins, by run).')
+    return _prose(f'(generated by `{COMMAND}` from `docs/results/*.csv`) ' + ' '.join(sentences)
+                  + ' Tables, figures and what each verdict rests on: '
+                  '[docs/results.md](docs/results.md).')
 
 
 def _prose(text: str) -> str:
@@ -191,25 +249,30 @@ def copy_results(study_out: Path, results: Path, figures: Path) -> None:
             shutil.copyfile(new, old)
 
 
-def update_readme(readme: Path, results: Path, cfg: StudyConfig | None = None) -> None:
-    """Rewrite the README's study section from the CSV copies in ``results``."""
+def update_docs(readme: Path, results_md: Path, results: Path,
+                cfg: StudyConfig | None = None) -> None:
+    """Rewrite the study sections of the README and of docs/results.md from ``results``."""
     cfg = cfg or load_study_config()
-    readme.write_text(replace_section(readme.read_text(), SECTION, study_section(results, cfg)))
+    results_md.write_text(replace_section(results_md.read_text(), SECTION,
+                                          study_section(results, cfg)))
+    readme.write_text(replace_section(readme.read_text(), SUMMARY,
+                                      summary_section(results, cfg)))
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Copy a study run's tables (``--from``) and rewrite the README's study section."""
+    """Copy a study run's tables (``--from``) and rewrite the generated study docs."""
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--from', dest='study_out', type=Path,
                         help='output folder of a study run, e.g. out/study')
     parser.add_argument('--readme', type=Path, default=Path('README.md'))
+    parser.add_argument('--results-md', type=Path, default=Path('docs/results.md'))
     parser.add_argument('--results', type=Path, default=Path('docs/results'))
     parser.add_argument('--figures', type=Path, default=Path('docs/figures'))
     args = parser.parse_args(argv)
     try:
         if args.study_out is not None:
             copy_results(args.study_out, args.results, args.figures)
-        update_readme(args.readme, args.results)
+        update_docs(args.readme, args.results_md, args.results)
     except (OSError, ValueError) as err:
         print(f'study readme: {err}', file=sys.stderr)
         return 1
