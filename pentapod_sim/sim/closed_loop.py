@@ -84,7 +84,7 @@ class Response:
         return self.u[:, self.input_names.index(name)]
 
 
-def _indices(names: Sequence[str], index: dict, what: str) -> npt.NDArray[np.intp]:
+def _indices(names: Sequence[str], index: dict[str, int], what: str) -> npt.NDArray[np.intp]:
     """Map port names to plant indices (PortError names a missing port)."""
     try:
         return np.array([index[n] for n in names], dtype=np.intp)
