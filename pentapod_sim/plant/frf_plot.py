@@ -12,7 +12,8 @@ from pentapod_sim.plant.frf import FrfResult
 
 
 def frf_plot(results: Sequence[FrfResult], output: str, input_: str, path: str | Path,
-             mode_freqs: Sequence[Sequence[float]] | None = None, title: str = '') -> Path:
+             mode_freqs: Sequence[Sequence[float] | npt.NDArray[np.float64]] | None = None,
+             title: str = '') -> Path:
     """
     Bode plot (log magnitude, phase) of one pair for several FRFs; PNG at ``path``.
 
