@@ -47,9 +47,8 @@ from pentapod_damper.laws import strut_bending_damper, tcp_damper  # noqa: E402
 from pentapod_sim.nodes.answer_poll import usable_cpus  # noqa: E402
 from pentapod_sim.scenario.domain import isolation  # noqa: E402
 from pentapod_sim.sim.closed_loop import (  # noqa: E402
-    closed_loop_matrices,
+    closed_loop_system,
     excitation_matrix,
-    feedback_gain,
     simulate,
 )
 from pentapod_sim.sim.multirate import MultiRatePlant  # noqa: E402
@@ -158,7 +157,7 @@ def offline_rows(n_steps: int, repeats: int = 3) -> list[dict]:
     laws = [tcp_damper(['x', 'y', 'z'], 20000.0), strut_bending_damper([1, 2, 3, 4, 5], 2e3)]
     rows = []
     for label, use_laws in (('open loop', []), ('closed loop', laws)):
-        a, b, c_y, _, _ = closed_loop_matrices(plant, feedback_gain(plant, use_laws))
+        a, b, c_y, _, _ = closed_loop_system(plant, use_laws)
         sys_d = control.ss(a, b, c_y, plant.d if use_laws == [] else np.zeros_like(plant.d),
                            1 / RATE)
 

@@ -2,9 +2,13 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:       # the numerical core loads without matplotlib
+    from matplotlib.figure import Figure
 
 
-def save_figure(fig, path: str | Path, tight: bool = True) -> Path:
+def save_figure(fig: Figure, path: str | Path, tight: bool = True) -> Path:
     """
     Write ``fig`` as a PNG (110 dpi) to ``path``, creating folders, and close it.
 

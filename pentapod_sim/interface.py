@@ -295,7 +295,8 @@ class TopicLayout:
     _ext: npt.NDArray[np.float64] = field(default_factory=lambda: np.full(1, np.nan),
                                           repr=False, compare=False)
 
-    def values(self, y: npt.NDArray[np.float64]) -> tuple[npt.NDArray, npt.NDArray]:
+    def values(self, y: npt.NDArray[np.float64]
+               ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
         """Positions and velocities of the joints from y (NaN where missing)."""
         if self._ext.size != y.size + 1:        # y and a NaN, which index -1 picks
             self._ext = np.full(y.size + 1, np.nan)
@@ -332,7 +333,7 @@ def batch_layout(layout: TopicLayout, row_length: int, rows: int, topic: str) ->
     """
     offsets = np.arange(rows)[:, None] * row_length
 
-    def flat(index):
+    def flat(index: npt.NDArray[np.intp]) -> npt.NDArray[np.intp]:
         return np.where(index < 0, -1, offsets + index).reshape(-1)
     return TopicLayout(topic, [f'{j}@{s}' for s in range(rows) for j in layout.joints],
                        flat(layout.position_index), flat(layout.velocity_index))

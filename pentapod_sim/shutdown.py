@@ -17,7 +17,8 @@ import ctypes
 import os
 import signal
 import threading
-from typing import Callable, TypeVar
+from types import FrameType
+from typing import Any, Callable, TypeVar
 
 T = TypeVar('T')
 
@@ -28,7 +29,7 @@ _PR_SET_PDEATHSIG = 1
 _received: list[int] = []
 
 
-def _handler(signum, frame) -> None:
+def _handler(signum: int, frame: FrameType | None) -> None:
     if not _received:
         _received.append(signum)
 
@@ -89,7 +90,7 @@ def unless_requested(work: Callable[[], T], poll: float = 0.05) -> T | None:
     """
     if requested():
         return None
-    out: dict = {}
+    out: dict[str, Any] = {}
 
     def run() -> None:
         try:

@@ -548,7 +548,7 @@ def plants() -> dict:
 def test_bending_gain_table_is_what_the_code_computes(plants):
     """Spectral radius of the sampled loop and continuous peak reduction, docs/nodes.md."""
     from pentapod_damper.laws import strut_bending_damper
-    from pentapod_sim.sim.closed_loop import closed_loop_matrices, feedback_gain
+    from pentapod_sim.sim.closed_loop import closed_loop_system
     from pentapod_sim.sim.stepping import DiscretePlant
     rows = _table_rows((ROOT / 'docs' / 'nodes.md').read_text(), 'bending gain [N m s/rad]')
     assert len(rows) >= 3
@@ -560,8 +560,8 @@ def test_bending_gain_table_is_what_the_code_computes(plants):
         for col, rate in ((1, 3000.0), (2, 5000.0)):
             for cell, pos in zip(row[col].split(' / '), ('P1', 'P2')):
                 plant = DiscretePlant(plants[pos].discretize(1.0 / rate))
-                k = feedback_gain(plant, [strut_bending_damper(range(1, 6), gain)])
-                radius = np.abs(np.linalg.eigvals(closed_loop_matrices(plant, k)[0])).max()
+                loop = closed_loop_system(plant, [strut_bending_damper(range(1, 6), gain)])
+                radius = np.abs(np.linalg.eigvals(loop.a)).max()
                 if cell == 'stable':
                     assert radius < 1.0, (row, pos, rate, radius)
                 else:

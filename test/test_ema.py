@@ -146,3 +146,11 @@ def test_tolerances_select_by_support():
     diagram = stability_diagram(plscf(freq, system.frf(freq), range(1, 11)))
     assert len(select_poles(diagram, Tolerances(min_stable=5))) == 2
     assert len(select_poles(diagram, Tolerances(min_stable=11))) == 0
+
+
+def test_selecting_from_an_unlabelled_diagram_names_the_missing_step():
+    system = TwoDof(zeta=(0.001, 0.02))
+    freq = np.arange(20, 1000) * 0.1
+    orders = plscf(freq, system.frf(freq), range(1, 4))
+    with pytest.raises(ValueError, match=r'order 1 has no pole classes; .*stability_diagram'):
+        select_poles(orders)

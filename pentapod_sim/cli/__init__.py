@@ -13,7 +13,7 @@ import argparse
 import logging
 import signal
 import sys
-from typing import Callable
+from typing import Callable, TYPE_CHECKING
 
 from pentapod_sim.errors import (
     BagError,
@@ -22,6 +22,9 @@ from pentapod_sim.errors import (
     PortError,
     UnreachablePoseError,
 )
+
+if TYPE_CHECKING:       # built only by the commands that need a model
+    from pentapod_sim.fe.model import FEModel
 
 #: Errors that come from the user's input (files, options); shown without a traceback.
 USER_ERRORS = (ConfigError, UnreachablePoseError, PortError, ModelFileError, BagError, OSError)
@@ -79,7 +82,7 @@ def add_model_arguments(parser: argparse.ArgumentParser, position: str = 'P1') -
                       help='divide the default element length by N (about 260: paper scale)')
 
 
-def model_from_args(args: argparse.Namespace):
+def model_from_args(args: argparse.Namespace) -> FEModel:
     """
     Build the FE model the shared options describe.
 

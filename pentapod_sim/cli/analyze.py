@@ -22,11 +22,16 @@ import warnings
 import numpy as np
 
 from pentapod_sim.analysis.bag.file_content import BagDamageWarning, UnreadableBagError
-from pentapod_sim.analysis.bag.reader import open_bag
+from pentapod_sim.analysis.bag.reader import Bag, open_bag
 from pentapod_sim.analysis.frf import plots
-from pentapod_sim.analysis.frf.estimation import amplitude_spectrum, EXCITATIONS, frf_from_series
+from pentapod_sim.analysis.frf.estimation import (
+    amplitude_spectrum,
+    EXCITATIONS,
+    frf_from_series,
+    FrfResult,
+)
 from pentapod_sim.analysis.frf.export import write_csv, write_uff58
-from pentapod_sim.analysis.frf.peaks import find_resonances, peak_reductions
+from pentapod_sim.analysis.frf.peaks import find_resonances, peak_reductions, Resonance
 from pentapod_sim.cli import run_command
 from pentapod_sim.cli.analyze_ema import add_parser as add_modes_parser
 from pentapod_sim.cli.analyze_ema import cmd_modes
@@ -41,7 +46,7 @@ def _slug(text: str) -> str:
     return re.sub(r'[^A-Za-z0-9]+', '_', text).strip('_')
 
 
-def cmd_info(args) -> int:
+def cmd_info(args: argparse.Namespace) -> int:
     """Print topics, types, counts, duration, run information and damage of a bag."""
     try:
         with warnings.catch_warnings():
@@ -66,7 +71,7 @@ def cmd_info(args) -> int:
     return 0
 
 
-def print_damage(bag) -> None:
+def print_damage(bag: Bag) -> None:
     """Print the damage report of a bag (nothing if it is intact)."""
     if not bag.damage:
         return
@@ -80,7 +85,7 @@ def print_damage(bag) -> None:
         print(f'  {damage.describe()}')
 
 
-def _frfs(bag_path, args) -> list:
+def _frfs(bag_path: str, args: argparse.Namespace) -> list[FrfResult]:
     topics = [spec.partition('.')[0] for spec in [args.input] + args.output]
     bag = open_bag(bag_path, topics)
     u = bag.series(args.input)
@@ -88,11 +93,11 @@ def _frfs(bag_path, args) -> list:
             for out in args.output]
 
 
-def _peak_rows(res, args) -> list:
+def _peak_rows(res: FrfResult, args: argparse.Namespace) -> list[Resonance]:
     return find_resonances(res, args.fmin, args.fmax, args.prominence_db)
 
 
-def _write_peaks(path: Path, peaks: list, unit: str) -> None:
+def _write_peaks(path: Path, peaks: list[Resonance], unit: str) -> None:
     with open(path, 'w', newline='', encoding='utf-8') as handle:
         writer = csv.writer(handle)
         writer.writerow(['freq_Hz', f'magnitude_{unit}', 'damping_ratio', 'coherence'])
@@ -119,7 +124,7 @@ def uff_direction(spec: str) -> int:
     return 'xyz'.index(axis) + (4 if rotational else 1)
 
 
-def _analytic(args):
+def _analytic(args: argparse.Namespace) -> tuple[np.ndarray, np.ndarray, str] | None:
     """Read ``--analytic`` CSV (columns freq_Hz, re, im; header line) as (freq, H, label)."""
     if not args.analytic:
         return None
@@ -129,7 +134,7 @@ def _analytic(args):
     return table[:, 0], table[:, 1] + 1j * table[:, 2], f'analytic ({Path(args.analytic).name})'
 
 
-def cmd_frf(args, plot: bool = True) -> int:
+def cmd_frf(args: argparse.Namespace, plot: bool = True) -> int:
     """Estimate FRFs (and peaks, and reductions with --compare); write PNG, CSV, UFF58."""
     out_dir = Path(args.out)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -162,7 +167,7 @@ def cmd_frf(args, plot: bool = True) -> int:
     return 0
 
 
-def cmd_time(args) -> int:
+def cmd_time(args: argparse.Namespace) -> int:
     """Plot recorded series over time."""
     bag = open_bag(args.bag, [spec.partition('.')[0] for spec in args.specs])
     png = plots.time_plot([bag.series(s) for s in args.specs],
@@ -172,10 +177,12 @@ def cmd_time(args) -> int:
     return 0
 
 
-def cmd_amplitudes(args) -> int:
+def cmd_amplitudes(args: argparse.Namespace) -> int:
     """Stroke [m] and force [N] amplitude spectra of every axis of a PMA state topic."""
     bag = open_bag(args.bag, [args.topic])
-    amps, units, freq = {}, {}, None
+    amps: dict[str, np.ndarray] = {}
+    units: dict[str, str] = {}
+    freq: np.ndarray | None = None
     for spec in bag.fields(args.topic):
         field, _, name = spec.partition('.')
         if field == 'velocity':
@@ -185,7 +192,7 @@ def cmd_amplitudes(args) -> int:
         freq, amp = amplitude_spectrum(ser.values, fs, args.nperseg)
         label = f'{name} {"stroke" if field == "position" else "force"}'
         amps[label], units[label] = amp, ser.unit
-    if not amps:
+    if not amps or freq is None:
         raise BagError(f'{args.topic} carries no position/effort fields')
     tag = _slug(f'{Path(args.bag).name}_{args.topic}')
     out_dir = Path(args.out)
@@ -202,7 +209,7 @@ def cmd_amplitudes(args) -> int:
     return 0
 
 
-def _frf_arguments(sub) -> None:
+def _frf_arguments(sub: argparse.ArgumentParser) -> None:
     sub.add_argument('bag', help='bag folder or .mcap file')
     sub.add_argument('--input', required=True, help='TOPIC.FIELD of the excitation [N]')
     sub.add_argument('--output', required=True, action='append', help='TOPIC.FIELD (repeat)')
@@ -235,7 +242,7 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def main(argv=None) -> int:
+def main(argv: list[str] | None = None) -> int:
     """Run the `analyze` command line; return the exit code."""
     args = build_parser().parse_args(argv)
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,

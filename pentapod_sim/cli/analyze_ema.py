@@ -8,6 +8,7 @@ LSFD (:mod:`pentapod_sim.analysis.ema.identify`). Writes ``<bag>_modes.csv``, ``
 """
 from __future__ import annotations
 
+import argparse
 from pathlib import Path
 import re
 
@@ -17,11 +18,11 @@ from pentapod_sim.analysis.ema import plots as ema_plots
 from pentapod_sim.analysis.ema.identify import DEFAULT_MAX_ORDER, identify_modes
 from pentapod_sim.analysis.ema.poles import Tolerances
 from pentapod_sim.analysis.ema.tables import mode_table, write_frf_csv, write_modes_csv
-from pentapod_sim.analysis.frf.from_run import frfs_from_bag
+from pentapod_sim.analysis.frf.from_run import frfs_from_bag, RunFrfs
 from pentapod_sim.errors import BagError
 
 
-def add_parser(subs) -> None:
+def add_parser(subs: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Add the ``modes`` subcommand to the ``analyze`` subparsers."""
     sub = subs.add_parser('modes', help='modal identification (pLSCF + LSFD) of a recorded run')
     sub.add_argument('bag', help='bag folder or .mcap file (with its excitation record)')
@@ -43,7 +44,7 @@ def add_parser(subs) -> None:
                           '(noisy FRFs with lines sparser than the half-power bands)')
 
 
-def cmd_modes(args) -> int:
+def cmd_modes(args: argparse.Namespace) -> int:
     """Identify modes from a bag; print the table; write CSV and PNG files."""
     if args.max_order < 2 or args.min_stable < 1:
         raise BagError(f'--max-order {args.max_order} must be >= 2 and --min-stable '
@@ -85,7 +86,7 @@ def cmd_modes(args) -> int:
     return 0
 
 
-def _warn_transient(run, band) -> None:
+def _warn_transient(run: RunFrfs, band: tuple[float, float]) -> None:
     """
     Print a warning if the transient error dominates in the band (line estimators only).
 

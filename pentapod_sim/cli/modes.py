@@ -21,9 +21,11 @@ import math
 from pathlib import Path
 import sys
 import time
+from typing import Any
 
 from pentapod_sim.cli import add_model_arguments, configure_logging, model_from_args, run_command
 from pentapod_sim.errors import ModalError
+from pentapod_sim.fe.model import FEModel
 from pentapod_sim.modes.causes import (
     analyse_causes,
     DEFAULT_ALPHA,
@@ -31,7 +33,7 @@ from pentapod_sim.modes.causes import (
     plot_energy_shares,
     plot_mode_distribution,
 )
-from pentapod_sim.modes.solver import solve_modes
+from pentapod_sim.modes.solver import ModalResult, solve_modes
 from pentapod_sim.modes.sturm import sturm_count
 from pentapod_sim.modes.window_pool import PARALLEL_MIN_DOF
 
@@ -67,8 +69,8 @@ def _parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _solve(model, args):
-    kwargs = {'n_modes': args.n_modes, 'f_max': args.f_max}
+def _solve(model: FEModel, args: argparse.Namespace) -> ModalResult:
+    kwargs: dict[str, Any] = {'n_modes': args.n_modes, 'f_max': args.f_max}
     if args.n_modes is None and args.f_max is None:
         kwargs['f_max'] = PAPER_BAND_HZ
     if args.modes_per_window:
@@ -78,7 +80,7 @@ def _solve(model, args):
     return solve_modes(model.K, model.M, **kwargs)
 
 
-def _band_count(model, modes) -> int:
+def _band_count(model: FEModel, modes: ModalResult) -> int:
     """Modes below 750 Hz: the solver's Sturm count if it used that limit, else a new one."""
     if modes.f_max == PAPER_BAND_HZ and modes.sturm_count is not None:
         return modes.sturm_count

@@ -22,22 +22,29 @@ import json
 import logging
 from pathlib import Path
 import sys
+from typing import Any, Iterator, TYPE_CHECKING
 
 import numpy as np
+import numpy.typing as npt
 
 from pentapod_sim.cli import add_model_arguments, configure_logging, model_from_args, run_command
 from pentapod_sim.errors import ConfigError
+from pentapod_sim.fe.model import FEModel
 from pentapod_sim.plant import frf, frf_plot, reduction
 from pentapod_sim.plant.build import (
     from_modal_data,
     keep_by_relevance,
-    load_reduction_config,
     modal_damping,
     plant_from_fe,
     reduce_plant,
 )
 from pentapod_sim.plant.check_model import DEFAULT_CHECK_F_MIN
-from pentapod_sim.plant.config import RelevanceRule
+from pentapod_sim.plant.config import load_reduction_config, RelevanceRule
+from pentapod_sim.plant.model import PlantModel
+
+if TYPE_CHECKING:       # imported by the commands that use them
+    from pentapod_sim.sim.controllers import DiscreteController
+    from pentapod_sim.sim.stability import LoopCheck
 
 LOGGER = logging.getLogger('statespace')
 DEFAULT_OUT = Path('out') / 'statespace'
@@ -46,11 +53,12 @@ DEFAULT_OUT = Path('out') / 'statespace'
 DEFAULT_DAMPERS = [f'strut{i}_bending_moment_{k}=2e4' for i in range(1, 6) for k in (2, 3)]
 
 
-def _positions(args) -> list[str]:
+def _positions(args: argparse.Namespace) -> list[str]:
     return [p for p in (args.position or ','.join(args.cfg.positions)).split(',') if p]
 
 
-def _plants(args):
+def _plants(args: argparse.Namespace
+            ) -> Iterator[tuple[str, PlantModel, npt.NDArray[np.intp]]]:
     """Yield (position, plant with all computed modes, kept indices) per position."""
     for position in _positions(args):
         model_args = copy.copy(args)
@@ -63,7 +71,7 @@ def _plants(args):
         yield position, plant_all, keep
 
 
-def _pair(args) -> tuple[str, str]:
+def _pair(args: argparse.Namespace) -> tuple[str, str]:
     """(output, input) from --pair OUT/IN or the config's report_pair (PortError if unknown)."""
     from pentapod_sim.plant.ports import check_names
     if args.pair:
@@ -77,7 +85,7 @@ def _pair(args) -> tuple[str, str]:
     return out, inp
 
 
-def _pair_rule(args) -> list[RelevanceRule]:
+def _pair_rule(args: argparse.Namespace) -> list[RelevanceRule]:
     """Relevance for the report: the report pair alone at the first rule's limit (or --limit)."""
     out, inp = _pair(args)
     rule = replace(args.cfg.relevance[0], inputs=(inp,), outputs=(out,))
@@ -88,7 +96,7 @@ def _pair_rule(args) -> list[RelevanceRule]:
     return [rule]
 
 
-def _direct_check(fe, pair_all, f_max: float) -> dict:
+def _direct_check(fe: FEModel, pair_all: PlantModel, f_max: float) -> dict[str, float]:
     """Undamped modal plant (all modes + residual) vs a direct FE harmonic solve."""
     from pentapod_sim.plant.ports import input_matrix, output_matrices, ports
     freq = reduction.between_resonances(pair_all.frequencies_hz, f_max)
@@ -104,7 +112,7 @@ def _direct_check(fe, pair_all, f_max: float) -> dict:
             'direct_solve_frequencies': int(freq.size)}
 
 
-def cmd_report(args) -> int:
+def cmd_report(args: argparse.Namespace) -> int:
     """Modes kept, static error with/without correction and FRF error for the report pair."""
     out, inp = _pair(args)
     freq = args.cfg.frequency.grid()
@@ -113,11 +121,11 @@ def cmd_report(args) -> int:
         pair_all = plant_all.select([inp], [out])
         keep = keep_by_relevance(pair_all, _pair_rule(args))
         reference = frf.modal_frf(pair_all, freq).H
-        row = {'position': position, 'pair': f'{out}/{inp}', 'n_dof': plant_all.meta['n_dof'],
-               'modes_computed': plant_all.n_modes, 'modes_kept': int(keep.size),
-               'relevance': dict(_pair_rule(args)[0].criterion,
-                                 measure=_pair_rule(args)[0].measure),
-               'static_compliance_m_per_n': float(pair_all.meta['static_compliance_full'][0][0])}
+        row: dict[str, Any] = {
+            'position': position, 'pair': f'{out}/{inp}', 'n_dof': plant_all.meta['n_dof'],
+            'modes_computed': plant_all.n_modes, 'modes_kept': int(keep.size),
+            'relevance': dict(_pair_rule(args)[0].criterion, measure=_pair_rule(args)[0].measure),
+            'static_compliance_m_per_n': float(pair_all.meta['static_compliance_full'][0][0])}
         for corrected in (False, True):
             red = reduce_plant(pair_all, keep, corrected)
             g_red = red.d[0, 0] + (red.c_disp[0] * red.b[:, 0] / red.omega ** 2).sum()
@@ -149,7 +157,7 @@ def cmd_report(args) -> int:
     return 0
 
 
-def cmd_frf(args) -> int:
+def cmd_frf(args: argparse.Namespace) -> int:
     """FRF of the report pair (kept modes, configured correction) per position: PNG + CSV."""
     out, inp = _pair(args)
     freq, results, marks = args.cfg.frequency.grid(), [], []
@@ -165,7 +173,7 @@ def cmd_frf(args) -> int:
     return 0
 
 
-def cmd_dcgain(args) -> int:
+def cmd_dcgain(args: argparse.Namespace) -> int:
     """Bar chart of the report pair's dc gain per mode with the relevance limit."""
     out, inp = _pair(args)
     rule = _pair_rule(args)[0]
@@ -201,7 +209,7 @@ def _dampers(specs: list[str]) -> dict[str, float]:
     return dampers
 
 
-def _laws(dampers: dict[str, float]) -> list:
+def _laws(dampers: dict[str, float]) -> list[DiscreteController]:
     """The dampers as memoryless velocity feedback (the same in discrete and continuous time)."""
     from pentapod_sim.plant.ports import collocated_output
     from pentapod_sim.sim.controllers import DiscreteController
@@ -209,7 +217,8 @@ def _laws(dampers: dict[str, float]) -> list:
             for port, g in dampers.items()]
 
 
-def _sampled_loop_check(args, position: str, plant, laws: list):
+def _sampled_loop_check(args: argparse.Namespace, position: str, plant: PlantModel,
+                        laws: list[DiscreteController]) -> LoopCheck:
     """Truncation check of the dampers as sampled feedback (plant vs check model)."""
     from pentapod_sim.plant.check_model import check_f_max, check_model_from_fe
     from pentapod_sim.sim.stability import check_loop
@@ -226,15 +235,16 @@ POLE_COLUMNS = ('mode', 'open_freq_hz', 'open_zeta', 'sampled_freq_hz', 'sampled
                 'sampled_mac', 'continuous_freq_hz', 'continuous_zeta', 'continuous_mac')
 
 
-def _loop_poles(args, position: str, plant, laws: list) -> Path:
+def _loop_poles(args: argparse.Namespace, position: str, plant: PlantModel,
+                laws: list[DiscreteController]) -> Path:
     """Poles per mode (below the FRF band's top) of the sampled and continuous loop: CSV."""
     from pentapod_sim.sim.loop_poles import closed_loop_poles, continuous_loop_poles
     rate = args.sample_rate or args.cfg.sample_rate
     sampled = closed_loop_poles(plant, laws, 1.0 / rate)
     cont = continuous_loop_poles(plant, laws)
     rows = []
-    for i in np.flatnonzero(plant.frequencies_hz <= args.cfg.frequency.f_max):
-        row = [i + 1, plant.frequencies_hz[i], plant.zeta[i]]
+    for i in map(int, np.flatnonzero(plant.frequencies_hz <= args.cfg.frequency.f_max)):
+        row: list[float] = [i + 1, plant.frequencies_hz[i], plant.zeta[i]]
         for poles in (sampled, cont):
             j = poles.of_mode(i)
             row += ([poles.freq_hz[j], poles.zeta[j], poles.mac[j]] if j >= 0
@@ -261,7 +271,7 @@ def _loop_poles(args, position: str, plant, laws: list) -> Path:
     return path
 
 
-def cmd_closed_loop(args) -> int:
+def cmd_closed_loop(args: argparse.Namespace) -> int:
     """Open vs closed-loop FRF of the report pair with added viscous dampers."""
     from pentapod_sim.plant.frf_peaks import exact_peak, plant_pair_frf
     out, inp = _pair(args)
@@ -287,7 +297,7 @@ def cmd_closed_loop(args) -> int:
     return 0
 
 
-def cmd_build(args) -> int:
+def cmd_build(args: argparse.Namespace) -> int:
     """Build and save plant model files (from the FE model or from external modal data)."""
     if args.modal_data:
         from pentapod_sim.plant.external_modes import load_modal_data
@@ -315,7 +325,7 @@ def _parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest='command', required=True)
     for name, func in (('report', cmd_report), ('frf', cmd_frf), ('dcgain', cmd_dcgain),
                        ('closed-loop', cmd_closed_loop), ('build', cmd_build)):
-        p = sub.add_parser(name, help=func.__doc__.split('\n')[0])
+        p = sub.add_parser(name, help=(func.__doc__ or '').split('\n')[0])
         p.set_defaults(func=func)
         add_model_arguments(p, position='')
         for action in p._actions:     # the shared option takes one name; here a list
@@ -356,7 +366,7 @@ def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     configure_logging(args.verbose)
 
-    def command(args) -> int:
+    def command(args: argparse.Namespace) -> int:
         args.cfg = load_reduction_config(args.config)
         return args.func(args)
     return run_command('statespace', command, args)

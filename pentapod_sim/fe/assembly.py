@@ -23,6 +23,7 @@ from __future__ import annotations
 import hashlib
 import logging
 import time
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -36,6 +37,8 @@ from pentapod_sim.fe.model import FEModel
 
 LOG = logging.getLogger(__name__)
 Array = npt.NDArray[np.float64]
+#: COO rows, columns and values of element blocks
+Triplet = tuple[Array, Array, Array]
 GROUPS = ('frame', 'installation', 'struts', 'feed_drives', 'bp_joints', 'wp_joints')
 
 
@@ -49,9 +52,10 @@ class _Mesh:
         self.xyz: list[Array] = []
         self.n_nodes = 0
         self.named: dict[str, int] = {}
-        self.beams: list[dict] = []
-        self.springs: list[tuple] = []
-        self.masses: list[tuple] = []
+        self.beams: list[dict[str, Any]] = []
+        #: node a, node b (None: ground), frame (rows e1, e2, e3), k along/about them, group
+        self.springs: list[tuple[int, int | None, Array, Array, str]] = []
+        self.masses: list[tuple[int, float, Array]] = []
         self.slaves: dict[int, int] = {}
         self.mass_parts: dict[str, float] = {}
 
@@ -189,13 +193,13 @@ def _dofs(nodes: npt.ArrayLike) -> Array:
     return (6 * np.asarray(nodes, dtype=np.int64)[:, None] + np.arange(6)).astype(np.int32)
 
 
-def _triplets(blocks: Array, dofs: Array) -> tuple[Array, Array, Array]:
+def _triplets(blocks: Array, dofs: Array) -> Triplet:
     """Element blocks (e, d, d) at DOF indices (e, d) -> COO rows, cols, values."""
     d = dofs.shape[1]
     return (np.repeat(dofs, d, axis=1).ravel(), np.tile(dofs, (1, d)).ravel(), blocks.ravel())
 
 
-def _to_csr(parts: list, n: int) -> sp.csr_matrix:
+def _to_csr(parts: list[Triplet], n: int) -> sp.csr_matrix:
     """One COO -> CSR conversion (duplicates summed) of all collected triplets."""
     if not parts:
         return sp.csr_matrix((n, n))
@@ -203,7 +207,8 @@ def _to_csr(parts: list, n: int) -> sp.csr_matrix:
     return sp.coo_matrix((vals, (rows, cols)), shape=(n, n)).tocsr()
 
 
-def _beam_triplets(mesh: _Mesh, k_parts: dict, m_parts: list, chunk: int = 20000) -> None:
+def _beam_triplets(mesh: _Mesh, k_parts: dict[str, list[Triplet]], m_parts: list[Triplet],
+                   chunk: int = 20000) -> None:
     """Beam stiffness (per group) and mass triplets (vectorised over elements, chunked)."""
     xyz = mesh.positions()
     mat = mesh.machine.materials.steel
@@ -222,7 +227,7 @@ def _beam_triplets(mesh: _Mesh, k_parts: dict, m_parts: list, chunk: int = 20000
             m_parts.append(_triplets(beam.to_global(m_loc, axes), dofs))
 
 
-def _spring_triplets(mesh: _Mesh, k_parts: dict) -> None:
+def _spring_triplets(mesh: _Mesh, k_parts: dict[str, list[Triplet]]) -> None:
     """Zero-length springs (two-node and to-ground) triplets per group."""
     for a, b, frame, k_diag, group in mesh.springs:
         big = np.kron(np.eye(2), frame)            # 6x6 rotation for translations, rotations
@@ -235,7 +240,7 @@ def _spring_triplets(mesh: _Mesh, k_parts: dict) -> None:
         k_parts.setdefault(group, []).append(_triplets(blk, dofs))
 
 
-def _lumped_mass_triplets(mesh: _Mesh, m_parts: list) -> None:
+def _lumped_mass_triplets(mesh: _Mesh, m_parts: list[Triplet]) -> None:
     for a, m, inertia in mesh.masses:
         blk = np.zeros((6, 6))
         blk[:3, :3] = m * np.eye(3)
@@ -267,11 +272,11 @@ def _rigid_elimination(mesh: _Mesh) -> sp.csr_matrix:
                          shape=(n_full, 6 * len(free_nodes)))
 
 
-def _assemble(mesh: _Mesh) -> tuple[sp.csr_matrix, dict, sp.csr_matrix]:
+def _assemble(mesh: _Mesh) -> tuple[sp.csr_matrix, dict[str, sp.csr_matrix], sp.csr_matrix]:
     """Return T, the reduced stiffness groups and the reduced mass matrix of a mesh."""
     n_full = 6 * mesh.n_nodes
-    k_parts: dict[str, list] = {}
-    m_parts: list = []
+    k_parts: dict[str, list[Triplet]] = {}
+    m_parts: list[Triplet] = []
     _beam_triplets(mesh, k_parts, m_parts)
     _spring_triplets(mesh, k_parts)
     _lumped_mass_triplets(mesh, m_parts)

@@ -10,12 +10,13 @@ Quantities in radians may be written in degrees in YAML by appending ``_deg`` to
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 import os
 from pathlib import Path
 import typing
 
 import numpy as np
+import numpy.typing as npt
 
 from pentapod_sim.errors import ConfigError
 from pentapod_sim.paths import config_dir
@@ -23,6 +24,7 @@ from pentapod_sim.schema import ANY, build, internal, NON_NEGATIVE, POSITIVE, re
 
 __all__ = ['config_dir', 'load_machine', 'load_positions', 'machine_from_dict', 'MachineParams',
            'machine_path', 'Pose', 'positions_path']
+_T = typing.TypeVar('_T')
 
 
 def _f(unit: str, rule: str = POSITIVE, length: int | None = None,
@@ -35,7 +37,18 @@ def _f(unit: str, rule: str = POSITIVE, length: int | None = None,
     return spec(unit, rule, length=5 if per_strut else length, broadcast=per_strut)
 
 
-@dataclass(frozen=True)
+@typing.dataclass_transform(frozen_default=True, field_specifiers=(field, spec, _f))
+def _schema(cls: type[_T]) -> type[_T]:
+    """
+    ``dataclass(frozen=True)``, telling a type checker which calls declare fields.
+
+    :func:`_f` and :func:`pentapod_sim.schema.spec` make a ``dataclasses.field`` with a default
+    only if given one; a checker that does not know them takes each for a default value.
+    """
+    return dataclass(frozen=True)(cls)
+
+
+@_schema
 class MeshParams:
     """Beam meshing: target element length [m] and least elements per member [-]."""
 
@@ -43,7 +56,7 @@ class MeshParams:
     min_elements_per_member: int = _f('-')
 
 
-@dataclass(frozen=True)
+@_schema
 class Material:
     """Isotropic linear-elastic material: E [Pa], G [Pa], density [kg/m^3]."""
 
@@ -52,14 +65,14 @@ class Material:
     density: float = _f('kg/m^3')
 
 
-@dataclass(frozen=True)
+@_schema
 class Materials:
     """Named materials of the machine."""
 
     steel: Material
 
 
-@dataclass(frozen=True)
+@_schema
 class RhsSection:
     """Rectangular hollow section: outer width (local y) and height (local z), wall [m]."""
 
@@ -68,7 +81,7 @@ class RhsSection:
     thickness: float = _f('m')
 
 
-@dataclass(frozen=True)
+@_schema
 class FrameParams:
     """Machine frame: columns, rings, spokes, BP brackets and the lumped bed."""
 
@@ -84,7 +97,7 @@ class FrameParams:
     bed_inertia: tuple[float, ...] = _f('kg m^2', length=3)
 
 
-@dataclass(frozen=True)
+@_schema
 class InstallationParams:
     """Foundation springs of each of the five feet [N/m]."""
 
@@ -93,7 +106,7 @@ class InstallationParams:
     foot_stiffness_z: float = _f('N/m')
 
 
-@dataclass(frozen=True)
+@_schema
 class BpJointParams:
     """BP cardan joints: layout, needle-bearing stiffness, gimbal mass and angle limit."""
 
@@ -109,7 +122,7 @@ class BpJointParams:
     gimbal_inertia: tuple[float, ...] = _f('kg m^2', length=3)
 
 
-@dataclass(frozen=True)
+@_schema
 class FeedDriveParams:
     """Strut-gimbal link: nut (axial), guide (lateral), bending and torsion stiffness."""
 
@@ -119,7 +132,7 @@ class FeedDriveParams:
     torsion_stiffness: float = _f('N m/rad')
 
 
-@dataclass(frozen=True)
+@_schema
 class StrutParams:
     """
     Strut tubes: lengths, stroke limits [m], section, screw mass [kg/m], shear factor [-].
@@ -136,7 +149,7 @@ class StrutParams:
     shear_factor: float = _f('-')
 
 
-@dataclass(frozen=True)
+@_schema
 class WpJointParams:
     """WP cardan joints: ring radius [m], heights above the nose [m], stiffness, limit."""
 
@@ -148,7 +161,7 @@ class WpJointParams:
     angle_max: float = _f('rad')
 
 
-@dataclass(frozen=True)
+@_schema
 class PlatformParams:
     """Working platform (spindle housing) as a rigid body."""
 
@@ -159,7 +172,7 @@ class PlatformParams:
     pma_mount_above_tcp: float = _f('m', ANY)
 
 
-@dataclass(frozen=True)
+@_schema
 class Pose:
     """Platform pose: TCP position x, y, z [m] and tilts a (about x), b (about y) [rad]."""
 
@@ -169,26 +182,26 @@ class Pose:
     a: float = _f('rad', ANY)
     b: float = _f('rad', ANY)
 
-    def as_array(self) -> np.ndarray:
+    def as_array(self) -> npt.NDArray[np.float64]:
         """Return the pose as the array (x, y, z, a, b) [m, m, m, rad, rad]."""
         return np.array([self.x, self.y, self.z, self.a, self.b])
 
 
-@dataclass(frozen=True)
+@_schema
 class NamedPose(Pose):
     """A pose of config/positions.yaml with an optional description."""
 
     description: str = spec(default='', description='what the position is for')
 
 
-@dataclass(frozen=True)
+@_schema
 class PositionsFile:
     """config/positions.yaml: the named machine positions."""
 
     positions: dict[str, NamedPose] = spec(min_length=1, description='named machine positions')
 
 
-@dataclass(frozen=True)
+@_schema
 class MachineParams:
     """All parameters of the pentapod machine model (see config/machine.yaml)."""
 
@@ -239,17 +252,17 @@ def _check_section(sec: RhsSection, path: str) -> None:
                           f'{sec.width!r} x {sec.height!r} section')
 
 
-def machine_path(path: str | os.PathLike | None = None) -> Path:
+def machine_path(path: str | os.PathLike[str] | None = None) -> Path:
     """``path``, or machine.yaml of :func:`config_dir` if None."""
     return Path(path) if path is not None else config_dir() / 'machine.yaml'
 
 
-def positions_path(path: str | os.PathLike | None = None) -> Path:
+def positions_path(path: str | os.PathLike[str] | None = None) -> Path:
     """``path``, or positions.yaml of :func:`config_dir` if None."""
     return Path(path) if path is not None else config_dir() / 'positions.yaml'
 
 
-def machine_from_dict(data: dict, source: str = '<dict>') -> MachineParams:
+def machine_from_dict(data: dict[str, typing.Any], source: str = '<dict>') -> MachineParams:
     """
     Validate a parameter mapping (the parsed YAML) and return :class:`MachineParams`.
 
@@ -261,7 +274,7 @@ def machine_from_dict(data: dict, source: str = '<dict>') -> MachineParams:
     return replace(build(MachineParams, data, source), source=source)
 
 
-def load_machine(path: str | os.PathLike | None = None) -> MachineParams:
+def load_machine(path: str | os.PathLike[str] | None = None) -> MachineParams:
     """
     Load and validate the machine parameter file.
 
@@ -279,7 +292,8 @@ def load_machine(path: str | os.PathLike | None = None) -> MachineParams:
     return machine_from_dict(read_mapping(path), source=str(path))
 
 
-def load_positions(path: str | os.PathLike | None = None) -> dict[str, np.ndarray]:
+def load_positions(path: str | os.PathLike[str] | None = None
+                   ) -> dict[str, npt.NDArray[np.float64]]:
     """
     Load the named machine positions.
 

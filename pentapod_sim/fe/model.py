@@ -7,6 +7,7 @@ users (modal analysis, cause analysis, ports and reduction). It holds data only.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -55,7 +56,7 @@ class FEModel:
     strut_frames: npt.NDArray[np.float64]
     mass_parts: dict[str, float] = field(default_factory=dict)
     pose: npt.NDArray[np.float64] = field(default_factory=lambda: np.zeros(5))
-    meta: dict = field(default_factory=dict)
+    meta: dict[str, Any] = field(default_factory=dict)
 
     @property
     def n_dof(self) -> int:

@@ -25,11 +25,13 @@ import time
 from typing import Callable, Mapping, Protocol, Sequence
 
 import foxglove
-from foxglove.websocket import Capability
+from foxglove.websocket import Capability, WebSocketServer
 import numpy as np
+import numpy.typing as npt
 
 from pentapod_sim import interface
 from pentapod_sim.errors import ConfigError
+from pentapod_sim.live.envelope import Sample
 from pentapod_sim.live.spectrum import RunningSpectrum
 from pentapod_sim.live.status import RunStatus, STATUS_NAMES
 from pentapod_sim.live.streams import BatchStream, Shape, TopicStream
@@ -106,7 +108,7 @@ class LiveHub:
         self.status = RunStatus()
         self.spectrum = RunningSpectrum(params.spectrum_samples)
         self._spectrum_joints: list[str] = []
-        self.server = None
+        self.server: WebSocketServer | None = None
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._arrival: dict[str, float] = {}
@@ -168,7 +170,7 @@ class LiveHub:
     def start(self) -> int:
         """Start the WebSocket server and the worker; return the port it listens on."""
         try:
-            self.server = foxglove.start_server(
+            server = foxglove.start_server(
                 name='pentapod live view', host=self.p.host, port=self.p.port,
                 capabilities=[Capability.Time], context=self.context)
         except Exception as err:   # the SDK raises RuntimeError for a taken port, bad host
@@ -176,8 +178,9 @@ class LiveHub:
                               f'{err}') from None
         self._thread = threading.Thread(target=self._work, name='live_view_worker',
                                         daemon=True)
+        self.server = server
         self._thread.start()
-        return self.server.port
+        return server.port
 
     def stop(self) -> None:
         """Stop the worker (after a last pass that sends every open window) and the server."""
@@ -233,7 +236,7 @@ class LiveHub:
             stamps, values = part.samples
             if stream.topic in interface.STATE_TOPICS:
                 self.status.add(stamps)
-            if stream.topic == interface.TCP_STATE and len(stamps):
+            if stream.topic == interface.TCP_STATE and len(stamps) and stream.shape is not None:
                 self._feed_spectrum(stream.shape, stamps, values)
         quiet = wall - self._arrival.get(stream.topic, wall) >= self.p.idle_flush
         if (quiet or final) and stream.envelope.pending:
@@ -246,7 +249,7 @@ class LiveHub:
             self.status.reset()
             self.spectrum.reset()
 
-    def _send(self, stream: TopicStream, samples) -> None:
+    def _send(self, stream: TopicStream, samples: Sequence[Sample]) -> None:
         channel, shape = self.channels[stream.topic], stream.shape or Shape()
         if not channel.has_sinks():
             return                # no client subscribed: nothing to serialise
@@ -258,7 +261,8 @@ class LiveHub:
                                                 shape.split(row))
             channel.log(data, log_time=stamp)
 
-    def _feed_spectrum(self, shape: Shape, stamps, values) -> None:
+    def _feed_spectrum(self, shape: Shape, stamps: npt.NDArray[np.int64],
+                       values: npt.NDArray[np.float64]) -> None:
         field = self.p.spectrum_field
         start = 0
         for name, count in shape.fields:

@@ -16,6 +16,7 @@ test/test_live_view.py checks that the committed file equals :func:`layout_json`
 from __future__ import annotations
 
 import json
+from typing import Any, Sequence
 
 from pentapod_sim import interface
 from pentapod_sim.live.status import status_index
@@ -30,11 +31,17 @@ EFFORTS = {'exciter': len(AXES), 'pma': len(AXES), 'damper_tcp': len(AXES)}
 DAMPER_EFFORTS = 3 * N_STRUTS
 
 
-def _series(value: str, label: str, timestamp: str = 'headerStamp') -> dict:
+#: A layout's configuration or panel tree: Foxglove's JSON
+Json = dict[str, Any]
+#: A split of the panel tree, or one panel id
+Tree = Json | str
+
+
+def _series(value: str, label: str, timestamp: str = 'headerStamp') -> Json:
     return {'value': value, 'enabled': True, 'timestampMethod': timestamp, 'label': label}
 
 
-def _plot(title: str, series: list[dict], y_label: str = '', **extra) -> dict:
+def _plot(title: str, series: list[Json], y_label: str = '', **extra: Any) -> Json:
     config = {'title': title, 'paths': series, 'showXAxisLabels': True,
               'showYAxisLabels': True, 'showLegend': True, 'legendDisplay': 'floating',
               'showPlotValuesInLegend': False, 'isSynced': True, 'xAxisVal': 'timestamp',
@@ -63,22 +70,22 @@ def scenario_sources() -> list[str]:
     return names
 
 
-def _split(first, second, direction: str, percent: float = 50.0) -> dict:
+def _split(first: Tree, second: Tree, direction: str, percent: float = 50.0) -> Json:
     return {'first': first, 'second': second, 'direction': direction,
             'splitPercentage': percent}
 
 
-def _row(ids: list[str], direction: str = 'row'):
+def _row(ids: Sequence[Tree], direction: str = 'row') -> Tree:
     """Even split of panel ids (or subtrees)."""
     if len(ids) == 1:
         return ids[0]
     return _split(ids[0], _row(ids[1:], direction), direction, 100.0 / len(ids))
 
 
-def build_layout() -> dict:
+def build_layout() -> Json:
     """The layout as a dict (see the module docstring)."""
     tcp = _joints(interface.TCP_STATE)
-    cfg: dict[str, dict] = {}
+    cfg: dict[str, Json] = {}
     cfg['Plot!tcp_displacement'] = _plot('TCP displacement [m]', [
         _series(f'{interface.TCP_STATE}.position[{i}]', j) for i, j in enumerate(tcp)], 'm')
     cfg['Plot!tcp_velocity'] = _plot('TCP velocity [m/s]', [
@@ -127,7 +134,7 @@ def layout_json() -> str:
     return json.dumps(build_layout(), indent=2) + '\n'
 
 
-def message_paths(layout: dict) -> list[str]:
+def message_paths(layout: Json) -> list[str]:
     """Every message path a layout plots or shows (series, x axes, raw message topics)."""
     found = []
     for config in layout['configById'].values():

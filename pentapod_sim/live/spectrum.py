@@ -14,8 +14,8 @@ import numpy.typing as npt
 import scipy.signal
 
 
-def amplitude_spectrum(x: npt.NDArray[np.float64], dt: float) -> tuple[npt.NDArray,
-                                                                          npt.NDArray]:
+def amplitude_spectrum(x: npt.NDArray[np.float64], dt: float
+                       ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
     """
     Single-sided amplitude spectrum of the columns of x.
 
@@ -94,7 +94,7 @@ class RunningSpectrum:
         return (self.dt_ns > 0 and len(self.stamps) > 1
                 and self.stamps[-1] - self.stamps[0] >= (self.n - 1) * self.dt_ns)
 
-    def compute(self) -> tuple[npt.NDArray, npt.NDArray] | None:
+    def compute(self) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]] | None:
         """
         Spectrum of the n steps ending at the newest sample, or None if not :meth:`ready`.
 

@@ -72,7 +72,8 @@ class RunStatus:
         """Forget the stamps of the run (a new run starts; the plant's status stays)."""
         self.newest = -1      # newest stamp [ns]
         self.dt_ns = 0        # smallest positive stamp step [ns]
-        self._last = None     # (wall time [s], stamp [ns]) of the previous report
+        # (wall time [s], stamp [ns]) of the previous report
+        self._last: tuple[float, int] | None = None
 
     def add_plant(self, values: Mapping[str, str]) -> None:
         """Take the key/value pairs of a run-status message of the plant."""

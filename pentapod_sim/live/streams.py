@@ -59,7 +59,7 @@ class Shape:
 
     def split(self, row: npt.NDArray[np.float64]) -> dict[str, list[float]]:
         """Cut a value row back into JointState fields (absent fields: empty lists)."""
-        out = {f: [] for f in JOINT_STATE_FIELDS}
+        out: dict[str, list[float]] = {f: [] for f in JOINT_STATE_FIELDS}
         start = 0
         for name, count in self.fields:
             out[name] = row[start:start + count].tolist()

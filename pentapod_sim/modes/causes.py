@@ -23,13 +23,16 @@ import csv
 from dataclasses import dataclass
 import logging
 import os
-from typing import Callable, Mapping
+from typing import Callable, Mapping, TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
 import scipy.sparse as sp
 
 from pentapod_sim.modes.solver import ModalResult, solve_modes
+
+if TYPE_CHECKING:
+    from pentapod_sim.fe.model import FEModel
 
 _LOG = logging.getLogger(__name__)
 
@@ -84,12 +87,13 @@ class CauseTable:
     neuber_cause: tuple[str, ...] | None = None
     alpha: float = DEFAULT_ALPHA
 
-    def rows(self) -> list[dict]:
+    def rows(self) -> list[dict[str, float | str]]:
         """Return one dict per mode (the CSV columns)."""
         out = []
         for j, f in enumerate(self.frequencies):
-            row = {'mode': j + 1, 'frequency_hz': float(f), 'tcp_direction':
-                   self.tcp_direction[j], 'cause': self.cause[j]}
+            row: dict[str, float | str] = {
+                'mode': j + 1, 'frequency_hz': float(f), 'tcp_direction': self.tcp_direction[j],
+                'cause': self.cause[j]}
             if self.neuber_cause is not None:
                 row['neuber_cause'] = self.neuber_cause[j]
             for g, name in enumerate(self.group_names):
@@ -101,7 +105,7 @@ class CauseTable:
             out.append(row)
         return out
 
-    def to_csv(self, path: str | os.PathLike) -> None:
+    def to_csv(self, path: str | os.PathLike[str]) -> None:
         """Write :meth:`rows` to a CSV file (frequencies in Hz, shares as fractions)."""
         rows = self.rows()
         with open(path, 'w', newline='') as fh:
@@ -274,7 +278,7 @@ def _neuber_cause(freq: np.ndarray, f_full: np.ndarray,
     return tuple(out)
 
 
-def analyse_causes(model, modes: ModalResult, *, neuber: bool = True,
+def analyse_causes(model: FEModel, modes: ModalResult, *, neuber: bool = True,
                    alpha: float = DEFAULT_ALPHA, mac_min: float = DEFAULT_MAC_MIN,
                    rotation_length: float = DEFAULT_ROTATION_LENGTH,
                    progress: Callable[[str], None] | None = None) -> CauseTable:
@@ -308,7 +312,7 @@ def analyse_causes(model, modes: ModalResult, *, neuber: bool = True,
                       alpha)
 
 
-def plot_energy_shares(table: CauseTable, path: str | os.PathLike,
+def plot_energy_shares(table: CauseTable, path: str | os.PathLike[str],
                        n_modes: int | None = None, title: str = '') -> None:
     """
     Save a stacked-bar PNG of each mode's strain-energy shares per group.
@@ -347,7 +351,7 @@ def plot_energy_shares(table: CauseTable, path: str | os.PathLike,
     plt.close(fig)
 
 
-def plot_mode_distribution(frequencies: npt.ArrayLike, path: str | os.PathLike,
+def plot_mode_distribution(frequencies: npt.ArrayLike, path: str | os.PathLike[str],
                            f_max: float | None = None, bin_width: float = 25.0,
                            title: str = '') -> None:
     """

@@ -30,11 +30,13 @@ import math
 from typing import Callable
 
 import numpy as np
+import numpy.typing as npt
 
 from pentapod_sim.errors import ModalError
 from pentapod_sim.modes.window_pool import Window, WindowPool
 
 _LOG = logging.getLogger(__name__)
+Array = npt.NDArray[np.float64]
 
 #: Eigensolver convergence tolerance (relative; ARPACK: on the shift-inverted Ritz values);
 #: results are checked afterwards by their residual ||K phi - omega^2 M phi|| / ||K phi||.
@@ -54,7 +56,7 @@ AHEAD_SPACING = 1.0
 Progress = Callable[[int, 'int | None', str], None]
 
 
-def _edge_between(lam: np.ndarray, hi_index: int) -> float:
+def _edge_between(lam: Array, hi_index: int) -> float:
     """A window edge between ``lam[hi_index - 1]`` and ``lam[hi_index]``, moved off clusters."""
     i = hi_index
     while i > 1 and lam[i] - lam[i - 1] < 1e-6 * abs(lam[i]):
@@ -62,13 +64,13 @@ def _edge_between(lam: np.ndarray, hi_index: int) -> float:
     return 0.5 * (lam[i - 1] + lam[i])
 
 
-def _density(lam: np.ndarray) -> float:
+def _density(lam: Array) -> float:
     """Modes per rad/s in a window (the mode count of these structures grows about linearly)."""
     w = np.sqrt(np.clip(lam, 0.0, None))
     return (w.size - 1) / max(w[-1] - w[0], 1e-300)
 
 
-def _next_shift(lam: np.ndarray, a: float, target: int) -> float:
+def _next_shift(lam: Array, a: float, target: int) -> float:
     """
     Shift [rad^2/s^2] of the next window above edge ``a`` that should hold ``target`` modes.
 
@@ -82,7 +84,7 @@ def _next_shift(lam: np.ndarray, a: float, target: int) -> float:
     return 0.5 * (w_a ** 2 + w_b ** 2)
 
 
-def _edge_above(lam: np.ndarray, sigma: float, target: int) -> float:
+def _edge_above(lam: Array, sigma: float, target: int) -> float:
     """
     Edge [rad^2/s^2] above which the window after one solved ahead at ``sigma`` is placed.
 
@@ -92,7 +94,7 @@ def _edge_above(lam: np.ndarray, sigma: float, target: int) -> float:
     return (math.sqrt(max(sigma, 0.0)) + 0.5 * AHEAD_SPACING * target / _density(lam)) ** 2
 
 
-def _between(lam: np.ndarray, lo: float, hi: float) -> np.ndarray:
+def _between(lam: Array, lo: float, hi: float) -> npt.NDArray[np.bool_]:
     return (lam >= lo) & (lam < hi)
 
 
@@ -115,12 +117,13 @@ class Slicer:
     per_window: int
     progress: Progress | None
     limit: float = math.inf           # no mode at or above this eigenvalue is kept
-    lam: list = field(default_factory=list)
-    phi: list = field(default_factory=list)
-    residual: list = field(default_factory=list)
-    factors: list = field(default_factory=list)
-    solve_times: list = field(default_factory=list)
-    ahead: deque = field(default_factory=deque)
+    lam: list[Array] = field(default_factory=list)
+    phi: list[Array] = field(default_factory=list)
+    residual: list[Array] = field(default_factory=list)
+    factors: list[float] = field(default_factory=list)          # factorisation times [s]
+    solve_times: list[float] = field(default_factory=list)      # eigensolver times [s]
+    #: (future window, modes it should deliver, its shift) of the windows solved ahead
+    ahead: deque[tuple[Future[Window | None], int, float]] = field(default_factory=deque)
     windows: int = 0
     retries: int = 0
     unused: int = 0                   # windows solved ahead and then not used
@@ -131,7 +134,7 @@ class Slicer:
         if self.progress is not None:
             self.progress(found, wanted, msg)
 
-    def take(self, future: Future) -> Window:
+    def take(self, future: Future[Window | None]) -> Window:
         window = self.pool.result(future)
         if window.factor_seconds:
             self.factors.append(window.factor_seconds)
@@ -238,9 +241,10 @@ def slice_spectrum(sl: Slicer, wanted: int | None, lam_max: float | None) -> Non
     prev = sl.solve(-1e-9 * scale, sl.per_window + 1)   # K may be only semi-definite
     sl.windows = 1
     lo, c_lo = prev.sigma, prev.count
+    limit = math.inf if lam_max is None else lam_max
     while True:
-        done_by_limit = lam_max is not None and prev.lam[-1] >= lam_max
-        cut = lam_max if done_by_limit else _edge_between(prev.lam, prev.lam.size - 1)
+        done_by_limit = prev.lam[-1] >= limit
+        cut = limit if done_by_limit else _edge_between(prev.lam, prev.lam.size - 1)
         below = c_lo + _n_in(prev, lo, cut)
         if done_by_limit or (wanted is not None and below >= wanted):
             end = sl.solve(cut, 0)               # the last edge: a count-only factorisation
@@ -259,6 +263,6 @@ def slice_spectrum(sl: Slicer, wanted: int | None, lam_max: float | None) -> Non
         sl.report(c_lo, wanted, f'window {sl.windows}: modes up to '
                   f'{math.sqrt(max(lo, 0)) / 2 / math.pi:.4g} Hz, {c_lo} below (Sturm)')
         prev = run
-        if (wanted is not None and c_lo >= wanted) or (lam_max is not None and lo >= lam_max):
+        if (wanted is not None and c_lo >= wanted) or lo >= limit:
             sl.unused += len(sl.ahead)
             return

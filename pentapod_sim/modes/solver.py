@@ -35,7 +35,7 @@ _LOG = logging.getLogger(__name__)
 
 #: Problems up to this size are solved densely with ``scipy.linalg.eigh`` (exact, all modes).
 DENSE_LIMIT = 400
-
+Array = npt.NDArray[np.float64]
 
 
 @dataclass(frozen=True)
@@ -65,7 +65,7 @@ class ModalResult:
     shapes: npt.NDArray[np.float64]
     sturm_count: int | None = None
     f_max: float | None = None
-    stats: dict = field(default_factory=dict)
+    stats: dict[str, Any] = field(default_factory=dict)
 
     @property
     def omega(self) -> npt.NDArray[np.float64]:
@@ -102,7 +102,8 @@ class ModalResult:
         return int(np.searchsorted(self.frequencies, f, side='left'))
 
 
-def _check_inputs(K, M, n_modes, f_max) -> int:
+def _check_inputs(K: sp.spmatrix, M: sp.spmatrix, n_modes: int | None,
+                  f_max: float | None) -> int:
     if K.shape != M.shape or K.shape[0] != K.shape[1]:
         raise ValueError(f'K {K.shape} and M {M.shape} must be square and of equal size')
     if n_modes is None and f_max is None:
@@ -114,7 +115,8 @@ def _check_inputs(K, M, n_modes, f_max) -> int:
     return K.shape[0]
 
 
-def _solve_dense(K, M, n_modes, f_max) -> tuple[np.ndarray, np.ndarray, int | None]:
+def _solve_dense(K: sp.spmatrix, M: sp.spmatrix, n_modes: int | None, f_max: float | None
+                 ) -> tuple[Array, Array, int | None]:
     """All modes of a small problem with LAPACK (exact reference, no Lanczos)."""
     lam, phi = sla.eigh(K.toarray(), M.toarray())
     below = None
@@ -126,7 +128,8 @@ def _solve_dense(K, M, n_modes, f_max) -> tuple[np.ndarray, np.ndarray, int | No
     return lam, phi, below
 
 
-def _assemble_blocks(lam_blocks: list, phi_blocks: list, n_keep: int | None):
+def _assemble_blocks(lam_blocks: list[Array], phi_blocks: list[Array], n_keep: int | None
+                     ) -> tuple[Array, Array, list[tuple[int, int]]]:
     """Stack the windows' modes into one array, freeing each window as it is copied."""
     total = sum(x.size for x in lam_blocks)
     n_keep = total if n_keep is None else min(n_keep, total)
@@ -143,7 +146,8 @@ def _assemble_blocks(lam_blocks: list, phi_blocks: list, n_keep: int | None):
     return lam, phi, blocks
 
 
-def _edge_orthogonality(M, phi, blocks, edge_modes: int = 12) -> float:
+def _edge_orthogonality(M: sp.spmatrix, phi: Array, blocks: list[tuple[int, int]],
+                        edge_modes: int = 12) -> float:
     """
     Largest M-orthogonality error across the window edges, where a mode found twice would show.
 

@@ -26,6 +26,7 @@ import time
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 import scipy.sparse as sp
 
 from pentapod_sim import shutdown
@@ -68,9 +69,9 @@ class Window:
     sigma: float
     count: int
     k: int
-    lam: np.ndarray
-    phi: np.ndarray
-    residual: np.ndarray
+    lam: npt.NDArray[np.float64]
+    phi: npt.NDArray[np.float64]
+    residual: npt.NDArray[np.float64]
     factor_seconds: float
     solve_seconds: float
 
@@ -113,7 +114,8 @@ class _Solver:
 _PROCESS_SOLVER: _Solver | None = None
 
 
-def _start_process(K, M, method: str, tol: float, stop) -> None:
+def _start_process(K: sp.spmatrix, M: sp.spmatrix, method: str, tol: float,
+                   stop: Any) -> None:
     """
     Set up a window process: its solver, and signals that end it.
 
@@ -180,16 +182,16 @@ class WindowPool:
                                              initializer=_start_process,
                                              initargs=(K, M, method, tol, self._stop))
 
-    def submit(self, sigma: float, k: int) -> Future:
+    def submit(self, sigma: float, k: int) -> Future[Window | None]:
         """Solve the window at shift ``sigma`` [rad^2/s^2] for ``k`` modes (0: count only)."""
         if self._executor is None:
             assert self._inline is not None
-            done: Future = Future()
+            done: Future[Window | None] = Future()
             done.set_result(self._inline(sigma, k))
             return done
         return self._executor.submit(_solve_in_process, float(sigma), int(k))
 
-    def result(self, future: Future) -> Window:
+    def result(self, future: Future[Window | None]) -> Window:
         """The window of ``future``, waiting for it; a lost window process is a ModalError."""
         try:
             window = future.result()
@@ -203,7 +205,7 @@ class WindowPool:
     def __enter__(self) -> 'WindowPool':
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         if self._executor is not None:
             self._stop.set()   # windows solved ahead and not needed stop at their next solve
             self._executor.shutdown(wait=True, cancel_futures=True)

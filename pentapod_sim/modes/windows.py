@@ -23,6 +23,7 @@ from __future__ import annotations
 from typing import Callable
 
 import numpy as np
+import numpy.typing as npt
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
@@ -40,21 +41,25 @@ DEFAULT_METHOD = 'arpack'
 
 #: Called before every solve with the shift factorisation; it may raise to abandon the window.
 Checkpoint = Callable[[], None]
+Array = npt.NDArray[np.float64]
+#: Eigenvalues [rad^2/s^2] and eigenvectors (columns)
+Eigenpairs = tuple[Array, Array]
 
 
-def _solver(factor: ShiftedFactor, checkpoint: Checkpoint | None) -> Callable:
+def _solver(factor: ShiftedFactor, checkpoint: Checkpoint | None) -> Callable[[Array], Array]:
     """``x -> (K - sigma M)^-1 x``, calling ``checkpoint`` first when one is given."""
     if checkpoint is None:
         return factor.lu.solve
     solve = factor.lu.solve
 
-    def checked(x):
+    def checked(x: Array) -> Array:
         checkpoint()
         return solve(x)
     return checked
 
 
-def _arpack(K, M, factor: ShiftedFactor, k: int, tol: float, checkpoint: Checkpoint | None):
+def _arpack(K: sp.spmatrix, M: sp.spmatrix, factor: ShiftedFactor, k: int, tol: float,
+            checkpoint: Checkpoint | None) -> Eigenpairs:
     n = K.shape[0]
     v0 = np.random.default_rng(n).standard_normal(n)   # same start whatever ran before
     solve = _solver(factor, checkpoint)   # blocks of vectors go to SuperLU in one call
@@ -63,7 +68,8 @@ def _arpack(K, M, factor: ShiftedFactor, k: int, tol: float, checkpoint: Checkpo
                       v0=v0, ncv=min(n - 1, max(2 * k + 1, 20)), tol=tol)
 
 
-def _primme(K, M, factor: ShiftedFactor, k: int, tol: float, checkpoint: Checkpoint | None):
+def _primme(K: sp.spmatrix, M: sp.spmatrix, factor: ShiftedFactor, k: int, tol: float,
+            checkpoint: Checkpoint | None) -> Eigenpairs:
     try:
         import primme
     except ImportError:
@@ -71,12 +77,12 @@ def _primme(K, M, factor: ShiftedFactor, k: int, tol: float, checkpoint: Checkpo
                          '(pip install primme); method arpack needs nothing else') from None
     n, solve = K.shape[0], _solver(factor, checkpoint)
 
-    def inverted(x):
+    def inverted(x: Array) -> Array:
         return M @ solve(M @ x)
 
     m_norm = [1.0]
 
-    def converged(value, vector, res_norm) -> bool:
+    def converged(value: float, vector: npt.ArrayLike | None, res_norm: float) -> bool:
         """ARPACK's criterion on the inverted pencil, 1000 x tighter."""
         if vector is not None:   # PRIMME may ask without the vector: keep the last ||M v||
             m_norm[0] = float(np.linalg.norm(M @ np.asarray(vector).ravel()))
@@ -95,8 +101,7 @@ def _primme(K, M, factor: ShiftedFactor, k: int, tol: float, checkpoint: Checkpo
 
 
 def window_eigs(K: sp.spmatrix, M: sp.spmatrix, factor: ShiftedFactor, k: int, method: str,
-                tol: float, checkpoint: Checkpoint | None = None
-                ) -> tuple[np.ndarray, np.ndarray]:
+                tol: float, checkpoint: Checkpoint | None = None) -> Eigenpairs:
     """
     Return the ``k`` eigenpairs nearest ``factor.sigma``, eigenvalues ascending.
 
@@ -126,8 +131,8 @@ def window_eigs(K: sp.spmatrix, M: sp.spmatrix, factor: ShiftedFactor, k: int, m
     return lam[order], phi[:, order]
 
 
-def mass_normalise(K: sp.spmatrix, M: sp.spmatrix, lam: np.ndarray, phi: np.ndarray,
-                   chunk: int = 16) -> np.ndarray:
+def mass_normalise(K: sp.spmatrix, M: sp.spmatrix, lam: Array, phi: Array,
+                   chunk: int = 16) -> Array:
     """
     Scale the columns of ``phi`` in place to ``phi_j^T M phi_j = 1``; return their residuals.
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 import hashlib
 import logging
 from pathlib import Path
-from typing import Callable, Mapping, Sequence
+from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 import numpy.typing as npt
@@ -19,10 +19,12 @@ import numpy.typing as npt
 from pentapod_sim import __version__
 from pentapod_sim.errors import ConfigError, ModelFileError
 from pentapod_sim.fe.assembly import build_model
-from pentapod_sim.fe.machine_data import load_machine
+from pentapod_sim.fe.machine_data import load_machine, MachineParams
+from pentapod_sim.fe.model import FEModel
 from pentapod_sim.modes.solver import solve_modes
 from pentapod_sim.paths import config_dir
 from pentapod_sim.plant.config import (
+    DampingGroup,
     load_reduction_config,
     ReductionConfig,
     relevance_rule,
@@ -47,7 +49,7 @@ LOG = logging.getLogger(__name__)
 
 
 def modal_damping(frequencies_hz: npt.ArrayLike, damping_ratio: npt.ArrayLike,
-                  groups: Sequence = ()) -> np.ndarray:
+                  groups: Sequence[DampingGroup] = ()) -> npt.NDArray[np.float64]:
     """
     Damping ratio of every mode: ``damping_ratio``, overridden in the bands of ``groups``.
 
@@ -73,7 +75,7 @@ def modal_damping(frequencies_hz: npt.ArrayLike, damping_ratio: npt.ArrayLike,
 def from_modal_data(frequencies_hz: npt.ArrayLike, point_shapes: Mapping[str, npt.ArrayLike],
                     strut_frames: npt.ArrayLike | None, inputs: Sequence[str],
                     outputs: Sequence[str], zeta: npt.ArrayLike = 0.001,
-                    d: npt.ArrayLike | None = None, meta: dict | None = None,
+                    d: npt.ArrayLike | None = None, meta: dict[str, Any] | None = None,
                     chord_position: float = 0.5) -> PlantModel:
     """
     Plant model from modal data: frequencies and mass-normalised shapes at named points.
@@ -108,7 +110,7 @@ def from_modal_data(frequencies_hz: npt.ArrayLike, point_shapes: Mapping[str, np
         if not np.all(np.isfinite(p.vector)):
             raise ModelFileError(f'port {p.name!r} needs strut frames, none were given')
     c_disp, c_vel = output_matrices(out_ports)
-    d = np.zeros((len(outputs), len(inputs))) if d is None else d
+    d = np.zeros((len(outputs), len(inputs))) if d is None else np.asarray(d, dtype=float)
     zeta = np.asarray(zeta, float)
     if zeta.ndim > 0 and zeta.shape != omega.shape:
         raise ConfigError(f'damping ratios: {zeta.size} given for {omega.size} modes')
@@ -120,7 +122,8 @@ def from_modal_data(frequencies_hz: npt.ArrayLike, point_shapes: Mapping[str, np
 
 
 def keep_by_relevance(plant_all: PlantModel,
-                      relevance: Sequence[RelevanceRule | Mapping]) -> np.ndarray:
+                      relevance: Sequence[RelevanceRule | Mapping[str, Any]]
+                      ) -> npt.NDArray[np.intp]:
     """
     Indices of the modes kept by any of the relevance criteria (see config/reduction.yaml).
 
@@ -135,12 +138,13 @@ def keep_by_relevance(plant_all: PlantModel,
             gains = modal_resonance_gains(sub.omega, sub.zeta, sub.b, sub.c_disp)
         else:
             gains = modal_dc_gains(sub.omega, sub.b, sub.c_disp)
-        keep[select_modes(gains, **rule.criterion)] = True
+        keep[select_modes(gains, rule.abs_limit, rule.rel_limit, rule.count)] = True
     return np.flatnonzero(keep)
 
 
-def plant_from_fe(fe, reduction_cfg: ReductionConfig, progress: Callable[[str], None] | None = None
-                  ) -> tuple[PlantModel, np.ndarray]:
+def plant_from_fe(fe: FEModel, reduction_cfg: ReductionConfig,
+                  progress: Callable[[str], None] | None = None
+                  ) -> tuple[PlantModel, npt.NDArray[np.intp]]:
     """
     Plant with every mode below ``modes_f_max`` of an FE model, and the relevant modes.
 
@@ -168,8 +172,8 @@ def plant_from_fe(fe, reduction_cfg: ReductionConfig, progress: Callable[[str], 
     modes = solve_modes(fe.K, fe.M, f_max=cfg.modes_f_max)
     say(f'{modes.n_modes} modes, {modes.frequencies[0]:.2f} .. {modes.frequencies[-1]:.2f} Hz')
     inputs, outputs = list(cfg.inputs), list(cfg.outputs)
-    chord = getattr(cfg, 'chord_position', 0.5)
-    zeta = modal_damping(modes.frequencies, cfg.damping_ratio, getattr(cfg, 'damping_groups', ()))
+    chord = cfg.chord_position
+    zeta = modal_damping(modes.frequencies, cfg.damping_ratio, cfg.damping_groups)
     plant_all = from_modal_data(modes.frequencies, modal_points(fe.points, modes.shapes),
                                 fe.strut_frames, inputs, outputs, zeta, chord_position=chord)
     keep = keep_by_relevance(plant_all, cfg.relevance)
@@ -211,7 +215,7 @@ def reduce_plant(plant_all: PlantModel, keep: npt.ArrayLike,
                       plant_all.output_descriptions, meta)
 
 
-def build_plant(position: str | npt.ArrayLike, machine=None,
+def build_plant(position: str | npt.ArrayLike, machine: MachineParams | None = None,
                 reduction_cfg: ReductionConfig | None = None,
                 progress: Callable[[str], None] | None = None) -> PlantModel:
     """
@@ -261,7 +265,7 @@ def model_cache_key(position: str) -> str:
 
 
 def load_or_build_model(model_file: str = '', position: str = '',
-                        cache_dir: str | Path = 'out/models'):
+                        cache_dir: str | Path = 'out/models') -> tuple[PlantModel, str]:
     """
     Load a saved PlantModel, or build it for a position (cached under ``cache_dir``).
 

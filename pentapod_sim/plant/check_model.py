@@ -16,11 +16,14 @@ from pathlib import Path
 from typing import Callable
 
 import numpy as np
+import numpy.typing as npt
 
 from pentapod_sim.errors import ConfigError, ModelFileError
 from pentapod_sim.fe.assembly import build_model
-from pentapod_sim.fe.machine_data import load_machine
-from pentapod_sim.plant.build import load_reduction_config, model_cache_key, plant_from_fe
+from pentapod_sim.fe.machine_data import load_machine, MachineParams
+from pentapod_sim.fe.model import FEModel
+from pentapod_sim.plant.build import model_cache_key, plant_from_fe
+from pentapod_sim.plant.config import load_reduction_config, ReductionConfig
 from pentapod_sim.plant.model import PlantModel
 
 LOG = logging.getLogger(__name__)
@@ -46,7 +49,7 @@ def check_f_max(sample_rate: float, f_min: float = DEFAULT_CHECK_F_MIN) -> float
     return float(max(f_min, 2.0 * sample_rate))
 
 
-def check_model_from_fe(fe, reduction_cfg, f_max: float,
+def check_model_from_fe(fe: FEModel, reduction_cfg: ReductionConfig, f_max: float,
                         progress: Callable[[str], None] | None = None) -> PlantModel:
     """
     Every mode of ``fe`` below ``f_max`` with the ports of ``reduction_cfg``, no reduction.
@@ -63,16 +66,15 @@ def check_model_from_fe(fe, reduction_cfg, f_max: float,
     progress : callable, optional
         Receives one message per stage.
     """
-    if isinstance(reduction_cfg, dict):
-        cfg = dict(reduction_cfg, modes_f_max=float(f_max))
-    else:                       # the ReductionConfig dataclass
-        cfg = dataclasses.replace(reduction_cfg, modes_f_max=float(f_max))
+    cfg = dataclasses.replace(reduction_cfg, modes_f_max=float(f_max))
     plant, _ = plant_from_fe(fe, cfg, progress)
     plant.meta.update(check_model=True, check_f_max_hz=float(f_max))
     return plant
 
 
-def build_check_model(position, f_max: float, machine=None, reduction_cfg=None,
+def build_check_model(position: str | npt.ArrayLike, f_max: float,
+                      machine: MachineParams | None = None,
+                      reduction_cfg: ReductionConfig | None = None,
                       progress: Callable[[str], None] | None = None) -> PlantModel:
     """
     Check model of a machine position (name of config/positions.yaml or a 5-vector pose).

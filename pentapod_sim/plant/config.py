@@ -10,7 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 import os
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Callable, Mapping
 
 import numpy as np
 
@@ -25,7 +25,7 @@ MEASURES = ('dc', 'resonance')
 PAIR_UNIT = 'unit of the pair'
 
 
-def _all(known: tuple[str, ...]):
+def _all(known: tuple[str, ...]) -> Callable[[Any], Any]:
     """YAML ``all`` stands for every port name."""
     return lambda value: list(known) if value == 'all' else value
 
@@ -150,7 +150,7 @@ def default_path() -> Path:
     return config_dir() / 'reduction.yaml'
 
 
-def load_reduction_config(path: str | os.PathLike | None = None) -> ReductionConfig:
+def load_reduction_config(path: str | os.PathLike[str] | None = None) -> ReductionConfig:
     """
     Read and validate config/reduction.yaml (or ``path``).
 
@@ -163,7 +163,7 @@ def load_reduction_config(path: str | os.PathLike | None = None) -> ReductionCon
     return replace(load(ReductionConfig, path), source=str(path))
 
 
-def relevance_rule(rule: RelevanceRule | Mapping) -> RelevanceRule:
+def relevance_rule(rule: RelevanceRule | Mapping[str, Any]) -> RelevanceRule:
     """A :class:`RelevanceRule`, validated from a mapping with the keys of the file's rules."""
     return rule if isinstance(rule, RelevanceRule) else build(RelevanceRule, dict(rule),
                                                              'relevance rule')

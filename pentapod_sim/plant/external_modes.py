@@ -22,6 +22,7 @@ from __future__ import annotations
 import csv
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any, Mapping
 
 import numpy as np
 import numpy.typing as npt
@@ -52,12 +53,12 @@ class ModalData:
         Where the data came from.
     """
 
-    frequencies_hz: np.ndarray
-    point_shapes: dict
-    strut_frames: np.ndarray | None = None
-    zeta: np.ndarray | None = None
+    frequencies_hz: npt.NDArray[np.float64]
+    point_shapes: dict[str, npt.NDArray[np.float64]]
+    strut_frames: npt.NDArray[np.float64] | None = None
+    zeta: npt.NDArray[np.float64] | None = None
     source: str = ''
-    meta: dict = field(default_factory=dict)
+    meta: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         """Check sizes and values; ModelFileError names the bad entry."""
@@ -79,8 +80,9 @@ class ModalData:
                                  f'expected ({m},)')
 
 
-def from_fe_modes(points: dict, strut_frames: npt.ArrayLike, frequencies_hz: npt.ArrayLike,
-                  shapes: npt.ArrayLike, names: list[str] | None = None) -> ModalData:
+def from_fe_modes(points: Mapping[str, Any], strut_frames: npt.ArrayLike,
+                  frequencies_hz: npt.ArrayLike, shapes: npt.ArrayLike,
+                  names: list[str] | None = None) -> ModalData:
     """Modal data of an FE model's modes at its named points (all, or ``names``)."""
     chosen = {n: points[n] for n in (names or points)}
     return ModalData(np.asarray(frequencies_hz, float), modal_points(chosen, shapes),
@@ -97,7 +99,8 @@ def save_npz(data: ModalData, path: str | Path) -> Path:
     if data.zeta is not None:
         arrays['zeta'] = data.zeta
     with open(path, 'wb') as stream:
-        np.savez(stream, **arrays)
+        # numpy >= 2.1's stubs match **arrays also against the flag allow_pickle (a bool)
+        np.savez(stream, **arrays)  # type: ignore[arg-type]
     return path
 
 

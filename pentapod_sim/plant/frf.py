@@ -44,15 +44,15 @@ class FrfResult:
         Free text for legends (e.g. 'P1 open loop').
     """
 
-    freq: np.ndarray
-    H: np.ndarray
-    input_names: list
-    output_names: list
-    input_units: list
-    output_units: list
+    freq: npt.NDArray[np.float64]
+    H: npt.NDArray[np.complex128]
+    input_names: list[str]
+    output_names: list[str]
+    input_units: list[str]
+    output_units: list[str]
     label: str = ''
 
-    def pair(self, output: str, input_: str) -> np.ndarray:
+    def pair(self, output: str, input_: str) -> npt.NDArray[np.complex128]:
         """The (n_f,) FRF of one output/input pair (PortError if absent)."""
         for name, have in ((output, self.output_names), (input_, self.input_names)):
             if name not in have:

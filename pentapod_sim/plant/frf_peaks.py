@@ -119,7 +119,8 @@ def plant_pair_frf(plant: PlantModel, output: str, input_: str,
     return PoleResidueFrf.from_state_space(sys.A, sys.B[:, i], sys.C[o], float(sys.D[o, i]))
 
 
-def _argmax_bounded(fun: Callable, lo: float, hi: float) -> tuple[float, float]:
+def _argmax_bounded(fun: Callable[[npt.NDArray[np.float64]], npt.NDArray[np.float64]],
+                    lo: float, hi: float) -> tuple[float, float]:
     """(frequency, value) of a local maximum of ``fun`` on [lo, hi] (Brent, bounded)."""
     if hi <= lo:
         return lo, float(fun(np.array([lo]))[0])

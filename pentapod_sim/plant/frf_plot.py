@@ -12,7 +12,8 @@ from pentapod_sim.plant.frf import FrfResult
 
 
 def frf_plot(results: Sequence[FrfResult], output: str, input_: str, path: str | Path,
-             mode_freqs: Sequence[Sequence[float]] | None = None, title: str = '') -> Path:
+             mode_freqs: Sequence[Sequence[float] | npt.NDArray[np.float64]] | None = None,
+             title: str = '') -> Path:
     """
     Bode plot (log magnitude, phase) of one pair for several FRFs; PNG at ``path``.
 
@@ -40,7 +41,7 @@ def frf_plot(results: Sequence[FrfResult], output: str, input_: str, path: str |
         ax.grid(True, which='both', alpha=0.3)
     if any(r.label for r in results):
         ax_mag.legend(loc='lower left')
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def dc_gain_plot(gains: npt.ArrayLike, freq_hz: npt.ArrayLike, path: str | Path,
@@ -79,8 +80,5 @@ def dc_gain_plot(gains: npt.ArrayLike, freq_hz: npt.ArrayLike, path: str | Path,
     ax.set_ylim(bottom=max(g[g > 0].min() if np.any(g > 0) else 1e-20, 1e-6 * g.max()))
     ax.legend()
     ax.grid(True, axis='y', which='both', alpha=0.3)
-    return _save(fig, path)
-
-
-def _save(fig, path) -> Path:
     return save_figure(fig, path)
+

@@ -72,7 +72,7 @@ class PlantModel:
     output_units: list[str]
     input_descriptions: list[str]
     output_descriptions: list[str]
-    meta: dict = field(default_factory=dict)
+    meta: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         """Convert to float arrays and check shapes (ModelFileError names the mismatch)."""

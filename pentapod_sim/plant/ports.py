@@ -17,7 +17,7 @@ input (same vector), so velocity feedback ``u = -g * rate`` through a pair dissi
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Mapping, Sequence
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 import numpy.typing as npt
@@ -65,6 +65,10 @@ class Port:
         return self.kind == 'force'
 
 
+#: (point name, 3-vector direction, 'translation' or 'rotation', sign)
+_Term = tuple[str, npt.NDArray[np.float64], str, float]
+
+
 @dataclass(frozen=True)
 class _Definition:
     """Geometric definition of a port: ((point, component rows, sign), ...) and metadata."""
@@ -72,11 +76,11 @@ class _Definition:
     unit: str
     description: str
     kind: str
-    # each term: (point name, 3-vector direction, 'translation' or 'rotation', sign)
-    terms: tuple
+    terms: tuple[_Term, ...]
 
 
-def _strut_terms(i: int, what: str, k: int, frames: npt.NDArray) -> tuple:
+def _strut_terms(i: int, what: str, k: int, frames: npt.NDArray[np.float64]
+                 ) -> tuple[_Term, ...]:
     """Terms of the strut bending (what='bending', axis k=2/3) or axial (what='axial') ports."""
     if what == 'bending':
         e = frames[i - 1, k - 1]
@@ -87,7 +91,8 @@ def _strut_terms(i: int, what: str, k: int, frames: npt.NDArray) -> tuple:
             (f'bp_ring{i}', e1, 'translation', -1.0))
 
 
-def _chord_terms(i: int, k: int, frames: npt.NDArray, n_span: int, position: float) -> tuple:
+def _chord_terms(i: int, k: int, frames: npt.NDArray[np.float64], n_span: int,
+                 position: float) -> tuple[_Term, ...]:
     """
     Terms of strut i's chord port along e_k: the chord point minus the chord between joints.
 
@@ -108,7 +113,7 @@ def _chord_terms(i: int, k: int, frames: npt.NDArray, n_span: int, position: flo
             (nodes[-1], e, 'translation', -position))
 
 
-def _definitions(frames: npt.NDArray, n_span: dict[int, int] | None = None,
+def _definitions(frames: npt.NDArray[np.float64], n_span: dict[int, int] | None = None,
                  chord_position: float = CHORD_POSITION) -> dict[str, _Definition]:
     """
     All port definitions for the given strut frames (5, 3, 3), keyed by name.
@@ -237,7 +242,7 @@ def collocated_output(input_name: str, kind: str = 'velocity') -> str:
         raise PortError(f'input {input_name!r} has no collocated {kind!r} output') from None
 
 
-def _point_rows(points: Mapping, name: str) -> npt.NDArray[np.float64]:
+def _point_rows(points: Mapping[str, Any], name: str) -> npt.NDArray[np.float64]:
     """Dense (6, n) observation matrix of a point; PortError names missing points."""
     try:
         matrix = points[name]
@@ -247,7 +252,7 @@ def _point_rows(points: Mapping, name: str) -> npt.NDArray[np.float64]:
     return matrix.toarray() if sp.issparse(matrix) else np.asarray(matrix, dtype=float)
 
 
-def _span_counts(points: Mapping) -> dict[int, int]:
+def _span_counts(points: Mapping[str, Any]) -> dict[int, int]:
     """Elements of each strut's active span: one more than its ``strut<i>_span<j>`` points."""
     counts = {}
     for i in range(1, N_STRUTS + 1):
@@ -259,7 +264,7 @@ def _span_counts(points: Mapping) -> dict[int, int]:
     return counts
 
 
-def port(points: Mapping, strut_frames: npt.ArrayLike, name: str,
+def port(points: Mapping[str, Any], strut_frames: npt.ArrayLike, name: str,
          chord_position: float = CHORD_POSITION) -> Port:
     """
     Build one port on the given point matrices.
@@ -301,7 +306,7 @@ def port(points: Mapping, strut_frames: npt.ArrayLike, name: str,
     return Port(name, definition.unit, definition.description, definition.kind, vector)
 
 
-def ports(points: Mapping, strut_frames: npt.ArrayLike, names: Sequence[str],
+def ports(points: Mapping[str, Any], strut_frames: npt.ArrayLike, names: Sequence[str],
           chord_position: float = CHORD_POSITION) -> list[Port]:
     """Build several ports; see :func:`port`."""
     return [port(points, strut_frames, name, chord_position) for name in names]
@@ -348,7 +353,8 @@ def output_matrices(port_list: Sequence[Port]
     return c_disp, c_vel
 
 
-def modal_points(points: Mapping, shapes: npt.ArrayLike) -> dict[str, npt.NDArray[np.float64]]:
+def modal_points(points: Mapping[str, Any], shapes: npt.ArrayLike
+                 ) -> dict[str, npt.NDArray[np.float64]]:
     """
     Project point observation matrices onto mode shapes.
 

@@ -67,7 +67,7 @@ def modal_resonance_gains(omega: npt.ArrayLike, zeta: npt.ArrayLike, b: npt.Arra
     return modal_dc_gains(omega, b, c) / (2 * zeta)[:, None, None]
 
 
-def _check_limit(name: str, value, upper: float = np.inf) -> None:
+def _check_limit(name: str, value: object, upper: float = np.inf) -> None:
     """ConfigError unless 0 < value < upper (finite number)."""
     if not isinstance(value, (int, float, np.floating, np.integer)) or isinstance(value, bool) \
             or not np.isfinite(value) or value <= 0 or value >= upper:
@@ -75,7 +75,8 @@ def _check_limit(name: str, value, upper: float = np.inf) -> None:
 
 
 def select_modes(gains: npt.ArrayLike, abs_limit: float | None = None,
-                 rel_limit: float | None = None, count: int | None = None) -> np.ndarray:
+                 rel_limit: float | None = None, count: int | None = None
+                 ) -> npt.NDArray[np.intp]:
     """
     Indices of the relevant modes (ascending), by exactly one criterion.
 
@@ -144,7 +145,8 @@ def static_compliance(K: sp.spmatrix, B: npt.ArrayLike,
     return np.asarray(C, float) @ lu.solve(np.asarray(B, float))
 
 
-def static_error_percent(g_reduced: npt.ArrayLike, g_full: npt.ArrayLike) -> np.ndarray:
+def static_error_percent(g_reduced: npt.ArrayLike, g_full: npt.ArrayLike
+                         ) -> npt.NDArray[np.float64]:
     """Signed static error ``(G_red - G) / G * 100`` [%] per pair; NaN where G == 0."""
     g_reduced, g_full = np.asarray(g_reduced, float), np.asarray(g_full, float)
     with np.errstate(divide='ignore', invalid='ignore'):
@@ -173,17 +175,18 @@ class ReductionResult:
         round-off only when ``g_full`` is exact.
     """
 
-    keep: np.ndarray
-    gains: np.ndarray
-    g_full: np.ndarray
-    g_reduced: np.ndarray
-    residual: np.ndarray
-    error_percent: np.ndarray
-    error_corrected_percent: np.ndarray
+    keep: npt.NDArray[np.intp]
+    gains: npt.NDArray[np.float64]
+    g_full: npt.NDArray[np.float64]
+    g_reduced: npt.NDArray[np.float64]
+    residual: npt.NDArray[np.float64]
+    error_percent: npt.NDArray[np.float64]
+    error_corrected_percent: npt.NDArray[np.float64]
 
 
 def reduce_modes(omega: npt.ArrayLike, b: npt.ArrayLike, c: npt.ArrayLike,
-                 g_full: npt.ArrayLike | None = None, **criterion) -> ReductionResult:
+                 g_full: npt.ArrayLike | None = None, *, abs_limit: float | None = None,
+                 rel_limit: float | None = None, count: int | None = None) -> ReductionResult:
     """
     Select modes by dc gain and evaluate the static error.
 
@@ -194,25 +197,27 @@ def reduce_modes(omega: npt.ArrayLike, b: npt.ArrayLike, c: npt.ArrayLike,
     g_full : (n_out, n_in) array_like, optional
         Exact static compliance (:func:`static_compliance`); default the sum over all
         given modes, which ignores modes that were never computed.
-    **criterion
-        Exactly one of ``abs_limit``, ``rel_limit``, ``count`` (:func:`select_modes`).
+    abs_limit, rel_limit, count
+        Exactly one of them (:func:`select_modes`).
     """
     gains = modal_dc_gains(omega, b, c)
-    keep = select_modes(gains, **criterion)
+    keep = select_modes(gains, abs_limit, rel_limit, count)
+    criterion = {k: v for k, v in (('abs_limit', abs_limit), ('rel_limit', rel_limit),
+                                   ('count', count)) if v is not None}
     g_red = gains[keep].sum(axis=0)
     if g_full is None:
         g_full = gains.sum(axis=0)
-    g_full = np.asarray(g_full, float)
-    residual = g_full - g_red
+    g_exact = np.asarray(g_full, float)
+    residual = g_exact - g_red
     g_corr = g_red + residual
     LOG.info('kept %d of %d modes (%s)', keep.size, gains.shape[0], criterion)
-    return ReductionResult(keep, gains, g_full, g_red, residual,
-                           static_error_percent(g_red, g_full),
-                           static_error_percent(g_corr, g_full))
+    return ReductionResult(keep, gains, g_exact, g_red, residual,
+                           static_error_percent(g_red, g_exact),
+                           static_error_percent(g_corr, g_exact))
 
 
 def harmonic_response(K: sp.spmatrix, M: sp.spmatrix, B: npt.ArrayLike, C: npt.ArrayLike,
-                      freq_hz: npt.ArrayLike, damping: sp.spmatrix | np.ndarray | None = None,
+                      freq_hz: npt.ArrayLike, damping: sp.spmatrix | npt.ArrayLike | None = None,
                       ) -> npt.NDArray[np.complex128]:
     """
     Direct harmonic solve of the full FE model, ``C (K - w^2 M + i w C_d)^-1 B``.
@@ -248,7 +253,8 @@ def harmonic_response(K: sp.spmatrix, M: sp.spmatrix, B: npt.ArrayLike, C: npt.A
     return out
 
 
-def frf_error_percent(h_reduced: npt.ArrayLike, h_reference: npt.ArrayLike) -> np.ndarray:
+def frf_error_percent(h_reduced: npt.ArrayLike, h_reference: npt.ArrayLike
+                      ) -> npt.NDArray[np.float64]:
     """
     Frequency-domain error per pair: ``max_f |H_red - H_ref| / max_f |H_ref| * 100`` [%].
 
@@ -265,7 +271,7 @@ def frf_error_percent(h_reduced: npt.ArrayLike, h_reference: npt.ArrayLike) -> n
 
 
 def frf_relative_error_percent(h_reduced: npt.ArrayLike,
-                               h_reference: npt.ArrayLike) -> np.ndarray:
+                               h_reference: npt.ArrayLike) -> npt.NDArray[np.float64]:
     """
     Pointwise relative FRF error ``|H_red - H_ref| / |H_ref| * 100`` [%], shape of the inputs.
 
@@ -276,7 +282,7 @@ def frf_relative_error_percent(h_reduced: npt.ArrayLike,
         return np.abs(h_reduced - h_reference) / np.abs(h_reference) * 100
 
 
-def between_resonances(freq_hz: npt.ArrayLike, f_max: float) -> np.ndarray:
+def between_resonances(freq_hz: npt.ArrayLike, f_max: float) -> npt.NDArray[np.float64]:
     """Midpoints [Hz] between consecutive natural frequencies below ``f_max`` [Hz]."""
     freq = np.sort(np.asarray(freq_hz, float))
     freq = freq[freq < f_max]

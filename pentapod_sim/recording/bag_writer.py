@@ -17,7 +17,7 @@ import logging
 import os
 from pathlib import Path
 import time
-from typing import Mapping, Optional
+from typing import Any, Mapping, Optional
 
 from mcap.writer import CompressionType, Writer
 import yaml
@@ -31,7 +31,7 @@ ROSBAG2_VERSION = 9
 RUN_METADATA_NAME = 'pentapod_run'
 
 
-def qos_profile(reliability: str, depth: int, durability: str = 'volatile') -> dict:
+def qos_profile(reliability: str, depth: int, durability: str = 'volatile') -> dict[str, Any]:
     """
     Build one rosbag2 v9 QoS profile entry (durations 0 = infinite, rosbag2's convention).
 
@@ -66,7 +66,7 @@ class _Topic:
     name: str
     msg_type: str
     channel_id: int
-    qos_profiles: list
+    qos_profiles: list[dict[str, Any]]
     count: int = 0
 
 
@@ -89,8 +89,9 @@ class BagWriter:
         ``''`` (none, rosbag2's default), ``'zstd'`` or ``'lz4'``.
     """
 
-    def __init__(self, path, run_info: Optional[Mapping] = None, chunk_size: int = 64 * 1024,
-                 flush_period_s: float = 0.5, compression: str = '') -> None:
+    def __init__(self, path: str | os.PathLike[str], run_info: Optional[Mapping[str, Any]] = None,
+                 chunk_size: int = 64 * 1024, flush_period_s: float = 0.5,
+                 compression: str = '') -> None:
         self.path = Path(path)
         compressions = {'': CompressionType.NONE, 'zstd': CompressionType.ZSTD,
                         'lz4': CompressionType.LZ4}
@@ -103,8 +104,8 @@ class BagWriter:
         self.custom_data = {str(k): str(v) for k, v in (run_info or {}).items()}
         self.custom_data.setdefault('package_version', __version__)
         self.flush_period_s = float(flush_period_s)
-        self._topics: dict = {}
-        self._schemas: dict = {}
+        self._topics: dict[str, _Topic] = {}
+        self._schemas: dict[str, int] = {}      # message type -> schema id
         self._start_ns: Optional[int] = None
         self._end_ns: Optional[int] = None
         self._last_flush = time.monotonic()
@@ -121,12 +122,12 @@ class BagWriter:
         """Messages written so far (all topics)."""
         return sum(t.count for t in self._topics.values())
 
-    def topic_counts(self) -> dict:
+    def topic_counts(self) -> dict[str, int]:
         """Return ``{topic: messages written}``."""
         return {name: t.count for name, t in self._topics.items()}
 
     def add_topic(self, topic: str, msg_type: str,
-                  qos_profiles: Optional[list] = None) -> None:
+                  qos_profiles: Optional[list[dict[str, Any]]] = None) -> None:
         """
         Register a topic (once) with its type ``pkg/msg/Type`` and offered QoS profiles.
 
@@ -155,16 +156,16 @@ class BagWriter:
         self._topics[topic] = _Topic(topic, msg_type, channel_id, profiles)
         self.write_metadata_yaml()
 
-    def add_record(self, name: str, data: Mapping) -> None:
+    def add_record(self, name: str, data: Mapping[str, Any]) -> None:
         """
         Store ``data`` as an MCAP metadata record ``name`` and in metadata.yaml.
 
         Values are converted to str; metadata.yaml's ``custom_data`` holds them as
         ``<name>.<key>``.
         """
-        data = {str(k): str(v) for k, v in data.items()}
-        self._writer.add_metadata(name, data)
-        self.custom_data.update({f'{name}.{k}': v for k, v in data.items()})
+        text = {str(k): str(v) for k, v in data.items()}
+        self._writer.add_metadata(name, text)
+        self.custom_data.update({f'{name}.{k}': v for k, v in text.items()})
         self.write_metadata_yaml()
 
     def write(self, topic: str, data: bytes, log_time_ns: int,
@@ -207,7 +208,7 @@ class BagWriter:
         self.write_metadata_yaml()
         self._last_flush = time.monotonic()
 
-    def metadata(self) -> dict:
+    def metadata(self) -> dict[str, Any]:
         """Return the rosbag2 ``rosbag2_bagfile_information`` dict for the current state."""
         start = self._start_ns or 0
         duration = (self._end_ns - start) if self._end_ns is not None else 0
@@ -262,17 +263,18 @@ class BagWriter:
     def __enter__(self) -> 'BagWriter':
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.close()
 
 
-class _NoAliasDumper(yaml.SafeDumper):
+# PyYAML carries no type information here, so its classes are Any to the type checker
+class _NoAliasDumper(yaml.SafeDumper):  # type: ignore[misc]
     """Safe YAML dumper that writes repeated objects in full (no &id anchors)."""
 
-    def ignore_aliases(self, data) -> bool:
+    def ignore_aliases(self, data: object) -> bool:
         return True
 
 
-def _dump_qos(profiles: list) -> str:
+def _dump_qos(profiles: list[dict[str, Any]]) -> str:
     """Serialise QoS profiles as YAML text for the MCAP channel metadata."""
     return yaml.dump(profiles, Dumper=_NoAliasDumper, sort_keys=False).strip()

@@ -22,7 +22,7 @@ BUILTIN_TYPES = frozenset({
 _FIELD = re.compile(r'^\s*([A-Za-z][\w/]*)(?:<=\d+)?(?:\[[^\]]*\])?\s+(\w+)\s*(=)?')
 
 
-def _share_dirs() -> list:
+def _share_dirs() -> list[Path]:
     """Candidate ``share`` folders: AMENT_PREFIX_PATH entries, then sys.prefix."""
     prefixes = [p for p in os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep) if p]
     prefixes.append(sys.prefix)
@@ -50,7 +50,7 @@ def msg_file_text(msg_type: str) -> str:
     raise BagError(f'no .msg file for type {msg_type!r}; looked in {tried}')
 
 
-def _split_type(msg_type: str) -> tuple:
+def _split_type(msg_type: str) -> tuple[str, str]:
     parts = msg_type.split('/')
     if len(parts) == 3 and parts[1] == 'msg':
         return parts[0], parts[2]
@@ -59,7 +59,7 @@ def _split_type(msg_type: str) -> tuple:
     raise BagError(f'message type {msg_type!r} is not of the form pkg/msg/Type')
 
 
-def field_types(msg_text: str, package: str) -> list:
+def field_types(msg_text: str, package: str) -> list[str]:
     """
     List the non-builtin field types of a .msg text as ``pkg/msg/Type`` (constants skipped).
 

@@ -8,8 +8,9 @@ a ROS run must reproduce, bit for bit (test/test_plant_core.py). A multi-rate pl
 way at the exchange rate; ``full_rate=True`` also keeps its N outputs per exchange.
 :func:`closed_loop_system` forms the closed-loop discrete system of linear laws --
 memoryless ones as static gains, laws with actuator/sensor dynamics or delays with their
-controller states -- for the analytic checks (:func:`closed_loop_matrices` is its static-gain
-special case); for a multi-rate plant it is the loop at the exchange rate.
+controller states -- for the analytic checks, with the one construction of
+:func:`pentapod_sim.sim.controllers.loop_system` (:func:`closed_loop_matrices` is its case of a
+static gain matrix); for a multi-rate plant it is the loop at the exchange rate.
 
 Units: as the plant ports (N, N m in; m, m/s, rad, rad/s out); time in steps of dt [s].
 """
@@ -23,7 +24,12 @@ import numpy as np
 import numpy.typing as npt
 
 from pentapod_sim.errors import ConfigError, PortError
-from pentapod_sim.sim.controllers import controller_of, loop_system, LoopSystem
+from pentapod_sim.sim.controllers import (
+    controller_of,
+    DiscreteController,
+    loop_system,
+    LoopSystem,
+)
 from pentapod_sim.sim.stepping import DiscretePlant
 
 LOG = logging.getLogger(__name__)
@@ -78,7 +84,7 @@ class Response:
         return self.u[:, self.input_names.index(name)]
 
 
-def _indices(names: Sequence[str], index: dict, what: str) -> npt.NDArray[np.intp]:
+def _indices(names: Sequence[str], index: dict[str, int], what: str) -> npt.NDArray[np.intp]:
     """Map port names to plant indices (PortError names a missing port)."""
     try:
         return np.array([index[n] for n in names], dtype=np.intp)
@@ -160,26 +166,6 @@ def simulate(plant: DiscretePlant, laws: Sequence[Law], excitation: npt.NDArray[
                     y_full)
 
 
-def feedback_gain(plant: DiscretePlant, laws: Sequence[Law]) -> npt.NDArray[np.float64]:
-    """
-    Total static gain K (n_in, n_out) of memoryless linear laws, u = K y.
-
-    Raises
-    ------
-    ConfigError
-        If a law has memory (``linear_gain()`` is None or missing).
-    """
-    gain = np.zeros((len(plant.input_names), len(plant.output_names)))
-    for law in laws:
-        k_law = getattr(law, 'linear_gain', lambda: None)()
-        if k_law is None:
-            raise ConfigError(f'{type(law).__name__} has memory or limits; use simulate()')
-        rows = _indices(law.actuator_ports, plant.input_index, 'actuator')
-        cols = _indices(law.sensor_ports, plant.output_index, 'sensor')
-        gain[np.ix_(rows, cols)] += k_law
-    return gain
-
-
 def closed_loop_system(plant: DiscretePlant, laws: Sequence[Law]) -> LoopSystem:
     """
     Discrete closed loop of the plant and linear laws, as :func:`simulate` steps it.
@@ -191,8 +177,10 @@ def closed_loop_system(plant: DiscretePlant, laws: Sequence[Law]) -> LoopSystem:
     Returns
     -------
     LoopSystem
-        ``(a, b, c_y, c_u, augmented)`` as :func:`closed_loop_matrices`, with the
-        controllers' states after the plant's.
+        ``z_{k+1} = a z_k + b e_k``, ``u_k = c_u z_k + e_k``, ``y_k = c_y z_k`` (e: external
+        input), state ``[x; xc; u_{k-1}]``: the plant's, the controllers', and the last input
+        only if a law reads an output with feed-through (``augmented``; otherwise
+        ``y_k = c_y z_k + D u_{k-1}``).
 
     Raises
     ------
@@ -203,20 +191,21 @@ def closed_loop_system(plant: DiscretePlant, laws: Sequence[Law]) -> LoopSystem:
                        plant.output_names, [controller_of(law) for law in laws])
 
 
-def closed_loop_matrices(plant: DiscretePlant, gain: npt.NDArray[np.float64]):
+def closed_loop_matrices(plant: DiscretePlant, gain: npt.ArrayLike) -> LoopSystem:
     """
     Discrete closed loop of a static gain ``u_k = K y_k`` (sampled feedback, zero-order hold).
 
-    Returns ``(a, b, c_y, c_u, augmented)`` with ``z_{k+1} = a z_k + b e_k``,
-    ``u_k = c_u z_k + e_k`` and ``y_k = c_y z_k`` (e: external input). The state is
-    ``z_k = [x_k; u_{k-1}]`` (``augmented``) only if the laws read an output with feed-through
-    (``K D != 0``); otherwise ``z_k = x_k`` and ``y_k = c_y z_k + D u_{k-1}``.
+    The loop of :func:`closed_loop_system` for one memoryless law on every port, with
+    ``K = gain`` (n_in, n_out): ``z_{k+1} = a z_k + b e_k``, ``u_k = c_u z_k + e_k``,
+    ``y_k = c_y z_k`` (e: external input). The state is ``z_k = [x_k; u_{k-1}]``
+    (``augmented``) only if ``K D != 0``; otherwise ``z_k = x_k`` and
+    ``y_k = c_y z_k + D u_{k-1}``.
+
+    Raises
+    ------
+    ConfigError
+        If ``gain`` is not (n_in, n_out) or not finite.
     """
-    a, b, c, d = plant.a, plant.b, plant.c, plant.d
-    kc, kd = gain @ c, gain @ d
-    if not np.any(kd):
-        return a + b @ kc, b.copy(), c.copy(), kc, False
-    m = b.shape[1]
-    a_cl = np.block([[a + b @ kc, b @ kd], [kc, kd]])
-    b_cl = np.vstack([b, np.eye(m)])
-    return a_cl, b_cl, np.hstack([c, d]), np.hstack([kc, kd]), True
+    static = DiscreteController.static(plant.output_names, plant.input_names, gain)
+    return loop_system(plant.a, plant.b, plant.c, plant.d, plant.input_names,
+                       plant.output_names, [static])

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 import json
-from typing import NamedTuple, Sequence
+from typing import NamedTuple, Protocol, Sequence
 
 import numpy as np
 import numpy.typing as npt
@@ -34,17 +34,17 @@ class DiscreteController:
     Attributes
     ----------
     sensor_ports, actuator_ports : tuple of str
-        Plant output and input port names.
+        Plant output and input port names (any sequence of str, kept as a tuple).
     a, b, c, d : ndarray
         (n, n), (n, n_s), (n_a, n), (n_a, n_s); n = 0 for a memoryless law.
     """
 
-    sensor_ports: tuple
-    actuator_ports: tuple
-    a: np.ndarray
-    b: np.ndarray
-    c: np.ndarray
-    d: np.ndarray
+    sensor_ports: Sequence[str]
+    actuator_ports: Sequence[str]
+    a: npt.NDArray[np.float64]
+    b: npt.NDArray[np.float64]
+    c: npt.NDArray[np.float64]
+    d: npt.NDArray[np.float64]
 
     def __post_init__(self) -> None:
         """Convert to float arrays and check the shapes (ConfigError names the mismatch)."""
@@ -94,7 +94,19 @@ class DiscreteController:
             raise ConfigError(f'not a controller description: {err}') from None
 
 
-def controller_of(law) -> DiscreteController:
+class PortedLaw(Protocol):
+    """What :func:`controller_of` needs of a law besides ``discrete_model``/``linear_gain``."""
+
+    @property
+    def sensor_ports(self) -> Sequence[str]:
+        """Plant output ports the law reads."""
+
+    @property
+    def actuator_ports(self) -> Sequence[str]:
+        """Plant input ports the law drives."""
+
+
+def controller_of(law: PortedLaw) -> DiscreteController:
     """
     The discrete linear model of a control law.
 

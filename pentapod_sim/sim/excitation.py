@@ -66,10 +66,11 @@ class Excitation:
         direction = np.asarray(spec.direction, dtype=float)
         self.direction = direction / np.linalg.norm(direction)
         self.first = int(math.ceil(spec.start_delay / self.dt - 1e-9))
-        self._random = None
-        self._table = None       # one period (periodic kinds) or the pulse (impulse)
+        self._random: npt.NDArray[np.float64] | None = None
+        # one period (periodic kinds) or the pulse (impulse)
+        self._table: npt.NDArray[np.float64] | None = None
         self._bins = np.zeros(0, dtype=np.intp)
-        self._stepped = None
+        self._stepped: signals.SteppedLayout | None = None
         kind = spec.kind
         if kind == 'random':
             self._random = _band_limited_noise(spec, self.dt, self._n_active())
@@ -106,7 +107,8 @@ class Excitation:
     @property
     def period_steps(self) -> int | None:
         """Samples per period of a periodic kind (multisine, periodic chirp), else None."""
-        return len(self._table) if self.spec.kind in PERIODIC_KINDS else None
+        table = self._table
+        return len(table) if self.spec.kind in PERIODIC_KINDS and table is not None else None
 
     @property
     def lines_hz(self) -> npt.NDArray[np.float64]:
@@ -117,8 +119,9 @@ class Excitation:
         (where its energy lies; a little spills outside); stepped-sine frequencies as applied;
         empty for the other kinds.
         """
-        if self.spec.kind in PERIODIC_KINDS:
-            return self._bins / (len(self._table) * self.dt)
+        period = self.period_steps
+        if period is not None:
+            return self._bins / (period * self.dt)
         if self._stepped is not None:
             return self._stepped.frequencies.copy()
         return np.zeros(0)
@@ -169,11 +172,11 @@ class Excitation:
         if spec.kind == 'none' or j < 0 or j * self.dt >= spec.duration - 1e-12 * self.dt:
             return 0.0
         tau = j * self.dt  # time since the start of the signal [s]
-        kind = spec.kind
-        if kind in PERIODIC_KINDS:
-            return float(self._table[j % len(self._table)])
-        if kind == 'impulse':
-            return float(self._table[j]) if j < len(self._table) else 0.0
+        kind, table = spec.kind, self._table
+        if kind in PERIODIC_KINDS and table is not None:
+            return float(table[j % len(table)])
+        if kind == 'impulse' and table is not None:
+            return float(table[j]) if j < len(table) else 0.0
         if kind == 'step':
             return spec.amplitude
         if kind == 'sine':
@@ -181,8 +184,9 @@ class Excitation:
         if kind == 'chirp':
             return spec.amplitude * float(scipy.signal.chirp(
                 tau, spec.f_start, spec.duration, spec.f_end, method='linear', phi=-90))
-        if kind == 'stepped_sine':
+        if kind == 'stepped_sine' and self._stepped is not None:
             return spec.amplitude * self._stepped.value(j)
+        assert self._random is not None     # the one kind left
         return float(self._random[j])
 
     def force(self, k: int) -> npt.NDArray[np.float64]:

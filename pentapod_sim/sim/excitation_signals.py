@@ -22,6 +22,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 import math
+from typing import Sequence
 
 import numpy as np
 import numpy.typing as npt
@@ -46,7 +47,7 @@ def line_phases(n_lines: int, kind: str, seed: int) -> npt.NDArray[np.float64]:
 
 
 def multisine_bins(n_period: int, dt: float, f_start: float, f_end: float,
-                   frequencies) -> npt.NDArray[np.intp]:
+                   frequencies: Sequence[float]) -> npt.NDArray[np.intp]:
     """
     DFT bins (of one period of ``n_period`` samples) of the multisine lines.
 
@@ -167,4 +168,4 @@ def stepped_frequencies(f_start: float, f_end: float, spacing: float) -> npt.NDA
     if not f_start > 0:
         raise ConfigError(f'stepped-sine lines from f_start = {f_start!r} Hz: need > 0 Hz')
     count = int(math.floor((f_end - f_start) / spacing + 1e-9)) + 1
-    return f_start + spacing * np.arange(count)
+    return f_start + spacing * np.arange(count, dtype=np.float64)

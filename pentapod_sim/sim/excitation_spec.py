@@ -13,7 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field, fields
 import json
 import math
-from typing import Any
+from typing import Any, Sequence
 
 import numpy as np
 import numpy.typing as npt
@@ -99,7 +99,7 @@ class ExcitationSpec:
     seed: int = 0
     period: float = 1.0
     phases: str = 'schroeder'
-    frequencies: list = field(default_factory=list)
+    frequencies: list[float] = field(default_factory=list)
     line_spacing: float = 1.0
     settle_time: float = 1.0
     periods_per_line: int = 10
@@ -107,7 +107,7 @@ class ExcitationSpec:
     pulse_shape: str = 'rect'
 
 
-def _choice(name: str, value, choices) -> None:
+def _choice(name: str, value: str, choices: Sequence[str]) -> None:
     if value not in choices:
         raise ConfigError(f'excitation {name} {value!r} is not one of {", ".join(choices)}')
 
@@ -173,12 +173,12 @@ def period_samples(period: float, dt: float) -> int:
 
 # --- JSON form ---------------------------------------------------------------------------------
 
-def _json_float(value) -> float | str:
+def _json_float(value: float) -> float | str:
     value = float(value)
     return value if math.isfinite(value) else str(value)   # 'inf', '-inf', 'nan'
 
 
-def spec_to_dict(spec: ExcitationSpec) -> dict:
+def spec_to_dict(spec: ExcitationSpec) -> dict[str, Any]:
     """Plain, JSON-safe data of ``spec`` (floats; non-finite ones as 'inf', '-inf', 'nan')."""
     out: dict[str, Any] = {}
     for f in fields(ExcitationSpec):
@@ -194,7 +194,7 @@ def spec_to_dict(spec: ExcitationSpec) -> dict:
     return out
 
 
-def _number(name: str, value, kind):
+def _number(name: str, value: object, kind: type[float]) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float, str)):
         raise ConfigError(f'excitation parameter {name!r} = {value!r} is not a number')
     try:
@@ -208,7 +208,7 @@ def _number(name: str, value, kind):
     return number
 
 
-def spec_from_dict(data: dict) -> ExcitationSpec:
+def spec_from_dict(data: object) -> ExcitationSpec:
     """
     The spec of :func:`spec_to_dict`'s data; missing keys take the defaults.
 

@@ -91,7 +91,8 @@ def continuous_loop_system(plant: PlantModel, controllers: Sequence[DiscreteCont
     return a_cl, b_cl, y_of
 
 
-def _open_loop_start(plant: PlantModel, controllers, size: int, dt: float | None):
+def _open_loop_start(plant: PlantModel, controllers: Sequence[DiscreteController], size: int,
+                     dt: float | None) -> tuple[np.ndarray, np.ndarray]:
     """Eigenvalues at t = 0 and their origin: mode index (>= 0) or -1 (controller)."""
     m = plant.n_modes
     if dt is None:
@@ -123,7 +124,8 @@ def _match(old: np.ndarray, old_origin: np.ndarray, new: np.ndarray) -> tuple[np
 
 
 def follow_poles(matrix_at: Callable[[float], np.ndarray], start: np.ndarray,
-                 start_origin: np.ndarray, steps: int = FOLLOW_STEPS):
+                 start_origin: np.ndarray, steps: int = FOLLOW_STEPS
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """
     Eigenvalues and eigenvectors of ``matrix_at(1)`` with the origin of every eigenvalue.
 
@@ -225,7 +227,7 @@ class LoopPoles:
             width = (np.abs(self.lam.real) if self.dt is None else 1.0 - np.abs(self.lam))
             return np.where(width > 0, np.abs(r) / width, np.inf)
 
-    def rows(self, plant: PlantModel) -> list[dict]:
+    def rows(self, plant: PlantModel) -> list[dict[str, float]]:
         """One dict per pole by frequency: class, frequency, damping, mode (1-based), MAC."""
         out = []
         for j in np.argsort(self.freq_hz):
@@ -240,7 +242,7 @@ class LoopPoles:
 
 
 def _poles(plant: PlantModel, lam: np.ndarray, vectors: np.ndarray, origin: np.ndarray,
-           dt: float | None, system: tuple) -> LoopPoles:
+           dt: float | None, system: tuple[np.ndarray, np.ndarray, np.ndarray]) -> LoopPoles:
     """Keep one pole per conjugate pair, classify, pair the structural ones by MAC."""
     index = np.flatnonzero(lam.imag >= 0)
     kept, origin = lam[index], origin[index]

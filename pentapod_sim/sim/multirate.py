@@ -27,6 +27,7 @@ Units: SI, as the model's ports; ``dt``, ``fine_dt`` in s.
 from __future__ import annotations
 
 import numbers
+from typing import TYPE_CHECKING
 
 import control
 import numpy as np
@@ -35,11 +36,15 @@ import numpy.typing as npt
 from pentapod_sim.errors import ConfigError
 from pentapod_sim.sim.stepping import DEFAULT_MAX_STATE_NORM, DiscretePlant, modal_blocks
 
+if TYPE_CHECKING:
+    from pentapod_sim.plant.model import PlantModel
+    from pentapod_sim.sim.controllers import LoopSystem
+
 #: Largest accepted number of substeps per exchange (the stacked output matrices grow with N).
 MAX_SUBSTEPS = 1000
 
 
-def check_substeps(substeps) -> int:
+def check_substeps(substeps: object) -> int:
     """Return ``substeps`` as an int in [1, MAX_SUBSTEPS] (ConfigError names a bad value)."""
     if isinstance(substeps, bool) or not isinstance(substeps, numbers.Integral) \
             or not 1 <= int(substeps) <= MAX_SUBSTEPS:
@@ -141,7 +146,7 @@ class MultiRatePlant(DiscretePlant):
         self.fine_dt = fine_plant.dt
 
     @classmethod
-    def from_model(cls, model, sample_rate: float, substeps: int = 1,
+    def from_model(cls, model: PlantModel, sample_rate: float, substeps: int = 1,
                    max_state_norm: float = DEFAULT_MAX_STATE_NORM) -> 'MultiRatePlant':
         """
         From a :class:`pentapod_sim.plant.model.PlantModel`.
@@ -187,7 +192,8 @@ class MultiRatePlant(DiscretePlant):
         return out
 
 
-def full_rate_loop_outputs(plant: MultiRatePlant, loop) -> tuple[np.ndarray, np.ndarray]:
+def full_rate_loop_outputs(plant: MultiRatePlant, loop: LoopSystem
+                           ) -> tuple[np.ndarray, np.ndarray]:
     """
     Full-rate outputs of the sampled loop: substeps j = 1..N-1 of exchange k.
 

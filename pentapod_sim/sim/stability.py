@@ -158,7 +158,7 @@ class LoopCheck:
                 f'model ({self.check_modes} modes below {self.check_f_max:g} Hz, margin '
                 f'{self.check_margin:.3g}, largest eigenvalue at {self.check_critical_hz:.0f} Hz)')
 
-    def as_row(self) -> dict:
+    def as_row(self) -> dict[str, float | str]:
         """Plain values for tables."""
         return {'sample_rate_hz': 1 / self.dt, 'plant_modes': self.plant_modes,
                 'plant_radius': self.plant_radius, 'plant_margin': self.plant_margin,

@@ -86,7 +86,7 @@ class DiscretePlant:
         self.modal = blocks is not None
         n, m = self.n_states, self.n_states // 2
         self._x = np.zeros(n)
-        if self.modal:
+        if blocks is not None:
             # work[j, i] = P_ij x_j (j = 0: q, 1: dq), work[2] = B_d u as (2, m);
             # x_i = (work[0, i] + work[1, i]) + work[2, i]
             self._blocks_t = np.ascontiguousarray(blocks.transpose(1, 0, 2))
@@ -249,8 +249,8 @@ class ForceMixer:
         self._allowed = {s.name: (set(s.ports) or set(self.input_names))
                          for s in self.sources.values()}
         self._cache: dict[tuple[str, tuple[str, ...]], npt.NDArray[np.intp]] = {}
-        self.rejected: Counter = Counter()
-        self.accepted: Counter = Counter()
+        self.rejected: Counter[tuple[str, str]] = Counter()     # (source, reason)
+        self.accepted: Counter[str] = Counter()
         n = len(self.input_names)
         self.latest = {name: np.zeros(n) for name in self.sources}
         self.latest_step = dict.fromkeys(self.sources, -1)
@@ -308,7 +308,8 @@ class ForceMixer:
         self.accepted[source] += 1
         return None
 
-    def _check(self, source, names, values, step, current_step, exact) -> str | None:
+    def _check(self, source: str, names: Sequence[str], values: npt.NDArray[np.float64],
+               step: int, current_step: int, exact: bool) -> str | None:
         """Return the reason a message (efforts as a float array) is unacceptable, or None."""
         if source not in self.sources:
             return f'unknown_source: {source!r} is not a configured force source'

@@ -1,6 +1,8 @@
 """The per-step record of a plant run (y_k, u_k), written to an .npz file at the end."""
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from pentapod_sim.sim.stepping import DiscretePlant, ForceMixer
@@ -45,7 +47,7 @@ class Trace:
             self.y[k], self.u[k] = y, u
 
     def save(self, path: str, core: DiscretePlant, mixer: ForceMixer, n_planned: int,
-             extra: dict) -> None:
+             extra: dict[str, Any]) -> None:
         """
         Write the steps run: y, u, dt, port names, reject counts and ``extra``.
 

@@ -9,9 +9,10 @@ groups. Offsets count from the end of the 4-byte encapsulation header (Fast-CDR 
 """
 import dataclasses
 import struct
-from typing import Optional
+from typing import Optional, Sequence
 
 import numpy as np
+import numpy.typing as npt
 
 from pentapod_sim.analysis.bag.message_store import MessageStore
 from pentapod_sim.errors import BagError
@@ -19,22 +20,26 @@ from pentapod_sim.errors import BagError
 JOINT_STATE_FIELDS = ('position', 'velocity', 'effort')
 HEADER = 4  # CDR encapsulation header bytes
 BATCH = 200_000  # messages per gather when checking layouts
+#: CDR messages of one topic: a store, or a list of their bytes
+Messages = MessageStore | Sequence[bytes]
+Indices = npt.NDArray[np.intp]
+Floats = npt.NDArray[np.float64]
 
 
 @dataclasses.dataclass
 class JointStateLayout:
     """Byte layout of one JointState message: names, array offsets, structural byte indices."""
 
-    names: list
-    arrays: dict  # field -> (absolute byte offset, element count)
-    structure: np.ndarray  # absolute indices of bytes that define the layout
+    names: list[str]
+    arrays: dict[str, tuple[int, int]]  # field -> (absolute byte offset, element count)
+    structure: Indices  # absolute indices of bytes that define the layout
 
 
 def _align(offset: int, size: int) -> int:
     return offset + (-offset) % size
 
 
-def _read_string(body: bytes, off: int, structure: list) -> tuple:
+def _read_string(body: bytes | memoryview, off: int, structure: list[int]) -> tuple[str, int]:
     off = _align(off, 4)
     (length,) = struct.unpack_from('<I', body, off)
     structure.extend(range(off, off + 4 + max(length - 1, 0)))
@@ -52,7 +57,7 @@ def joint_state_layout(data: bytes) -> JointStateLayout:
         If the bytes are too short for the layout they announce.
     """
     body = memoryview(data)[HEADER:]
-    structure: list = []
+    structure: list[int] = []
     try:
         _, off = _read_string(body, 8, structure)
         off = _align(off, 4)
@@ -80,11 +85,11 @@ def joint_state_layout(data: bytes) -> JointStateLayout:
     return JointStateLayout(names, arrays, np.asarray(structure, dtype=np.intp) + HEADER)
 
 
-def _store(messages) -> MessageStore:
+def _store(messages: Messages) -> MessageStore:
     return messages if isinstance(messages, MessageStore) else MessageStore.from_list(messages)
 
 
-def stamps_ns(messages) -> np.ndarray:
+def stamps_ns(messages: Messages) -> npt.NDArray[np.int64]:
     """
     Header stamps [ns] of messages whose first field is a std_msgs/Header or builtin Time.
 
@@ -104,12 +109,13 @@ def stamps_ns(messages) -> np.ndarray:
     return sec * 1_000_000_000 + nanosec
 
 
-def _groups_by_length(store: MessageStore) -> dict:
+def _groups_by_length(store: MessageStore) -> dict[int, Indices]:
     lengths = store.lengths
     return {int(length): np.flatnonzero(lengths == length) for length in np.unique(lengths)}
 
 
-def _same_layout(store: MessageStore, indices: np.ndarray, layout: JointStateLayout) -> tuple:
+def _same_layout(store: MessageStore, indices: Indices, layout: JointStateLayout
+                 ) -> tuple[Indices, Indices]:
     """Split ``indices`` into those whose structural bytes equal the layout's and the rest."""
     if len(layout.structure) == 0:
         return indices, indices[:0]
@@ -123,7 +129,7 @@ def _same_layout(store: MessageStore, indices: np.ndarray, layout: JointStateLay
     return indices[same], indices[~same]
 
 
-def _layouts(store: MessageStore) -> list:
+def _layouts(store: MessageStore) -> list[tuple[Indices, JointStateLayout]]:
     """Group message indices by identical JointState layout: [(indices, layout)]."""
     groups = []
     for _, indices in _groups_by_length(store).items():
@@ -134,7 +140,7 @@ def _layouts(store: MessageStore) -> list:
     return groups
 
 
-def joint_state_arrays(messages) -> tuple:
+def joint_state_arrays(messages: Messages) -> tuple[list[str], dict[str, Floats]]:
     """
     Decode JointState messages into per-field arrays.
 
@@ -153,13 +159,13 @@ def joint_state_arrays(messages) -> tuple:
     """
     store = _store(messages)
     groups = _layouts(store)
-    names: list = []
+    names: list[str] = []
     for _, layout in groups:
         names.extend(n for n in layout.names if n not in names)
     column = {name: k for k, name in enumerate(names)}
     values = {f: np.full((len(store), len(names)), np.nan) for f in JOINT_STATE_FIELDS}
     for indices, layout in groups:
-        cols = [column[n] for n in layout.names]
+        cols = np.array([column[n] for n in layout.names], dtype=np.intp)
         for field, (offset, count) in layout.arrays.items():
             if count == 0:
                 continue
@@ -171,7 +177,7 @@ def joint_state_arrays(messages) -> tuple:
     return names, values
 
 
-def joint_state_column(messages, field: str, name: str) -> tuple:
+def joint_state_column(messages: Messages, field: str, name: str) -> tuple[Floats, list[str]]:
     """
     Decode one value (``field`` of joint ``name``) of every JointState message.
 
@@ -195,7 +201,7 @@ def joint_state_column(messages, field: str, name: str) -> tuple:
     """
     store = _store(messages)
     values = np.full(len(store), np.nan)
-    names: list = []
+    names: list[str] = []
     for indices, layout in _layouts(store):
         names.extend(n for n in layout.names if n not in names)
         offset, count = layout.arrays[field]
@@ -205,7 +211,7 @@ def joint_state_column(messages, field: str, name: str) -> tuple:
     return values, names
 
 
-def wrench_arrays(messages, component: Optional[int] = None) -> np.ndarray:
+def wrench_arrays(messages: Messages, component: Optional[int] = None) -> Floats:
     """
     Decode WrenchStamped messages.
 

@@ -8,13 +8,24 @@ that gives up half-way leaves nothing behind. A damaged or missing part of a fil
 :class:`Damage` entry (where, why, which topics, which log-time span, how many messages lost),
 never an exception: only a file with nothing readable raises :class:`UnreadableBagError`.
 """
+from __future__ import annotations
+
 import dataclasses
 from pathlib import Path
-from typing import Optional
+from typing import Any, Optional, TYPE_CHECKING
 
 import numpy as np
+import numpy.typing as npt
 
 from pentapod_sim.errors import BagError
+
+if TYPE_CHECKING:       # the fast reader gets the class at run time (mcap_chunks.internals)
+    from mcap.records import Schema
+
+Bytes = npt.NDArray[np.uint8]
+Int64s = npt.NDArray[np.int64]
+#: messages data[starts[i]:starts[i] + lengths[i]] of one chunk
+Segment = tuple[Bytes, Int64s, Int64s]
 
 
 class UnreadableBagError(BagError):
@@ -56,8 +67,8 @@ class Damage:
     reason: str
     start_ns: Optional[int] = None
     end_ns: Optional[int] = None
-    lost: Optional[dict] = None
-    topics: tuple = ()
+    lost: Optional[dict[str, int]] = None
+    topics: tuple[str, ...] = ()
 
     @property
     def messages_lost(self) -> Optional[int]:
@@ -87,7 +98,7 @@ class ChannelInfo:
     """Topic and schema (an mcap Schema record, or None) of one MCAP channel."""
 
     topic: str
-    schema: object = None
+    schema: Optional[Schema] = None
 
     @property
     def msg_type(self) -> str:
@@ -112,20 +123,23 @@ class FileContent:
         Topics whose messages are kept (None: all); the others are listed without messages.
     """
 
-    def __init__(self, path: Path, wanted: Optional[set]) -> None:
+    def __init__(self, path: Path, wanted: Optional[set[str]]) -> None:
         self.path = Path(path)
         self.wanted = wanted
-        self.schemas: dict = {}    # schema id -> mcap Schema record
-        self.channels: dict = {}   # channel id -> ChannelInfo
-        self.segments: dict = {}   # topic -> [(data, starts, lengths, log times)]
-        self.loose: dict = {}      # topic -> ([payload], [log time])
-        self.orphans: dict = {}    # channel id without a Channel record -> messages seen
-        self.metadata: dict = {}
-        self.damage: list = []
+        self.schemas: dict[int, Schema] = {}          # schema id -> mcap Schema record
+        self.channels: dict[int, ChannelInfo] = {}    # channel id -> ChannelInfo
+        #: topic -> [(data, starts, lengths, log times)]
+        self.segments: dict[str, list[tuple[Bytes, Int64s, Int64s, Int64s]]] = {}
+        #: topic -> ([payload], [log time])
+        self.loose: dict[str, tuple[list[bytes], list[int]]] = {}
+        #: channel id without a Channel record -> messages seen
+        self.orphans: dict[int, int] = {}
+        self.metadata: dict[str, dict[str, str]] = {}
+        self.damage: list[Damage] = []
         self.truncated = False
         self.reader = 'fast'
         #: {topic: messages} the file says it holds (summary statistics), if trustworthy
-        self.expected: Optional[dict] = None
+        self.expected: Optional[dict[str, int]] = None
 
     def add_channel(self, channel_id: int, topic: str, schema_id: int) -> None:
         """Register a channel (a repeated registration keeps the first)."""
@@ -135,8 +149,8 @@ class FileContent:
         info = self.channels.get(channel_id)
         return info is not None and (self.wanted is None or info.topic in self.wanted)
 
-    def add_chunk(self, data: np.ndarray, channel_ids: np.ndarray, times: np.ndarray,
-                  starts: np.ndarray, lengths: np.ndarray) -> None:
+    def add_chunk(self, data: Bytes, channel_ids: Int64s, times: Int64s, starts: Int64s,
+                  lengths: Int64s) -> None:
         """Add the messages of one verified chunk (views into ``data``)."""
         for channel_id in np.unique(channel_ids).tolist():
             mine = channel_ids == channel_id
@@ -165,7 +179,7 @@ class FileContent:
         info = self.channels.get(int(channel_id))
         return info.topic if info else f'channel {int(channel_id)}'
 
-    def counts(self) -> dict:
+    def counts(self) -> dict[str, int]:
         """``{topic: messages read}`` (kept topics only)."""
         out = {topic: sum(len(s[1]) for s in segments)
                for topic, segments in self.segments.items()}
@@ -178,7 +192,7 @@ class FileContent:
         """Messages read (kept topics only)."""
         return sum(self.counts().values())
 
-    def report(self, offset: int, reason: str, **fields) -> Damage:
+    def report(self, offset: int, reason: str, **fields: Any) -> Damage:
         """Record one damaged part; return it (its loss may be filled in later)."""
         damage = Damage(self.path.name, int(offset), reason, **fields)
         self.damage.append(damage)
@@ -195,8 +209,8 @@ class FileContent:
                       self.path.name, 'the summary statistics')
 
 
-def reconcile(damage: list, expected: dict, read: dict, wanted: Optional[set], file: str,
-              source: str) -> None:
+def reconcile(damage: list[Damage], expected: dict[str, int], read: dict[str, int],
+              wanted: Optional[set[str]], file: str, source: str) -> None:
     """
     Explain every message that ``expected`` lists and the readers did not return.
 
@@ -219,7 +233,7 @@ def reconcile(damage: list, expected: dict, read: dict, wanted: Optional[set], f
                              lost=missing))
 
 
-def compact(data: np.ndarray, starts: np.ndarray, lengths: np.ndarray) -> tuple:
+def compact(data: Bytes, starts: Int64s, lengths: Int64s) -> Segment:
     """Copy the given messages of a chunk into a new contiguous array; return a segment."""
     ends = np.cumsum(lengths)
     new_starts = ends - lengths

@@ -24,14 +24,16 @@ import importlib
 import io
 import struct
 from types import SimpleNamespace
+from typing import Any
 import zlib
 
 import numpy as np
+import numpy.typing as npt
 
 try:
     import zstandard
 except ImportError:  # pragma: no cover - mcap depends on it
-    zstandard = None
+    zstandard = None  # type: ignore[assignment]  # its chunks are then reported unsupported
 try:
     import lz4.frame as lz4_frame
 except ImportError:  # pragma: no cover - mcap depends on it
@@ -43,6 +45,12 @@ _PREFIX = struct.Struct('<BQHIQQ')  # opcode, length, channel, sequence, log, pu
 _RECORD = struct.Struct('<BQ')
 _CHUNK_HEAD = struct.Struct('<QQQII')  # start, end, uncompressed size, crc, compression length
 _MESSAGE_MIN = 22  # channel u16 + sequence u32 + two u64 times
+Body = bytes | memoryview
+Int64s = npt.NDArray[np.int64]
+#: header, decompressed records (uint8), per message: channel, log time [ns], payload start,
+#: payload length; the Schema and Channel records
+SplitChunk = tuple['ChunkHeader', npt.NDArray[np.uint8], Int64s, Int64s, Int64s, Int64s,
+                   list[Any]]
 #: The mcap names the fast reader uses: module -> attributes.
 INTERNAL_NAMES = {
     'mcap.data_stream': ('ReadDataStream',),
@@ -83,16 +91,19 @@ def internals() -> SimpleNamespace:
 class _ExactReader(io.BytesIO):
     """A byte stream whose reads fail instead of returning fewer bytes than asked for."""
 
-    def read(self, size=-1) -> bytes:
+    def read(self, size: int | None = -1) -> bytes:
         data = super().read(size)
         if size is not None and size >= 0 and len(data) != size:
             raise RecordDamage(f'a field of {size} bytes runs past the record end')
         return data
 
 
-def parse_record(mcap: SimpleNamespace, kind: str, body) -> object:
+def parse_record(mcap: SimpleNamespace, kind: str, body: Body) -> Any:
     """
     Parse one record body with mcap's record class ``kind``; it must use every byte.
+
+    The record is an instance of ``mcap.records.<kind>`` (loaded at run time by
+    :func:`internals`, hence typed Any).
 
     Raises
     ------
@@ -130,7 +141,7 @@ class ChunkHeader:
     records_at: int  # offset of the records in the record body
 
 
-def chunk_header(body) -> ChunkHeader:
+def chunk_header(body: Body) -> ChunkHeader:
     """
     Parse and check the header of a Chunk record body (without opcode and length).
 
@@ -156,7 +167,7 @@ def chunk_header(body) -> ChunkHeader:
     return ChunkHeader(start, end, size, crc, compression, at + 8)
 
 
-def chunk_bytes(body, header: ChunkHeader):
+def chunk_bytes(body: Body, header: ChunkHeader) -> Body:
     """
     Return the decompressed, CRC-checked records of a Chunk record body.
 
@@ -167,6 +178,7 @@ def chunk_bytes(body, header: ChunkHeader):
     """
     data = memoryview(body)[header.records_at:]
     size = header.uncompressed_size
+    records: Body
     if header.compression and size > MAX_CHUNK_BYTES:
         raise RecordDamage(f'chunk uncompressed size {size} bytes exceeds {MAX_CHUNK_BYTES}')
     try:
@@ -198,7 +210,7 @@ def chunk_bytes(body, header: ChunkHeader):
     return records
 
 
-def split_chunk(mcap: SimpleNamespace, body) -> tuple:
+def split_chunk(mcap: SimpleNamespace, body: Body) -> SplitChunk:
     """
     Verify one Chunk record body and split it into its records.
 
@@ -226,7 +238,9 @@ def split_chunk(mcap: SimpleNamespace, body) -> tuple:
     """
     header = chunk_header(body)
     data = chunk_bytes(body, header)
-    messages, others = [], []  # messages: (channel, log time, payload start, payload length)
+    # channel, log time, payload start, payload length of one message after the other
+    messages: list[int] = []
+    others: list[Any] = []
     off, end = 0, len(data)
     message_op = int(mcap.Opcode.MESSAGE)
     kinds = {int(mcap.Opcode.SCHEMA): 'Schema', int(mcap.Opcode.CHANNEL): 'Channel'}

@@ -12,8 +12,9 @@ damaged record length cannot make it allocate more than the file holds.
 """
 import os
 from pathlib import Path
+from typing import BinaryIO, cast, IO
 
-from mcap.reader import make_reader
+from mcap.reader import make_reader, McapReader
 
 from pentapod_sim.analysis.bag.file_content import FileContent, UnreadableBagError
 
@@ -21,12 +22,12 @@ from pentapod_sim.analysis.bag.file_content import FileContent, UnreadableBagErr
 class _FileWindow:
     """A read-only file stream whose reads never ask for more than the file holds."""
 
-    def __init__(self, raw, seekable: bool) -> None:
+    def __init__(self, raw: BinaryIO, seekable: bool) -> None:
         self._raw = raw
         self._size = os.fstat(raw.fileno()).st_size
         self._seekable = seekable
 
-    def read(self, size: int = -1) -> bytes:
+    def read(self, size: int | None = -1) -> bytes:
         left = max(self._size - self._raw.tell(), 0)
         return self._raw.read(left if size is None or size < 0 else min(size, left))
 
@@ -38,6 +39,13 @@ class _FileWindow:
 
     def tell(self) -> int:
         return self._raw.tell()
+
+
+def _reader(raw: BinaryIO, seekable: bool, validate_crcs: bool = False) -> McapReader:
+    """``make_reader`` on a :class:`_FileWindow` of ``raw``."""
+    # make_reader is typed for IO[bytes]; it calls read, seek, tell and seekable only
+    window = cast(IO[bytes], _FileWindow(raw, seekable))
+    return make_reader(window, validate_crcs=validate_crcs)
 
 
 def read_file(path: Path, content: FileContent) -> None:
@@ -53,7 +61,7 @@ def read_file(path: Path, content: FileContent) -> None:
     with open(path, 'rb') as raw:
         _summary_counts(raw, content)
         raw.seek(0)
-        reader = make_reader(_FileWindow(raw, seekable=False), validate_crcs=True)
+        reader = _reader(raw, seekable=False, validate_crcs=True)
         try:
             for schema, channel, message in reader.iter_messages(log_time_order=False):
                 if channel.id not in content.channels:
@@ -73,17 +81,17 @@ def read_file(path: Path, content: FileContent) -> None:
     content.finish()
 
 
-def _summary_counts(raw, content: FileContent) -> None:
+def _summary_counts(raw: BinaryIO, content: FileContent) -> None:
     """Channels and expected messages per topic from the summary, if it is readable."""
     try:
-        summary = make_reader(_FileWindow(raw, seekable=True)).get_summary()
+        summary = _reader(raw, seekable=True).get_summary()
         if summary is None:
             return
         content.schemas.update(summary.schemas)
         for channel in summary.channels.values():
             content.add_channel(channel.id, channel.topic, channel.schema_id)
         if summary.statistics is not None:
-            expected: dict = {}
+            expected: dict[str, int] = {}
             for channel_id, count in summary.statistics.channel_message_counts.items():
                 topic = content.topic_of(channel_id)
                 expected[topic] = expected.get(topic, 0) + count
@@ -92,13 +100,13 @@ def _summary_counts(raw, content: FileContent) -> None:
         return
 
 
-def _metadata(raw, content: FileContent) -> None:
+def _metadata(raw: BinaryIO, content: FileContent) -> None:
     """Metadata records: through the summary's index, else read in sequence up to a damage."""
     for seekable in (True, False):
         raw.seek(0)
-        found: dict = {}
+        found: dict[str, dict[str, str]] = {}
         try:
-            for record in make_reader(_FileWindow(raw, seekable)).iter_metadata():
+            for record in _reader(raw, seekable).iter_metadata():
                 found[record.name] = dict(record.metadata)
         except Exception:  # noqa: BLE001 - the damage is reported by the message read
             if seekable:

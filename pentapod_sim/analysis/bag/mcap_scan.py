@@ -16,15 +16,17 @@ Two ways through a file, chosen by what is intact:
 Every chunk is verified as :mod:`~.mcap_chunks` describes. Nothing is allocated from a length
 before it is checked against the bytes that exist. Layout constants are the MCAP spec's.
 """
+import dataclasses
 import os
 from pathlib import Path
 import struct
 from types import SimpleNamespace
-from typing import Optional
+from typing import Any, BinaryIO, Iterator, Optional
 import zlib
 
-from pentapod_sim.analysis.bag.file_content import FileContent, UnreadableBagError
+from pentapod_sim.analysis.bag.file_content import Damage, FileContent, UnreadableBagError
 from pentapod_sim.analysis.bag.mcap_chunks import (
+    Body,
     chunk_header,
     internals,
     InternalsChanged,
@@ -37,6 +39,16 @@ MAGIC = b'\x89MCAP0\r\n'
 _FOOTER = struct.Struct('<BQQQI')  # opcode, length (20), summary start, offsets start, crc
 _TAIL = _FOOTER.size + len(MAGIC)
 _RECORD = struct.Struct('<BQ')
+
+
+@dataclasses.dataclass
+class _Summary:
+    """What the summary section indexes (mcap record objects, typed Any: see parse_record)."""
+
+    end: int                                    # start of the summary section
+    chunks: list[Any] = dataclasses.field(default_factory=list)     # ChunkIndex, by offset
+    statistics: Any = None                      # the Statistics record, if any
+    metadata: list[Any] = dataclasses.field(default_factory=list)   # MetadataIndex records
 
 
 def read_file(path: Path, content: FileContent) -> None:
@@ -61,7 +73,7 @@ def read_file(path: Path, content: FileContent) -> None:
                     raise UnreadableBagError(f'{path} is not an MCAP file (bad magic '
                                              f'{head[:8]!r}, no MCAP footer)')
                 content.report(0, 'file magic damaged', lost={})
-            if summary is not None and summary['chunks']:
+            if summary is not None and summary.chunks:
                 _read_indexed(mcap, stream, size, summary, content)
             else:
                 _read_sequential(mcap, stream, size, content, footer_ok)
@@ -70,12 +82,13 @@ def read_file(path: Path, content: FileContent) -> None:
     content.finish()
 
 
-def _read_at(stream, offset: int, length: int) -> bytes:
+def _read_at(stream: BinaryIO, offset: int, length: int) -> bytes:
     stream.seek(offset)
     return stream.read(length)
 
 
-def _summary(mcap: SimpleNamespace, stream, size: int, content: FileContent) -> tuple:
+def _summary(mcap: SimpleNamespace, stream: BinaryIO, size: int, content: FileContent
+             ) -> tuple[bool, Optional[_Summary]]:
     """
     Read footer and summary section.
 
@@ -83,9 +96,8 @@ def _summary(mcap: SimpleNamespace, stream, size: int, content: FileContent) -> 
     -------
     footer_ok : bool
         Whether the file ends with an intact-looking footer and magic.
-    summary : dict or None
-        ``chunks`` (ChunkIndex records by offset), ``statistics``, ``metadata`` (indexes),
-        ``end`` (start of the summary section); None (the reason reported) if unusable.
+    summary : _Summary or None
+        None (the reason reported) if unusable.
     """
     if size < len(MAGIC) + _TAIL:
         return False, None
@@ -103,12 +115,12 @@ def _summary(mcap: SimpleNamespace, stream, size: int, content: FileContent) -> 
         content.report(start, 'summary section or footer damaged (CRC mismatch); read the '
                        'data section record by record', lost={})
         return True, None
-    out = {'chunks': [], 'statistics': None, 'metadata': [], 'end': start}
+    out = _Summary(start)
     kinds = {int(mcap.Opcode.SCHEMA): 'Schema', int(mcap.Opcode.CHANNEL): 'Channel',
              int(mcap.Opcode.CHUNK_INDEX): 'ChunkIndex',
              int(mcap.Opcode.STATISTICS): 'Statistics',
              int(mcap.Opcode.METADATA_INDEX): 'MetadataIndex'}
-    records = []
+    records: list[tuple[str, Any]] = []
     try:
         for opcode, body, _ in _records(section, 0):
             if opcode in kinds:
@@ -123,16 +135,16 @@ def _summary(mcap: SimpleNamespace, stream, size: int, content: FileContent) -> 
         elif kind == 'Channel':
             _add_channel(content, record)
         elif kind == 'ChunkIndex':
-            out['chunks'].append(record)
+            out.chunks.append(record)
         elif kind == 'Statistics':
-            out['statistics'] = record
+            out.statistics = record
         else:
-            out['metadata'].append(record)
-    out['chunks'].sort(key=lambda index: index.chunk_start_offset)
+            out.metadata.append(record)
+    out.chunks.sort(key=lambda index: index.chunk_start_offset)
     return True, out
 
 
-def _records(data, offset: int):
+def _records(data: Body, offset: int) -> Iterator[tuple[int, memoryview, int]]:
     """Yield (opcode, body, offset) of the records in ``data``; RecordDamage on bad framing."""
     end = len(data)
     while offset < end:
@@ -145,11 +157,11 @@ def _records(data, offset: int):
         offset += 9 + length
 
 
-def _add_channel(content: FileContent, channel) -> None:
+def _add_channel(content: FileContent, channel: Any) -> None:
     content.add_channel(channel.id, channel.topic, channel.schema_id)
 
 
-def _take_chunk(mcap: SimpleNamespace, body, content: FileContent) -> None:
+def _take_chunk(mcap: SimpleNamespace, body: Body, content: FileContent) -> None:
     """Split a chunk (RecordDamage if it fails a check) and add its records."""
     _, data, channel_ids, times, starts, lengths, others = split_chunk(mcap, body)
     for record in others:
@@ -160,10 +172,10 @@ def _take_chunk(mcap: SimpleNamespace, body, content: FileContent) -> None:
     content.add_chunk(data, channel_ids, times, starts, lengths)
 
 
-def _read_indexed(mcap: SimpleNamespace, stream, size: int, summary: dict,
+def _read_indexed(mcap: SimpleNamespace, stream: BinaryIO, size: int, summary: _Summary,
                   content: FileContent) -> None:
-    data_end = summary['end']
-    for index in summary['chunks']:
+    data_end = summary.end
+    for index in summary.chunks:
         offset, length = index.chunk_start_offset, index.chunk_length
         topics = tuple(sorted({content.topic_of(c) for c in index.message_index_offsets}))
         try:
@@ -179,7 +191,7 @@ def _read_indexed(mcap: SimpleNamespace, stream, size: int, summary: dict,
             content.report(offset, f'damaged chunk skipped: {err}',
                            start_ns=index.message_start_time, end_ns=index.message_end_time,
                            lost=lost, topics=topics)
-    for index in summary['metadata']:
+    for index in summary.metadata:
         try:
             if not (len(MAGIC) <= index.offset and 9 <= index.length <= data_end - index.offset):
                 raise RecordDamage('metadata index points outside the data section')
@@ -190,21 +202,21 @@ def _read_indexed(mcap: SimpleNamespace, stream, size: int, summary: dict,
         except RecordDamage as err:
             content.report(index.offset, f'metadata record {index.name!r} damaged ({err})',
                            lost={})
-    if summary['statistics'] is not None:
-        expected: dict = {}
-        for channel_id, count in summary['statistics'].channel_message_counts.items():
+    if summary.statistics is not None:
+        expected: dict[str, int] = {}
+        for channel_id, count in summary.statistics.channel_message_counts.items():
             topic = content.topic_of(channel_id)
             expected[topic] = expected.get(topic, 0) + count
         content.expected = expected
 
 
-def _index_counts(mcap: SimpleNamespace, stream, index, data_end: int,
-                  content: FileContent) -> Optional[dict]:
+def _index_counts(mcap: SimpleNamespace, stream: BinaryIO, index: Any, data_end: int,
+                  content: FileContent) -> Optional[dict[str, int]]:
     """Messages per topic of one chunk from its Message Index records (None if unreadable)."""
     start = index.chunk_start_offset + index.chunk_length
     if not index.message_index_offsets or index.message_index_length > data_end - start:
         return None
-    counts: dict = {}
+    counts: dict[str, int] = {}
     try:
         section = _read_at(stream, start, index.message_index_length)
         for opcode, body, _ in _records(section, 0):
@@ -217,12 +229,12 @@ def _index_counts(mcap: SimpleNamespace, stream, index, data_end: int,
     return counts
 
 
-def _take_metadata(mcap: SimpleNamespace, body, content: FileContent) -> None:
+def _take_metadata(mcap: SimpleNamespace, body: Body, content: FileContent) -> None:
     record = parse_record(mcap, 'Metadata', body)
     content.metadata[record.name] = dict(record.metadata)
 
 
-def _read_sequential(mcap: SimpleNamespace, stream, size: int, content: FileContent,
+def _read_sequential(mcap: SimpleNamespace, stream: BinaryIO, size: int, content: FileContent,
                      footer_seen: bool) -> None:
     """Read records from the start; stop at the data end, a cut or broken framing."""
     ops = SimpleNamespace(**{name: int(getattr(mcap.Opcode, name)) for name in (
@@ -230,7 +242,8 @@ def _read_sequential(mcap: SimpleNamespace, stream, size: int, content: FileCont
         'FOOTER')})
     kinds = {ops.SCHEMA: 'Schema', ops.CHANNEL: 'Channel', ops.METADATA: 'Metadata',
              ops.MESSAGE_INDEX: 'MessageIndex'}
-    offset, damaged_chunk, chunked = len(MAGIC), None, False
+    offset, chunked = len(MAGIC), False
+    damaged_chunk: Optional[Damage] = None
     while True:
         stream.seek(offset)
         prefix = stream.read(9)
@@ -273,7 +286,8 @@ def _read_sequential(mcap: SimpleNamespace, stream, size: int, content: FileCont
         offset += 9 + length
 
 
-def _chunk_in_sequence(mcap: SimpleNamespace, body, offset: int, content: FileContent):
+def _chunk_in_sequence(mcap: SimpleNamespace, body: Body, offset: int, content: FileContent
+                       ) -> Optional[Damage]:
     """Take a chunk met in a sequential read; return its damage entry if it is damaged."""
     header = chunk_header(body)  # RecordDamage here: its framing is broken, stop reading
     try:
@@ -284,7 +298,8 @@ def _chunk_in_sequence(mcap: SimpleNamespace, body, offset: int, content: FileCo
     return None
 
 
-def _take_simple(kind: str, record, content: FileContent, damaged_chunk) -> None:
+def _take_simple(kind: str, record: Any, content: FileContent,
+                 damaged_chunk: Optional[Damage]) -> None:
     if kind == 'Schema':
         content.schemas[record.id] = record
     elif kind == 'Channel':
@@ -299,10 +314,10 @@ def _take_simple(kind: str, record, content: FileContent, damaged_chunk) -> None
         damaged_chunk.topics = tuple(sorted(lost))
 
 
-def _cut_record(content: FileContent, stream, offset: int, is_chunk: bool, size: int,
+def _cut_record(content: FileContent, stream: BinaryIO, offset: int, is_chunk: bool, size: int,
                 length: int) -> None:
     content.truncated = True
-    fields = {}
+    fields: dict[str, int] = {}
     if is_chunk and size - offset - 9 >= 16:
         start_ns, end_ns = struct.unpack('<QQ', _read_at(stream, offset + 9, 16))
         fields = {'start_ns': start_ns, 'end_ns': end_ns}

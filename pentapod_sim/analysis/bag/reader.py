@@ -21,18 +21,23 @@ Field specifications (``TOPIC.FIELD``; topic names contain no dots):
 
 Times are header stamps (simulation time) [s] when the type has one, else MCAP log times.
 """
+from __future__ import annotations
+
 import dataclasses
 import logging
+import os
 from pathlib import Path
-from typing import Optional
+from typing import Any, NoReturn, Optional, TYPE_CHECKING
 import warnings
 
 import numpy as np
+import numpy.typing as npt
 import yaml
 
 from pentapod_sim.analysis.bag import cdr_arrays, mcap_public, mcap_scan
 from pentapod_sim.analysis.bag.file_content import (
     BagDamageWarning,
+    Damage,
     FileContent,
     McapInternalsWarning,
     reconcile,
@@ -42,6 +47,9 @@ from pentapod_sim.analysis.bag.mcap_chunks import InternalsChanged
 from pentapod_sim.analysis.bag.message_store import MessageStore
 from pentapod_sim.errors import BagError
 
+if TYPE_CHECKING:
+    from mcap.records import Schema
+
 LOGGER = logging.getLogger(__name__)
 STAMPED_TYPES = ('sensor_msgs/msg/JointState', 'geometry_msgs/msg/WrenchStamped',
                  'rosgraph_msgs/msg/Clock')
@@ -49,7 +57,7 @@ WRENCH_FIELDS = ('force.x', 'force.y', 'force.z', 'torque.x', 'torque.y', 'torqu
 READERS = ('fast', 'mcap.reader')
 YAML_LOADER = getattr(yaml, 'CSafeLoader', yaml.SafeLoader)  # libyaml: 20x faster
 #: Why the fast reader cannot be used in this process (set once, with the one warning).
-FALLBACK = {'reason': None}
+FALLBACK: dict[str, Optional[str]] = {'reason': None}
 
 
 @dataclasses.dataclass
@@ -60,8 +68,8 @@ class TopicData:
     msg_type: str
     schema_text: str
     payloads: MessageStore = dataclasses.field(default_factory=MessageStore)
-    _times: list = dataclasses.field(default_factory=list)
-    schema: object = None  # the file's mcap Schema record (for mcap_ros2)
+    _times: list[npt.NDArray[np.int64]] = dataclasses.field(default_factory=list)
+    schema: Optional[Schema] = None  # the file's mcap Schema record (for mcap_ros2)
 
     @property
     def count(self) -> int:
@@ -140,16 +148,17 @@ class Bag:
         The reader that read the files.
     """
 
-    def __init__(self, path, topics: Optional[list] = None, reader: str = 'fast') -> None:
+    def __init__(self, path: str | os.PathLike[str], topics: Optional[list[str]] = None,
+                 reader: str = 'fast') -> None:
         if reader not in READERS:
             raise BagError(f'unknown bag reader {reader!r}; use one of {READERS}')
         self.path = Path(path)
         self.wanted = set(topics) if topics is not None else None
-        self.topics: dict = {}
-        self.custom_data: dict = {}
-        self.mcap_metadata: dict = {}
-        self.metadata_yaml: Optional[dict] = None
-        self.damage: list = []
+        self.topics: dict[str, TopicData] = {}
+        self.custom_data: dict[str, Any] = {}
+        self.mcap_metadata: dict[str, dict[str, str]] = {}
+        self.metadata_yaml: Optional[dict[str, Any]] = None
+        self.damage: list[Damage] = []
         self.truncated = False
         self.reader = reader
         for file in self._mcap_files():
@@ -165,7 +174,7 @@ class Bag:
         if self.damage:
             warnings.warn(BagDamageWarning(self.damage_summary()), stacklevel=3)
 
-    def _mcap_files(self) -> list:
+    def _mcap_files(self) -> list[Path]:
         if self.path.is_file():
             return [self.path]
         if not self.path.is_dir():
@@ -214,10 +223,10 @@ class Bag:
             for data, starts, lengths, times in segments:
                 self.topics[topic].payloads.add_segment(data, starts, lengths)
                 self.topics[topic]._times.append(times)
-        for topic, (payloads, times) in content.loose.items():
+        for topic, (payloads, log_times) in content.loose.items():
             for payload in payloads:
                 self.topics[topic].payloads.append(payload)
-            self.topics[topic]._times.append(np.asarray(times, dtype=np.int64))
+            self.topics[topic]._times.append(np.asarray(log_times, dtype=np.int64))
         self.mcap_metadata.update(content.metadata)
         self.damage.extend(content.damage)
         self.truncated |= content.truncated
@@ -228,6 +237,8 @@ class Bag:
 
     def _reconcile_with_metadata_yaml(self) -> None:
         """Count what a cut file lost from metadata.yaml's per-topic message counts."""
+        if self.metadata_yaml is None:
+            return
         try:
             expected = {entry['topic_metadata']['name']: int(entry['message_count'])
                         for entry in self.metadata_yaml['topics_with_message_count']}
@@ -261,7 +272,7 @@ class Bag:
             return cdr_arrays.stamps_ns(data.payloads)
         return data.log_time_ns
 
-    def fields(self, name: str) -> list:
+    def fields(self, name: str) -> list[str]:
         """List the field specs :meth:`series` accepts for a topic (known types only)."""
         data = self.topic(name)
         if data.msg_type == 'sensor_msgs/msg/JointState' and data.count:
@@ -287,6 +298,7 @@ class Bag:
         data = self.topic(topic)
         if data.count == 0:
             raise BagError(f'topic {topic!r} in {self.path} has no messages')
+        values: npt.NDArray[np.floating[Any]]
         if data.msg_type == 'sensor_msgs/msg/JointState':
             values, unit = self._joint_field(data, field)
         elif data.msg_type == 'geometry_msgs/msg/WrenchStamped':
@@ -299,7 +311,7 @@ class Bag:
         t_ns = self.times_ns(topic)
         return Series(t_ns * 1e-9, values, unit, spec, t_ns)
 
-    def _joint_field(self, data: TopicData, field: str) -> tuple:
+    def _joint_field(self, data: TopicData, field: str) -> tuple[npt.NDArray[np.float64], str]:
         first, _, second = field.partition('.')
         if second in cdr_arrays.JOINT_STATE_FIELDS and first not in cdr_arrays.JOINT_STATE_FIELDS:
             first, second = second, first
@@ -314,7 +326,7 @@ class Bag:
         return column, joint_unit(first, second)
 
     @staticmethod
-    def _wrench_field(data: TopicData, field: str) -> tuple:
+    def _wrench_field(data: TopicData, field: str) -> tuple[npt.NDArray[np.float64], str]:
         field = field.removeprefix('wrench.')
         if field not in WRENCH_FIELDS:
             raise BagError(f'field {field!r} not in {data.name}; use one of {WRENCH_FIELDS}')
@@ -344,13 +356,14 @@ def _generic_field(data: TopicData, field: str) -> np.ndarray:
     return out
 
 
-def _unknown_joint_field(data: TopicData, field: str, names: list) -> None:
+def _unknown_joint_field(data: TopicData, field: str, names: list[str]) -> NoReturn:
     """Raise BagError listing the JointState fields that exist."""
     choices = [f'{f}.{n}' for f in cdr_arrays.JOINT_STATE_FIELDS for n in names]
     raise BagError(f'field {field!r} not in {data.name}; use one of {choices}')
 
 
-def open_bag(path, topics: Optional[list] = None, reader: str = 'fast') -> Bag:
+def open_bag(path: str | os.PathLike[str], topics: Optional[list[str]] = None,
+             reader: str = 'fast') -> Bag:
     """
     Load a bag folder or .mcap file.
 

@@ -16,6 +16,7 @@ import numpy.typing as npt
 from pentapod_sim.analysis.ema.lsfd import lsfd, refine_poles, ResidueFit
 from pentapod_sim.analysis.ema.poles import (
     as_frf_array,
+    OrderPoles,
     plscf,
     pole_frequency_damping,
     select_poles,
@@ -51,8 +52,8 @@ class ModalModel:
     freq_hz: np.ndarray
     damping: np.ndarray
     fit: ResidueFit
-    diagram: list
-    band: tuple
+    diagram: list[OrderPoles]
+    band: tuple[float, float]
     tol: Tolerances
 
     @property

@@ -122,7 +122,7 @@ def lsfd(freq: npt.ArrayLike, H: npt.ArrayLike, poles: npt.ArrayLike,
     return ResidueFit(poles, residues, coef[..., 2 * r], coef[..., 2 * r + 1], frf_form)
 
 
-def _line_weights(H: np.ndarray, sigma) -> np.ndarray:
+def _line_weights(H: np.ndarray, sigma: npt.ArrayLike | None) -> np.ndarray:
     """Weights (No * Ni, F): 1 / sigma per line (floored), or ones."""
     n_out, n_in, n_freq = H.shape
     if sigma is None:
@@ -135,7 +135,8 @@ def _line_weights(H: np.ndarray, sigma) -> np.ndarray:
 
 
 def _solve(freq: np.ndarray, H: np.ndarray, poles: np.ndarray, frf_form: str,
-           weights: np.ndarray, dpoles: np.ndarray | None = None) -> tuple:
+           weights: np.ndarray, dpoles: np.ndarray | None = None
+           ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     """
     Weighted LSFD: coefficients (No, Ni, 2R + 2), residual vector, Jacobian or None.
 
@@ -213,7 +214,7 @@ def _refine_one(freq: np.ndarray, H: np.ndarray, pole: complex, others: np.ndarr
                 frf_form: str, weights: np.ndarray) -> complex:
     """One pole minimising the weighted LSFD residual with ``others`` fixed."""
 
-    def to_pole(x: np.ndarray) -> tuple:
+    def to_pole(x: np.ndarray) -> tuple[complex, np.ndarray]:
         wn, zeta = np.exp(x[0]), min(np.exp(x[1]), 0.999)
         root = np.sqrt(1 - zeta ** 2)
         lam = wn * (-zeta + 1j * root)
@@ -221,9 +222,9 @@ def _refine_one(freq: np.ndarray, H: np.ndarray, pole: complex, others: np.ndarr
         dpoles[0, 0], dpoles[1, 0] = lam, zeta * wn * (-1 - 1j * zeta / root)
         return lam, dpoles
 
-    cache: dict = {}
+    cache: dict[bytes, tuple[np.ndarray, np.ndarray | None]] = {}
 
-    def evaluate(x: np.ndarray) -> tuple:
+    def evaluate(x: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
         key = x.tobytes()
         if key not in cache:
             cache.clear()

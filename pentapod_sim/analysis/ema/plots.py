@@ -15,6 +15,7 @@ matplotlib.use('Agg')
 import matplotlib.pyplot as plt  # noqa: E402  (backend must be chosen first)
 import numpy as np  # noqa: E402
 
+from pentapod_sim.analysis.ema.identify import ModalModel  # noqa: E402
 from pentapod_sim.figures import save_figure  # noqa: E402
 
 #: marker, colour, legend text per stability class (pentapod_sim.analysis.ema.poles.CLASSES)
@@ -23,7 +24,8 @@ CLASS_STYLE = {'o': ('.', '0.6', 'new'), 'f': ('x', 'tab:orange', 'f stable'),
                's': ('o', 'tab:green', 'f, zeta, vector stable')}
 
 
-def stability_plot(model, freq: np.ndarray, H: np.ndarray, path, title: str = '') -> Path:
+def stability_plot(model: ModalModel, freq: np.ndarray, H: np.ndarray, path: str | Path,
+                   title: str = '') -> Path:
     """
     Stability diagram: poles per model order over frequency, with the FRF magnitude sum.
 
@@ -68,8 +70,8 @@ def stability_plot(model, freq: np.ndarray, H: np.ndarray, path, title: str = ''
     return save_figure(fig, path)
 
 
-def synthesis_plot(model, freq: np.ndarray, H: np.ndarray, labels: Sequence[str], unit: str,
-                   path, title: str = '') -> Path:
+def synthesis_plot(model: ModalModel, freq: np.ndarray, H: np.ndarray, labels: Sequence[str],
+                   unit: str, path: str | Path, title: str = '') -> Path:
     """
     Measured FRFs against those synthesised from the identified modes (one input).
 

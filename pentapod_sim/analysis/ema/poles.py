@@ -66,7 +66,7 @@ class OrderPoles:
     classes: Optional[np.ndarray] = None
 
 
-def pole_frequency_damping(poles: npt.ArrayLike) -> tuple:
+def pole_frequency_damping(poles: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     """Natural frequency [Hz] and damping ratio [-] of continuous poles ``s`` [rad/s]."""
     poles = np.asarray(poles, dtype=complex)
     wn = np.abs(poles)
@@ -75,7 +75,8 @@ def pole_frequency_damping(poles: npt.ArrayLike) -> tuple:
 
 
 def plscf(freq: npt.ArrayLike, H: npt.ArrayLike, orders: Sequence[int],
-          sigma: Optional[npt.ArrayLike] = None, max_damping: float = 0.2) -> list:
+          sigma: Optional[npt.ArrayLike] = None, max_damping: float = 0.2
+          ) -> list[OrderPoles]:
     """
     Poles of the (poly-reference) least-squares complex frequency-domain estimator.
 
@@ -138,7 +139,7 @@ def as_frf_array(H: npt.ArrayLike, n_freq: int) -> np.ndarray:
     return H
 
 
-def _weights(H: np.ndarray, sigma) -> np.ndarray:
+def _weights(H: np.ndarray, sigma: Optional[npt.ArrayLike]) -> np.ndarray:
     """Weight per output and line (F,) from the noise std, or 1/RMS of the output's FRFs."""
     rms = np.maximum(np.sqrt(np.mean(np.abs(H) ** 2, axis=(1, 2))), 1e-300)[:, None]
     if sigma is None:
@@ -149,7 +150,7 @@ def _weights(H: np.ndarray, sigma) -> np.ndarray:
     return 1.0 / np.maximum(sig, floor)
 
 
-def _order_poles(m: np.ndarray, n: int, n_in: int, dt_m: float, band: tuple,
+def _order_poles(m: np.ndarray, n: int, n_in: int, dt_m: float, band: tuple[float, float],
                  max_damping: float) -> OrderPoles:
     k = n * n_in
     alpha = np.vstack([-np.linalg.lstsq(m[:k, :k], m[:k, k:], rcond=None)[0],
@@ -173,7 +174,8 @@ def _mac(a: np.ndarray, b: np.ndarray) -> float:
     return float(abs(np.vdot(a, b)) ** 2 / max(np.vdot(a, a).real * np.vdot(b, b).real, 1e-300))
 
 
-def stability_diagram(orders: list, tol: Tolerances = Tolerances()) -> list:
+def stability_diagram(orders: list[OrderPoles], tol: Tolerances = Tolerances()
+                      ) -> list[OrderPoles]:
     """
     Label every pole of every order 'o', 'f', 'd' or 's' against the previous order.
 
@@ -189,7 +191,7 @@ def stability_diagram(orders: list, tol: Tolerances = Tolerances()) -> list:
     list of OrderPoles
         The same objects with ``classes`` set.
     """
-    previous = None
+    previous: Optional[OrderPoles] = None
     for entry in orders:
         classes = np.full(len(entry.poles), 'o')
         if previous is not None and len(previous.poles):
@@ -208,7 +210,7 @@ def stability_diagram(orders: list, tol: Tolerances = Tolerances()) -> list:
     return orders
 
 
-def select_poles(orders: list, tol: Tolerances = Tolerances()) -> np.ndarray:
+def select_poles(orders: Sequence[OrderPoles], tol: Tolerances = Tolerances()) -> np.ndarray:
     """
     Pick the physical poles from a labelled stability diagram (module docstring).
 
@@ -224,12 +226,23 @@ def select_poles(orders: list, tol: Tolerances = Tolerances()) -> np.ndarray:
     -------
     (R,) complex ndarray
         Selected poles [rad/s] (positive imaginary part), sorted by frequency; may be empty.
+
+    Raises
+    ------
+    ValueError
+        If an order has no classes (:func:`stability_diagram` was not run on it).
     """
-    rows = [(f, z, e.order, p) for e in orders
-            for f, z, p, c in zip(e.freq, e.damping, e.poles, e.classes) if c == 's']
+    # (frequency [Hz], damping ratio [-], model order, pole [rad/s]) of each stable pole
+    rows: list[tuple[float, float, int, complex]] = []
+    for e in orders:
+        if e.classes is None:
+            raise ValueError(f'order {e.order} has no pole classes; label the orders with '
+                             'stability_diagram() first')
+        rows += [(f, z, e.order, p) for f, z, p, c in zip(e.freq, e.damping, e.poles, e.classes)
+                 if c == 's']
     rows.sort(key=lambda row: row[0])
-    clusters: list[list[tuple]] = []
-    current: list[tuple] = []
+    clusters: list[list[tuple[float, float, int, complex]]] = []
+    current: list[tuple[float, float, int, complex]] = []
     for row in rows:
         if current and row[0] - current[-1][0] >= tol.tol_freq * row[0]:
             clusters.append(current)

@@ -12,13 +12,15 @@ from typing import Sequence
 
 import numpy as np
 
+from pentapod_sim.analysis.ema.identify import ModalModel
+
 
 def constant_unit(frf_unit: str) -> str:
     """Unit of a modal constant of an FRF in ``frf_unit``: ``m/N`` -> ``1/kg``."""
     return '1/kg' if frf_unit == 'm/N' else f'{frf_unit} (rad/s)^2'
 
 
-def mode_table(model, labels: Sequence[str], frf_unit: str) -> list:
+def mode_table(model: ModalModel, labels: Sequence[str], frf_unit: str) -> list[str]:
     """
     Lines of a text table: mode, f [Hz], zeta [-], modal constant per output (|rA|, phase).
 
@@ -44,7 +46,8 @@ def mode_table(model, labels: Sequence[str], frf_unit: str) -> list:
     return lines
 
 
-def write_modes_csv(path, model, labels: Sequence[str], frf_unit: str) -> Path:
+def write_modes_csv(path: str | Path, model: ModalModel, labels: Sequence[str],
+                    frf_unit: str) -> Path:
     """
     Write one row per mode: freq_Hz, damping_ratio, then per output rA re/im and |rA|.
 
@@ -62,15 +65,16 @@ def write_modes_csv(path, model, labels: Sequence[str], frf_unit: str) -> Path:
                         + [f'{label} rA_{part} [{unit}]' for label in labels
                            for part in ('re', 'im', 'abs')])
         for r, (f, zeta, pole) in enumerate(zip(model.freq_hz, model.damping, model.poles)):
-            cells = []
+            cells: list[float] = []
             for c in constants[:, r]:
                 cells += [c.real, c.imag, abs(c)]
             writer.writerow([r + 1, f, zeta, pole.real, pole.imag] + cells)
     return path
 
 
-def write_frf_csv(path, freq: np.ndarray, H: np.ndarray, synth: np.ndarray,
-                  labels: Sequence[str], frf_unit: str, sigma=None, transient=None) -> Path:
+def write_frf_csv(path: str | Path, freq: np.ndarray, H: np.ndarray, synth: np.ndarray,
+                  labels: Sequence[str], frf_unit: str, sigma: np.ndarray | None = None,
+                  transient: np.ndarray | None = None) -> Path:
     """
     Write measured and synthesised FRFs (first input) per line, with their error estimates.
 

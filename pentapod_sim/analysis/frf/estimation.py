@@ -16,7 +16,7 @@ coherence = |G_uy|^2 / (G_uu G_yy). Window and averaging follow the excitation t
 """
 import dataclasses
 import logging
-from typing import Optional
+from typing import Optional, TypedDict
 import warnings
 
 import numpy as np
@@ -75,6 +75,15 @@ class FrfResult:
         return f'{self.output_unit}/{self.input_unit}'
 
 
+class _Labels(TypedDict):
+    """The text fields of a :class:`FrfResult` every estimator passes on unchanged."""
+
+    input_unit: str
+    output_unit: str
+    excitation: str
+    label: str
+
+
 def estimate_frf(u: npt.ArrayLike, y: npt.ArrayLike, fs: float, excitation: str = 'random',
                  nperseg: Optional[int] = None, input_unit: str = '', output_unit: str = '',
                  label: str = '') -> FrfResult:
@@ -113,8 +122,8 @@ def estimate_frf(u: npt.ArrayLike, y: npt.ArrayLike, fs: float, excitation: str 
         raise ValueError(f'sampling rate fs={fs} Hz must be positive')
     if not np.any(u):
         raise ValueError('the input signal is identically zero')
-    meta = {'input_unit': input_unit, 'output_unit': output_unit, 'excitation': excitation,
-                'label': label}
+    meta: _Labels = {'input_unit': input_unit, 'output_unit': output_unit,
+                     'excitation': excitation, 'label': label}
     if excitation == 'impulse':
         return _impulse_frf(u, y, fs, meta)
     if excitation == 'sine':
@@ -139,7 +148,7 @@ def estimate_frf(u: npt.ArrayLike, y: npt.ArrayLike, fs: float, excitation: str 
     return FrfResult(freq, h1, h1, h2, coherence, n_averages=n_avg, **meta)
 
 
-def _impulse_frf(u: np.ndarray, y: np.ndarray, fs: float, meta: dict) -> FrfResult:
+def _impulse_frf(u: np.ndarray, y: np.ndarray, fs: float, meta: _Labels) -> FrfResult:
     n = len(u)
     peak = int(np.argmax(np.abs(u)))
     threshold = 0.02 * abs(u[peak])
@@ -173,7 +182,7 @@ def _impulse_frf(u: np.ndarray, y: np.ndarray, fs: float, meta: dict) -> FrfResu
                      exp_window_tau=tau, **meta)
 
 
-def _sine_frf(u: np.ndarray, y: np.ndarray, fs: float, meta: dict) -> FrfResult:
+def _sine_frf(u: np.ndarray, y: np.ndarray, fs: float, meta: _Labels) -> FrfResult:
     n = len(u)
     spec = np.abs(np.fft.rfft(u - u.mean()))
     k = int(np.argmax(spec[1:])) + 1
@@ -194,7 +203,7 @@ def _sine_frf(u: np.ndarray, y: np.ndarray, fs: float, meta: dict) -> FrfResult:
     return FrfResult(np.array([f0]), h, h, h.copy(), np.array([coh]), **meta)
 
 
-def aligned(u: Series, y: Series) -> tuple:
+def aligned(u: Series, y: Series) -> tuple[np.ndarray, np.ndarray, float]:
     """
     Put two recorded series on their common sample times.
 
@@ -248,7 +257,8 @@ def frf_from_series(u: Series, y: Series, excitation: str = 'random',
                         label=f'{u.label} -> {y.label}')
 
 
-def amplitude_spectrum(x: npt.ArrayLike, fs: float, nperseg: Optional[int] = None) -> tuple:
+def amplitude_spectrum(x: npt.ArrayLike, fs: float, nperseg: Optional[int] = None
+                       ) -> tuple[np.ndarray, np.ndarray]:
     """
     Single-sided amplitude spectrum (peak amplitude of a sinusoid per bin), Welch/Hann.
 

@@ -10,6 +10,7 @@ abscissa spacing (ordinate type 6) written as 4E20.12 (two complex values per li
 import csv
 import datetime
 from pathlib import Path
+from typing import Any, Sequence
 
 import numpy as np
 
@@ -31,7 +32,7 @@ DATA_TYPES = {
 }
 
 
-def write_csv(path, results: list) -> Path:
+def write_csv(path: str | Path, results: Sequence[FrfResult]) -> Path:
     """
     Write FRFs as CSV: freq_Hz, then per FRF re, im, magnitude, phase_rad, coherence.
 
@@ -120,7 +121,7 @@ def uff58_block(result: FrfResult, response_node: int = 1, response_dir: int = 1
     return '\n'.join(lines) + '\n'
 
 
-def write_uff58(path, results: list, **kwargs) -> Path:
+def write_uff58(path: str | Path, results: Sequence[FrfResult], **kwargs: Any) -> Path:
     """
     Write FRFs as consecutive UFF 58 datasets (function ids 1, 2, ...).
 

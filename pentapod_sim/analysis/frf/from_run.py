@@ -19,14 +19,15 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from pathlib import Path
 from typing import Optional, Sequence
 
 import numpy as np
 
 from pentapod_sim.analysis.bag.excitation_record import excitation_of
-from pentapod_sim.analysis.bag.reader import open_bag
+from pentapod_sim.analysis.bag.reader import Bag, open_bag, Series
 from pentapod_sim.analysis.frf.estimation import estimate_frf
-from pentapod_sim.analysis.frf.periodic import synchronous_frf
+from pentapod_sim.analysis.frf.periodic import LineFrf, synchronous_frf
 from pentapod_sim.analysis.frf.stepped_sine import stepped_sine_frf
 from pentapod_sim.errors import BagError
 from pentapod_sim.interface import EXCITATION, TCP_STATE
@@ -73,24 +74,24 @@ class RunFrfs:
     H: np.ndarray
     sigma: Optional[np.ndarray]
     transient: Optional[np.ndarray]
-    labels: list
-    units: list
+    labels: list[str]
+    units: list[str]
     kind: str
     estimator: str
-    band: tuple
+    band: tuple[float, float]
     frf_form: str
     n_averages: int
 
 
 @dataclasses.dataclass
 class _Common:
-    labels: list
-    units: list
+    labels: list[str]
+    units: list[str]
     kind: str
     frf_form: str
 
 
-def default_outputs(bag) -> list:
+def default_outputs(bag: Bag) -> list[str]:
     """The translational TCP displacements ``/pentapod/tcp_state.position.tcp_{x,y,z}``."""
     if TCP_STATE not in bag.topics:
         raise BagError(f'{bag.path} has no {TCP_STATE}; name the outputs (--outputs)')
@@ -102,7 +103,7 @@ def default_outputs(bag) -> list:
     return found
 
 
-def _on_steps(series, dt: float) -> tuple:
+def _on_steps(series: Series, dt: float) -> tuple[int, np.ndarray]:
     """(first step, values per step) of a series stamped on plant steps; gaps are errors."""
     steps = np.rint(series.time_ns / (dt * 1e9)).astype(np.int64)
     order = np.argsort(steps, kind='stable')
@@ -116,7 +117,8 @@ def _on_steps(series, dt: float) -> tuple:
     return int(steps[0]), values
 
 
-def _common(first_steps: Sequence[int], arrays: Sequence[np.ndarray]) -> tuple:
+def _common(first_steps: Sequence[int], arrays: Sequence[np.ndarray]
+            ) -> tuple[int, list[np.ndarray]]:
     start = max(first_steps)
     end = min(f + len(a) for f, a in zip(first_steps, arrays))
     if end - start < 16:
@@ -124,7 +126,7 @@ def _common(first_steps: Sequence[int], arrays: Sequence[np.ndarray]) -> tuple:
     return start, [a[start - f:end - f] for f, a in zip(first_steps, arrays)]
 
 
-def frfs_from_bag(bag_path, outputs: Optional[Sequence[str]] = None,
+def frfs_from_bag(bag_path: str | Path, outputs: Optional[Sequence[str]] = None,
                   input_spec: Optional[str] = None, source: Optional[str] = None) -> RunFrfs:
     """
     Estimate the FRFs of a recorded run from its stored excitation to ``outputs``.
@@ -173,7 +175,8 @@ def frfs_from_bag(bag_path, outputs: Optional[Sequence[str]] = None,
     y_series = [bag.series(spec_) for spec_ in outputs]
     placed = [_on_steps(s, dt) for s in u_series + y_series]
     start, arrays = _common([p[0] for p in placed], [p[1] for p in placed])
-    u = sum(w * a for w, a in zip(weights, arrays[:len(u_series)]))
+    terms = [w * a for w, a in zip(weights, arrays[:len(u_series)])]
+    u = sum(terms[1:], terms[0])
     ys = arrays[len(u_series):]
     units = [f'{s.unit}/N' for s in y_series]
     form = FRF_FORMS.get(y_series[0].unit, 'receptance')
@@ -192,7 +195,7 @@ def frfs_from_bag(bag_path, outputs: Optional[Sequence[str]] = None,
                    h1[0].n_averages)
 
 
-def _periodic(exc: Excitation, u: np.ndarray, ys: list, start: int, dt: float,
+def _periodic(exc: Excitation, u: np.ndarray, ys: list[np.ndarray], start: int, dt: float,
               common: _Common) -> RunFrfs:
     period = int(exc.period_steps or 0)
     first = exc.first + exc.settle_periods * period  # absolute step of the first used period
@@ -213,7 +216,8 @@ def _periodic(exc: Excitation, u: np.ndarray, ys: list, start: int, dt: float,
                         (lines.min(), lines.max()), common)
 
 
-def _line_result(res: list, estimator: str, band: tuple, common: _Common) -> RunFrfs:
+def _line_result(res: Sequence[LineFrf], estimator: str, band: tuple[float, float],
+                 common: _Common) -> RunFrfs:
     return RunFrfs(res[0].freq, np.array([r.H for r in res])[:, None, :],
                    np.array([r.noise_std for r in res])[:, None, :],
                    np.array([r.transient for r in res])[:, None, :], common.labels,

@@ -9,7 +9,7 @@ window with time constant tau, its added damping 1 / (2 pi fn tau) is subtracted
 """
 import dataclasses
 import logging
-from typing import Optional
+from typing import Optional, Sequence
 import warnings
 
 import numpy as np
@@ -57,7 +57,7 @@ class PeakReduction:
 
 
 def find_resonances(result: FrfResult, fmin: float = 0.0, fmax: Optional[float] = None,
-                    prominence_db: float = 6.0, max_peaks: int = 20) -> list:
+                    prominence_db: float = 6.0, max_peaks: int = 20) -> list[Resonance]:
     """
     Find resonance peaks of ``|H|`` and identify their damping ratios.
 
@@ -101,17 +101,20 @@ def _identify(result: FrfResult, k: int) -> Resonance:
     half = peak / np.sqrt(2.0)
     f1 = _crossing(freq, mag, half, k, -1)
     f2 = _crossing(freq, mag, half, k, +1)
-    zeta = (f2 - f1) / (2.0 * fn) if (f1 is not None and f2 is not None) else np.nan
-    if np.isfinite(zeta) and (f2 - f1) < 3 * df:
-        warnings.warn(f'half-power band at {fn:.2f} Hz spans only {(f2 - f1) / df:.1f} bins; '
-                      'damping ratio is coarse (use longer segments)')
+    zeta = np.nan
+    if f1 is not None and f2 is not None:
+        zeta = (f2 - f1) / (2.0 * fn)
+        if np.isfinite(zeta) and (f2 - f1) < 3 * df:
+            warnings.warn(f'half-power band at {fn:.2f} Hz spans only {(f2 - f1) / df:.1f} '
+                          'bins; damping ratio is coarse (use longer segments)')
     if result.exp_window_tau and np.isfinite(zeta):
         zeta -= 1.0 / (2 * np.pi * fn * result.exp_window_tau)
     coh = float(result.coherence[k]) if result.coherence is not None else np.nan
     return Resonance(float(fn), peak, float(zeta), coh)
 
 
-def _crossing(freq: np.ndarray, mag: np.ndarray, level: float, k: int, step: int):
+def _crossing(freq: np.ndarray, mag: np.ndarray, level: float, k: int, step: int
+              ) -> Optional[float]:
     """Frequency where |H| falls below ``level`` walking from bin k in direction step."""
     j = k
     while 0 <= j + step < len(mag):
@@ -123,7 +126,8 @@ def _crossing(freq: np.ndarray, mag: np.ndarray, level: float, k: int, step: int
     return None
 
 
-def peak_reductions(reference: list, compared: list, rel_tol: float = 0.15) -> list:
+def peak_reductions(reference: Sequence[Resonance], compared: Sequence[Resonance],
+                    rel_tol: float = 0.15) -> list[PeakReduction]:
     """
     Match the resonances of two runs by frequency and give the peak reduction.
 

@@ -149,7 +149,7 @@ def synchronous_frf(u: npt.ArrayLike, y: npt.ArrayLike, dt: float, period_steps:
                    transient=np.abs(h_first - h_second))
 
 
-def _average(spec_u: np.ndarray, spec_y: np.ndarray) -> tuple:
+def _average(spec_u: np.ndarray, spec_y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """FRF of the averaged spectra and its noise standard deviation (M, L) -> (L,), (L,)."""
     m = spec_u.shape[0]
     mu, my = spec_u.mean(axis=0), spec_y.mean(axis=0)

@@ -12,11 +12,15 @@ matplotlib.use('Agg')
 import matplotlib.pyplot as plt  # noqa: E402  (backend must be chosen first)
 import numpy as np  # noqa: E402
 
+from pentapod_sim.analysis.bag.reader import Series  # noqa: E402
+from pentapod_sim.analysis.frf.estimation import FrfResult  # noqa: E402
+from pentapod_sim.analysis.frf.peaks import Resonance  # noqa: E402
 from pentapod_sim.figures import save_figure  # noqa: E402
 
 
-def frf_plot(results: Sequence, path, analytic: Optional[tuple] = None,
-             resonances: Optional[Sequence] = None, fmin: float = 0.0,
+def frf_plot(results: Sequence[FrfResult], path: str | Path,
+             analytic: Optional[tuple[np.ndarray, np.ndarray, str]] = None,
+             resonances: Optional[Sequence[Resonance]] = None, fmin: float = 0.0,
              fmax: Optional[float] = None, title: str = '') -> Path:
     """
     Bode magnitude, phase and coherence of measured FRFs, optionally with an analytic FRF.
@@ -70,10 +74,10 @@ def frf_plot(results: Sequence, path, analytic: Optional[tuple] = None,
     for ax in (ax_mag, ax_ph, ax_coh):
         ax.grid(True, which='both', alpha=0.3)
     ax_mag.set_title(title)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
-def time_plot(series: Sequence, path, title: str = '') -> Path:
+def time_plot(series: Sequence[Series], path: str | Path, title: str = '') -> Path:
     """
     Plot recorded series over time, one axis per series.
 
@@ -99,11 +103,11 @@ def time_plot(series: Sequence, path, title: str = '') -> Path:
         ax.grid(True, alpha=0.3)
     axes[-1, 0].set_xlabel('time [s]')
     fig.suptitle(title)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
-def amplitude_plot(freq: np.ndarray, amplitudes: dict, units: dict, path,
-                   title: str = '') -> Path:
+def amplitude_plot(freq: np.ndarray, amplitudes: dict[str, np.ndarray], units: dict[str, str],
+                   path: str | Path, title: str = '') -> Path:
     """
     Plot amplitude spectra (e.g. actuator stroke [m] and force [N]) over frequency.
 
@@ -124,7 +128,7 @@ def amplitude_plot(freq: np.ndarray, amplitudes: dict, units: dict, path,
     -------
     Path
     """
-    by_unit: dict = {}
+    by_unit: dict[str, list[tuple[str, np.ndarray]]] = {}
     for label, amp in amplitudes.items():
         by_unit.setdefault(units.get(label, ''), []).append((label, amp))
     fig, axes = plt.subplots(len(by_unit), 1, figsize=(8, 3 * len(by_unit)), sharex=True,
@@ -137,8 +141,5 @@ def amplitude_plot(freq: np.ndarray, amplitudes: dict, units: dict, path,
         ax.grid(True, which='both', alpha=0.3)
     axes[-1, 0].set_xlabel('frequency [Hz]')
     fig.suptitle(title)
-    return _save(fig, path)
-
-
-def _save(fig, path) -> Path:
     return save_figure(fig, path)
+

@@ -21,7 +21,8 @@ import numpy.typing as npt
 from pentapod_sim.analysis.frf.periodic import LineFrf
 
 
-def fit_sine(x: np.ndarray, freq_hz: float, dt: float, first_step: int) -> tuple:
+def fit_sine(x: np.ndarray, freq_hz: float, dt: float, first_step: int
+             ) -> tuple[complex, float]:
     """
     Complex amplitude of ``x`` at ``freq_hz`` and the residual standard deviation.
 
@@ -52,7 +53,8 @@ def fit_sine(x: np.ndarray, freq_hz: float, dt: float, first_step: int) -> tuple
 
 
 def stepped_sine_frf(u: npt.ArrayLike, y: npt.ArrayLike, dt: float,
-                     windows: Sequence[tuple], input_unit: str = '', output_unit: str = '',
+                     windows: Sequence[tuple[float, int, int]], input_unit: str = '',
+                     output_unit: str = '',
                      label: str = '') -> LineFrf:
     """
     FRF at the lines of a stepped sine, one least-squares fit per measuring window.
@@ -94,14 +96,15 @@ def stepped_sine_frf(u: npt.ArrayLike, y: npt.ArrayLike, dt: float,
                              f'the record of {len(u)} samples (or is shorter than 8)')
         rows.append(_line(u, y, float(freq), dt, first, end))
         min_periods = min(min_periods, (end - first) * dt * freq)
-    freq, h, noise, transient = (np.array(col) for col in zip(*rows))
-    return LineFrf(freq, h, h.copy(), h.copy(), np.full(len(freq), np.nan),
+    lines, h, noise, transient = (np.array(col) for col in zip(*rows))
+    return LineFrf(lines, h, h.copy(), h.copy(), np.full(len(lines), np.nan),
                    input_unit=input_unit, output_unit=output_unit, excitation='stepped_sine',
                    n_averages=int(min_periods), label=label, noise_std=noise,
                    transient=transient)
 
 
-def _line(u: np.ndarray, y: np.ndarray, freq: float, dt: float, first: int, end: int) -> tuple:
+def _line(u: np.ndarray, y: np.ndarray, freq: float, dt: float, first: int, end: int
+          ) -> tuple[float, complex, float, float]:
     amp_u, std_u = fit_sine(u[first:end], freq, dt, first)
     amp_y, std_y = fit_sine(y[first:end], freq, dt, first)
     if abs(amp_u) == 0:
