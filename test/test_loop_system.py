@@ -15,7 +15,7 @@ import pytest
 from fixtures.demo_model import demo_model
 from pentapod_damper.laws import Dynamics, strut_axial_damper, tcp_damper
 from pentapod_sim.errors import ConfigError
-from pentapod_sim.sim.closed_loop import closed_loop_matrices, closed_loop_system
+from pentapod_sim.sim.closed_loop import closed_loop_system
 from pentapod_sim.sim.controllers import DiscreteController, loop_system
 from pentapod_sim.sim.stepping import DiscretePlant
 
@@ -142,18 +142,24 @@ def test_closed_loop_system_of_laws_is_control_feedback(demo_plant):
     _assert_same_loop(loop, _matrices(demo_plant), [law.discrete_model() for law in laws])
 
 
-def test_closed_loop_matrices_is_the_loop_of_a_static_gain(demo_plant):
+def _static_loop(plant, gain):
+    static = DiscreteController.static(plant.output_names, plant.input_names, gain)
+    return loop_system(plant.a, plant.b, plant.c, plant.d, plant.input_names,
+                       plant.output_names, [static])
+
+
+def test_a_static_gain_with_feed_through_is_the_augmented_loop(demo_plant):
     """A gain reading displacements with feed-through: the augmented loop of python-control."""
     outputs = list(demo_plant.output_names)
     gain = np.zeros((len(demo_plant.input_names), len(outputs)))
     gain[0, outputs.index('tcp_displacement_x')] = -2.0e6
     gain[:, outputs.index('tcp_velocity_y')] = -800.0
-    loop = closed_loop_matrices(demo_plant, gain)
+    loop = _static_loop(demo_plant, gain)
     assert loop.augmented
     static = DiscreteController.static(outputs, demo_plant.input_names, gain)
     _assert_same_loop(loop, _matrices(demo_plant), [static])
 
 
-def test_closed_loop_matrices_names_a_gain_of_the_wrong_shape(demo_plant):
+def test_a_static_gain_of_the_wrong_shape_is_named(demo_plant):
     with pytest.raises(ConfigError, match=r'matrix d has shape \(2, 2\), expected \(3, '):
-        closed_loop_matrices(demo_plant, np.eye(2))
+        _static_loop(demo_plant, np.eye(2))

@@ -9,8 +9,8 @@ way at the exchange rate; ``full_rate=True`` also keeps its N outputs per exchan
 :func:`closed_loop_system` forms the closed-loop discrete system of linear laws --
 memoryless ones as static gains, laws with actuator/sensor dynamics or delays with their
 controller states -- for the analytic checks, with the one construction of
-:func:`pentapod_sim.sim.controllers.loop_system` (:func:`closed_loop_matrices` is its case of a
-static gain matrix); for a multi-rate plant it is the loop at the exchange rate.
+:func:`pentapod_sim.sim.controllers.loop_system`; for a multi-rate plant it is the loop at the
+exchange rate.
 
 Units: as the plant ports (N, N m in; m, m/s, rad, rad/s out); time in steps of dt [s].
 """
@@ -26,7 +26,6 @@ import numpy.typing as npt
 from pentapod_sim.errors import ConfigError, PortError
 from pentapod_sim.sim.controllers import (
     controller_of,
-    DiscreteController,
     loop_system,
     LoopSystem,
 )
@@ -189,23 +188,3 @@ def closed_loop_system(plant: DiscretePlant, laws: Sequence[Law]) -> LoopSystem:
     """
     return loop_system(plant.a, plant.b, plant.c, plant.d, plant.input_names,
                        plant.output_names, [controller_of(law) for law in laws])
-
-
-def closed_loop_matrices(plant: DiscretePlant, gain: npt.ArrayLike) -> LoopSystem:
-    """
-    Discrete closed loop of a static gain ``u_k = K y_k`` (sampled feedback, zero-order hold).
-
-    The loop of :func:`closed_loop_system` for one memoryless law on every port, with
-    ``K = gain`` (n_in, n_out): ``z_{k+1} = a z_k + b e_k``, ``u_k = c_u z_k + e_k``,
-    ``y_k = c_y z_k`` (e: external input). The state is ``z_k = [x_k; u_{k-1}]``
-    (``augmented``) only if ``K D != 0``; otherwise ``z_k = x_k`` and
-    ``y_k = c_y z_k + D u_{k-1}``.
-
-    Raises
-    ------
-    ConfigError
-        If ``gain`` is not (n_in, n_out) or not finite.
-    """
-    static = DiscreteController.static(plant.output_names, plant.input_names, gain)
-    return loop_system(plant.a, plant.b, plant.c, plant.d, plant.input_names,
-                       plant.output_names, [static])
