@@ -11,7 +11,6 @@ what the current code and ``config/study.yaml`` compute.
 """
 from __future__ import annotations
 
-import argparse
 import csv
 import math
 from pathlib import Path
@@ -21,6 +20,7 @@ import textwrap
 
 from pentapod_damper.study.config import load_study_config, StudyConfig
 from pentapod_damper.study.measured_damping import SETTLE_MODES
+from pentapod_sim.cli import CommandParser
 
 SECTION = 'study-tables'
 TABLES = ('summary', 'struts12_share', 'pma', 'pma_highpass', 'damping')
@@ -199,7 +199,7 @@ def update_readme(readme: Path, results: Path, cfg: StudyConfig | None = None) -
 
 def main(argv: list[str] | None = None) -> int:
     """Copy a study run's tables (``--from``) and rewrite the README's study section."""
-    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser = CommandParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--from', dest='study_out', type=Path,
                         help='output folder of a study run, e.g. out/study')
     parser.add_argument('--readme', type=Path, default=Path('README.md'))

@@ -27,7 +27,7 @@ from pentapod_sim.analysis.frf import plots
 from pentapod_sim.analysis.frf.estimation import amplitude_spectrum, EXCITATIONS, frf_from_series
 from pentapod_sim.analysis.frf.export import write_csv, write_uff58
 from pentapod_sim.analysis.frf.peaks import find_resonances, peak_reductions
-from pentapod_sim.cli import run_command
+from pentapod_sim.cli import CommandParser, run_command
 from pentapod_sim.cli.analyze_ema import add_parser as add_modes_parser
 from pentapod_sim.cli.analyze_ema import cmd_modes
 from pentapod_sim.errors import BagError
@@ -217,7 +217,7 @@ def _frf_arguments(sub) -> None:
 
 def build_parser() -> argparse.ArgumentParser:
     """Return the command-line parser."""
-    parser = argparse.ArgumentParser(prog='analyze', description=__doc__.split('\n')[1])
+    parser = CommandParser(prog='analyze', description=__doc__.split('\n')[1])
     parser.add_argument('--out', default=str(DEFAULT_OUT), help='output folder')
     parser.add_argument('-v', '--verbose', action='store_true')
     subs = parser.add_subparsers(dest='command', required=True)

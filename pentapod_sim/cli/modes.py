@@ -22,7 +22,13 @@ from pathlib import Path
 import sys
 import time
 
-from pentapod_sim.cli import add_model_arguments, configure_logging, model_from_args, run_command
+from pentapod_sim.cli import (
+    add_model_arguments,
+    CommandParser,
+    configure_logging,
+    model_from_args,
+    run_command,
+)
 from pentapod_sim.errors import ModalError
 from pentapod_sim.modes.causes import (
     analyse_causes,
@@ -41,7 +47,7 @@ PAPER_BAND_HZ = 750.0
 
 
 def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog='modes', description=__doc__.split('\n\n')[0])
+    parser = CommandParser(prog='modes', description=__doc__.split('\n\n')[0])
     add_model_arguments(parser)
     parser.add_argument('--n-modes', type=int, default=None,
                         help='number of lowest modes (with --f-max: at most this many)')

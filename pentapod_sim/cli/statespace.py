@@ -25,7 +25,13 @@ import sys
 
 import numpy as np
 
-from pentapod_sim.cli import add_model_arguments, configure_logging, model_from_args, run_command
+from pentapod_sim.cli import (
+    add_model_arguments,
+    CommandParser,
+    configure_logging,
+    model_from_args,
+    run_command,
+)
 from pentapod_sim.errors import ConfigError
 from pentapod_sim.plant import frf, frf_plot, reduction
 from pentapod_sim.plant.build import (
@@ -309,8 +315,8 @@ def cmd_build(args) -> int:
 
 
 def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog='statespace', description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = CommandParser(prog='statespace', description=__doc__,
+                           formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument('-v', '--verbose', action='store_true')
     sub = parser.add_subparsers(dest='command', required=True)
     for name, func in (('report', cmd_report), ('frf', cmd_frf), ('dcgain', cmd_dcgain),
