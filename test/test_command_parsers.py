@@ -30,7 +30,8 @@ def test_a_top_level_option_after_the_sub_command_is_refused_with_where_it_belon
 
 @pytest.mark.parametrize('argv', [['frf', 'BAG', '--inp', 'a.b', '--output', 'c.d'],
                                   ['--verb', 'info', 'BAG'],
-                                  ['time', 'BAG', 'X.y', '--out', 'DIR']])
+                                  ['time', 'BAG', 'X.y', '--out', 'DIR'],
+                                  ['recover', 'BAG', '--in-pl']])
 def test_abbreviations_are_refused_in_commands_and_sub_commands(argv, capsys):
     with pytest.raises(SystemExit) as stop:
         analyze.build_parser().parse_args(argv)

@@ -10,6 +10,7 @@ Examples::
     analyze time BAG /pentapod/tcp_state.position.tcp_x /pentapod/excitation.force.x
     analyze amplitudes BAG [--topic /pentapod/pma/state]
     analyze modes BAG [--band F1 F2] [--outputs TOPIC.FIELD ...]
+    analyze recover BAG [--to DIR | --in-place]
 """
 import argparse
 import csv
@@ -30,6 +31,8 @@ from pentapod_sim.analysis.frf.peaks import find_resonances, peak_reductions
 from pentapod_sim.cli import CommandParser, run_command
 from pentapod_sim.cli.analyze_ema import add_parser as add_modes_parser
 from pentapod_sim.cli.analyze_ema import cmd_modes
+from pentapod_sim.cli.analyze_recover import add_parser as add_recover_parser
+from pentapod_sim.cli.analyze_recover import cmd_recover
 from pentapod_sim.errors import BagError
 from pentapod_sim.interface import PMA_STATE
 
@@ -232,6 +235,7 @@ def build_parser() -> argparse.ArgumentParser:
     amp.add_argument('--topic', default=PMA_STATE)
     amp.add_argument('--nperseg', type=int, default=None)
     add_modes_parser(subs)
+    add_recover_parser(subs)
     return parser
 
 
@@ -241,7 +245,7 @@ def main(argv=None) -> int:
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
                         format='%(levelname)s %(name)s: %(message)s')
     commands = {'info': cmd_info, 'frf': cmd_frf, 'time': cmd_time,
-                'amplitudes': cmd_amplitudes, 'modes': cmd_modes,
+                'amplitudes': cmd_amplitudes, 'modes': cmd_modes, 'recover': cmd_recover,
                 'peaks': lambda a: cmd_frf(a, plot=False)}
     return run_command('analyze', commands[args.command], args, errors=(ValueError,))
 
