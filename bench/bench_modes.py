@@ -213,7 +213,7 @@ def run(quick: bool) -> list[dict]:
 
 def main(argv: list[str] | None = None) -> int:
     """Print the benchmark rows, or run one case and print it as JSON (``--case``)."""
-    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0], allow_abbrev=False)
     parser.add_argument('--quick', action='store_true')
     parser.add_argument('--case', choices=('plain', *METHOD))
     parser.add_argument('--element-size', type=float, default=None)

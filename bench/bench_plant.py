@@ -24,7 +24,6 @@ Full: 100k offline steps, 20k lockstep steps, 5 s real time (60 s at machine rat
 """
 from __future__ import annotations
 
-import argparse
 import os
 from pathlib import Path
 import shutil
@@ -44,6 +43,7 @@ import scipy.signal  # noqa: E402
 
 from fixtures.demo_model import demo_model  # noqa: E402
 from pentapod_damper.laws import strut_bending_damper, tcp_damper  # noqa: E402
+from pentapod_sim.cli import CommandParser  # noqa: E402
 from pentapod_sim.nodes.answer_poll import usable_cpus  # noqa: E402
 from pentapod_sim.scenario.domain import isolation  # noqa: E402
 from pentapod_sim.sim.closed_loop import (  # noqa: E402
@@ -619,7 +619,7 @@ def run(quick: bool) -> list[dict]:
 
 
 if __name__ == '__main__':
-    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser = CommandParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--quick', action='store_true', help='short version (about a minute)')
     parser.add_argument('--offline', action='store_true',
                         help='only the offline rows (no ROS); prints them, saves nothing')

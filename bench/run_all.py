@@ -20,7 +20,6 @@ they mean something on a shared, noisy machine where absolute times do not.
 """
 from __future__ import annotations
 
-import argparse
 import ast
 import importlib.util
 import json
@@ -34,6 +33,8 @@ import traceback
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))          # the bench scripts import the checkout's package
+from pentapod_sim.cli import CommandParser  # noqa: E402
+
 RESULTS = HERE / 'results'
 COLUMNS = ('benchmark', 'ours', 'baseline', 'baseline figure', 'ratio', 'note')
 TABLES_COMMAND = 'python bench/run_all.py --tables'
@@ -180,7 +181,7 @@ def _run(path: Path, quick: bool) -> bool:
 
 def main(argv: list[str] | None = None) -> int:
     """Run the selected benchmarks; return 1 if any of them failed to run."""
-    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser = CommandParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--quick', action='store_true', help='short smoke version (CI)')
     parser.add_argument('--only', default='', help='comma-separated topics, e.g. modes,plant')
     parser.add_argument('--tables', action='store_true',

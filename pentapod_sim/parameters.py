@@ -374,7 +374,9 @@ def markdown() -> str:
 
 def main(argv=None) -> int:
     """``python -m pentapod_sim.parameters [--markdown | NODE]``: print tables."""
-    parser = argparse.ArgumentParser(description="Print the nodes' parameter tables.")
+    # whole option names only, as CommandParser (pentapod_sim.cli, a later stage) does
+    parser = argparse.ArgumentParser(description="Print the nodes' parameter tables.",
+                                     allow_abbrev=False)
     parser.add_argument('node', nargs='?', choices=NODE_KINDS, help='one node (text table)')
     parser.add_argument('--markdown', action='store_true',
                         help='all tables as Markdown (docs/parameters.md)')

@@ -11,7 +11,6 @@ Ctrl-C stops the running runs and exits with 130.
 """
 from __future__ import annotations
 
-import argparse
 import logging
 import os
 from pathlib import Path
@@ -27,6 +26,7 @@ from pentapod_damper.study.pieces import pma_results  # noqa: F401  (test_docs u
 from pentapod_damper.study.report import struts12_share, StudyResults, summary_rows, write_report
 from pentapod_damper.study.schedule import Interrupted, run_pieces, Schedule
 from pentapod_sim import shutdown
+from pentapod_sim.cli import CommandParser
 from pentapod_sim.errors import BagError, ConfigError, RunError
 from pentapod_sim.scenario.domain import DOMAIN_VAR, user_domain
 
@@ -89,7 +89,7 @@ def _print_summary(res: StudyResults, report: Path) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     """Run the study: 0 on success, 1 with a one-line error on a failure, 128 + n on signal n."""
-    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser = CommandParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--config', help='study YAML (default config/study.yaml)')
     parser.add_argument('--out', default='out/study', help='output folder')
     parser.add_argument('--duration', type=float, help='excited time per run [s]')

@@ -21,7 +21,6 @@ Units: frequencies [Hz], peaks [m/N], gains as the laws'.
 """
 from __future__ import annotations
 
-import argparse
 import sys
 
 from pentapod_damper.laws import Dynamics, ViscousDamper
@@ -30,6 +29,7 @@ from pentapod_damper.scenario_laws import scenario_laws
 from pentapod_damper.study.analytic import SampledPairFrf
 from pentapod_damper.study.config import load_study_config
 from pentapod_damper.study.pipeline import CHECK_CACHE
+from pentapod_sim.cli import CommandParser
 from pentapod_sim.errors import ConfigError
 from pentapod_sim.plant.build import load_or_build_model
 from pentapod_sim.plant.check_model import check_f_max, load_or_build_check_model
@@ -136,7 +136,7 @@ def markdown_table(table: list[dict]) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     """Print the table; return 1 with a message on a configuration error."""
-    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser = CommandParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--positions', default='P1,P2')
     parser.add_argument('--scenarios', default=','.join(SCENARIOS))
     parser.add_argument('--try', dest='candidate', help='order,bandwidth_hz,delay_steps')

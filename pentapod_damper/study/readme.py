@@ -12,7 +12,6 @@ rewrites the two sections. test/test_docs.py checks that both equal what this ma
 """
 from __future__ import annotations
 
-import argparse
 import csv
 import math
 from pathlib import Path
@@ -22,6 +21,7 @@ import textwrap
 
 from pentapod_damper.study.config import load_study_config, StudyConfig
 from pentapod_damper.study.measured_damping import SETTLE_MODES
+from pentapod_sim.cli import CommandParser
 
 #: section of docs/results.md with the tables, section of the README with the sentences
 SECTION, SUMMARY = 'study-tables', 'study-summary'
@@ -261,7 +261,7 @@ def update_docs(readme: Path, results_md: Path, results: Path,
 
 def main(argv: list[str] | None = None) -> int:
     """Copy a study run's tables (``--from``) and rewrite the generated study docs."""
-    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser = CommandParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--from', dest='study_out', type=Path,
                         help='output folder of a study run, e.g. out/study')
     parser.add_argument('--readme', type=Path, default=Path('README.md'))

@@ -21,6 +21,7 @@ from pentapod_damper.sweep.compute import columns
 from pentapod_damper.sweep.runner import DEFAULT_WORKERS, run_sweep, SweepReport
 from pentapod_damper.sweep.settings import make_settings
 from pentapod_damper.sweep.store import ResultStore
+from pentapod_sim.cli import CommandParser
 from pentapod_sim.errors import ConfigError
 
 #: Exit status after Ctrl-C (the finished tasks are stored).
@@ -28,7 +29,7 @@ INTERRUPTED = 130
 
 
 def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog='sweep', description=__doc__.split('\n\n')[0])
+    parser = CommandParser(prog='sweep', description=__doc__.split('\n\n')[0])
     grid = parser.add_argument_group('grid (SI units, tilts in degrees)')
     for axis, default in (('x', '0'), ('y', '0'), ('z', '0.85'), ('a-deg', '0'),
                           ('b-deg', '0')):

@@ -6,6 +6,7 @@ position name, mesh size), the same logging setup and the same handling of a use
 (:func:`run_command`: one line ``<prog>: error: <message>`` on stderr, exit code 1, no
 traceback; argparse's usage errors keep exit code 2). Ctrl-C ends a command with one line
 ``<prog>: stopped by SIGINT`` and exit code 130, as the nodes do (:mod:`pentapod_sim.shutdown`).
+Every command parses its options with :class:`CommandParser`, which refuses abbreviated options.
 """
 from __future__ import annotations
 
@@ -32,6 +33,34 @@ USER_ERRORS = (ConfigError, UnreachablePoseError, PortError, ModelFileError, Bag
 EXIT_USER_ERROR = 1
 #: Exit code of a command stopped by Ctrl-C (128 + SIGINT, the shell's convention).
 EXIT_SIGINT = 128 + signal.SIGINT
+
+
+class CommandParser(argparse.ArgumentParser):
+    """
+    An ``ArgumentParser`` that refuses abbreviated options, also in its sub-commands.
+
+    argparse takes a unique prefix of a long option for the option (``--out`` for
+    ``--output``), so an option misplaced after a sub-command silently became another one; with
+    ``allow_abbrev=False`` (the default here; sub-command parsers are of this class too) only
+    whole option names count. An option of the main command given after the sub-command is
+    refused with a line saying where it belongs.
+    """
+
+    def __init__(self, *args, **kwargs) -> None:
+        kwargs.setdefault('allow_abbrev', False)
+        super().__init__(*args, **kwargs)
+
+    def parse_args(self, args=None, namespace=None):  # type: ignore[override]
+        """Parse like argparse; name a main-command option found after the sub-command."""
+        parsed, extra = self.parse_known_args(args, namespace)
+        if extra:
+            own = [a for a in extra if a.split('=')[0] in self._option_string_actions]
+            if own:
+                command = getattr(parsed, 'command', None) or 'the sub-command'
+                self.error(f'{own[0]} is an option of {self.prog} itself: give it before '
+                           f'{command} ({self.prog} {own[0].split("=")[0]} ... {command} ...)')
+            self.error(f'unrecognized arguments: {" ".join(extra)}')
+        return parsed
 
 
 def run_command(prog: str, func: Callable[[argparse.Namespace], int],

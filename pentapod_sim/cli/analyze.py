@@ -10,6 +10,7 @@ Examples::
     analyze time BAG /pentapod/tcp_state.position.tcp_x /pentapod/excitation.force.x
     analyze amplitudes BAG [--topic /pentapod/pma/state]
     analyze modes BAG [--band F1 F2] [--outputs TOPIC.FIELD ...]
+    analyze recover BAG [--to DIR | --in-place]
 """
 import argparse
 import csv
@@ -32,9 +33,11 @@ from pentapod_sim.analysis.frf.estimation import (
 )
 from pentapod_sim.analysis.frf.export import write_csv, write_uff58
 from pentapod_sim.analysis.frf.peaks import find_resonances, peak_reductions, Resonance
-from pentapod_sim.cli import run_command
+from pentapod_sim.cli import CommandParser, run_command
 from pentapod_sim.cli.analyze_ema import add_parser as add_modes_parser
 from pentapod_sim.cli.analyze_ema import cmd_modes
+from pentapod_sim.cli.analyze_recover import add_parser as add_recover_parser
+from pentapod_sim.cli.analyze_recover import cmd_recover
 from pentapod_sim.errors import BagError
 from pentapod_sim.interface import PMA_STATE
 
@@ -224,7 +227,7 @@ def _frf_arguments(sub: argparse.ArgumentParser) -> None:
 
 def build_parser() -> argparse.ArgumentParser:
     """Return the command-line parser."""
-    parser = argparse.ArgumentParser(prog='analyze', description=__doc__.split('\n')[1])
+    parser = CommandParser(prog='analyze', description=__doc__.split('\n')[1])
     parser.add_argument('--out', default=str(DEFAULT_OUT), help='output folder')
     parser.add_argument('-v', '--verbose', action='store_true')
     subs = parser.add_subparsers(dest='command', required=True)
@@ -239,6 +242,7 @@ def build_parser() -> argparse.ArgumentParser:
     amp.add_argument('--topic', default=PMA_STATE)
     amp.add_argument('--nperseg', type=int, default=None)
     add_modes_parser(subs)
+    add_recover_parser(subs)
     return parser
 
 
@@ -248,7 +252,7 @@ def main(argv: list[str] | None = None) -> int:
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
                         format='%(levelname)s %(name)s: %(message)s')
     commands = {'info': cmd_info, 'frf': cmd_frf, 'time': cmd_time,
-                'amplitudes': cmd_amplitudes, 'modes': cmd_modes,
+                'amplitudes': cmd_amplitudes, 'modes': cmd_modes, 'recover': cmd_recover,
                 'peaks': lambda a: cmd_frf(a, plot=False)}
     return run_command('analyze', commands[args.command], args, errors=(ValueError,))
 

@@ -23,7 +23,13 @@ import sys
 import time
 from typing import Any
 
-from pentapod_sim.cli import add_model_arguments, configure_logging, model_from_args, run_command
+from pentapod_sim.cli import (
+    add_model_arguments,
+    CommandParser,
+    configure_logging,
+    model_from_args,
+    run_command,
+)
 from pentapod_sim.errors import ModalError
 from pentapod_sim.fe.model import FEModel
 from pentapod_sim.modes.causes import (
@@ -43,7 +49,7 @@ PAPER_BAND_HZ = 750.0
 
 
 def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog='modes', description=__doc__.split('\n\n')[0])
+    parser = CommandParser(prog='modes', description=__doc__.split('\n\n')[0])
     add_model_arguments(parser)
     parser.add_argument('--n-modes', type=int, default=None,
                         help='number of lowest modes (with --f-max: at most this many)')

@@ -27,7 +27,13 @@ from typing import Any, Iterator, TYPE_CHECKING
 import numpy as np
 import numpy.typing as npt
 
-from pentapod_sim.cli import add_model_arguments, configure_logging, model_from_args, run_command
+from pentapod_sim.cli import (
+    add_model_arguments,
+    CommandParser,
+    configure_logging,
+    model_from_args,
+    run_command,
+)
 from pentapod_sim.errors import ConfigError
 from pentapod_sim.fe.model import FEModel
 from pentapod_sim.plant import frf, frf_plot, reduction
@@ -319,8 +325,8 @@ def cmd_build(args: argparse.Namespace) -> int:
 
 
 def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog='statespace', description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = CommandParser(prog='statespace', description=__doc__,
+                           formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument('-v', '--verbose', action='store_true')
     sub = parser.add_subparsers(dest='command', required=True)
     for name, func in (('report', cmd_report), ('frf', cmd_frf), ('dcgain', cmd_dcgain),

@@ -20,15 +20,22 @@ import time
 from typing import Any, Mapping, Optional
 
 from mcap.writer import CompressionType, Writer
-import yaml
 
 from pentapod_sim import __version__
 from pentapod_sim.errors import BagError
 from pentapod_sim.recording.msgdefs import message_definition
+from pentapod_sim.recording.rosbag2_metadata import (
+    bagfile_information,
+    dump_yaml,
+    FileEntry,
+    record_text,
+    ROSBAG2_RECORD,
+    RUN_METADATA_NAME,
+    TopicEntry,
+    write_metadata_yaml,
+)
 
 LOGGER = logging.getLogger(__name__)
-ROSBAG2_VERSION = 9
-RUN_METADATA_NAME = 'pentapod_run'
 
 
 def qos_profile(reliability: str, depth: int, durability: str = 'volatile') -> dict[str, Any]:
@@ -210,50 +217,22 @@ class BagWriter:
 
     def metadata(self) -> dict[str, Any]:
         """Return the rosbag2 ``rosbag2_bagfile_information`` dict for the current state."""
-        start = self._start_ns or 0
-        duration = (self._end_ns - start) if self._end_ns is not None else 0
-        count = self.message_count
-        return {
-            'version': ROSBAG2_VERSION,
-            'storage_identifier': 'mcap',
-            'relative_file_paths': [self.mcap_name],
-            'duration': {'nanoseconds': duration},
-            'starting_time': {'nanoseconds_since_epoch': start},
-            'message_count': count,
-            'topics_with_message_count': [
-                {'topic_metadata': {'name': t.name, 'type': t.msg_type,
-                                    'serialization_format': 'cdr',
-                                    'offered_qos_profiles': t.qos_profiles,
-                                    'type_description_hash': ''},
-                 'message_count': t.count}
-                for t in self._topics.values()],
-            'compression_format': '',
-            'compression_mode': '',
-            'files': [{'path': self.mcap_name,
-                       'starting_time': {'nanoseconds_since_epoch': start},
-                       'duration': {'nanoseconds': duration}, 'message_count': count}],
-            'custom_data': dict(self.custom_data),
-            'ros_distro': 'jazzy',
-        }
+        files = [FileEntry(self.mcap_name, self.message_count, self._start_ns, self._end_ns)]
+        topics = [TopicEntry(t.name, t.msg_type, t.qos_profiles, t.count)
+                  for t in self._topics.values()]
+        return bagfile_information(files, topics, self.custom_data)
 
     def write_metadata_yaml(self) -> None:
         """Atomically (write + rename) replace metadata.yaml with the current state."""
-        info = self.metadata()
-        text = yaml.dump({'rosbag2_bagfile_information': info}, Dumper=_NoAliasDumper,
-                         sort_keys=False)
-        tmp = self.path / 'metadata.yaml.tmp'
-        tmp.write_text(text, encoding='utf-8')
-        os.replace(tmp, self.path / 'metadata.yaml')
+        write_metadata_yaml(self.path, self.metadata())
 
     def close(self) -> None:
         """Finish the MCAP (summary, footer, rosbag2 metadata record) and metadata.yaml."""
         if self._closed:
             return
         self._closed = True
-        info = self.metadata()
-        self._writer.add_metadata('rosbag2', {
-            'serialized_metadata': yaml.dump(info, Dumper=_NoAliasDumper,
-                                             sort_keys=False).strip()})
+        self._writer.add_metadata(ROSBAG2_RECORD,
+                                  {'serialized_metadata': record_text(self.metadata())})
         self._writer.finish()
         self._stream.close()
         self.write_metadata_yaml()
@@ -267,14 +246,6 @@ class BagWriter:
         self.close()
 
 
-# PyYAML carries no type information here, so its classes are Any to the type checker
-class _NoAliasDumper(yaml.SafeDumper):  # type: ignore[misc]
-    """Safe YAML dumper that writes repeated objects in full (no &id anchors)."""
-
-    def ignore_aliases(self, data: object) -> bool:
-        return True
-
-
 def _dump_qos(profiles: list[dict[str, Any]]) -> str:
     """Serialise QoS profiles as YAML text for the MCAP channel metadata."""
-    return yaml.dump(profiles, Dumper=_NoAliasDumper, sort_keys=False).strip()
+    return dump_yaml(profiles).strip()
