@@ -29,10 +29,10 @@ from pentapod_sim.cli import add_model_arguments, configure_logging, model_from_
 from pentapod_sim.errors import ConfigError
 from pentapod_sim.plant import frf, frf_plot, reduction
 from pentapod_sim.plant.build import (
+    config_damping,
     from_modal_data,
     keep_by_relevance,
     load_reduction_config,
-    modal_damping,
     plant_from_fe,
     reduce_plant,
 )
@@ -292,8 +292,8 @@ def cmd_build(args) -> int:
     if args.modal_data:
         from pentapod_sim.plant.external_modes import load_modal_data
         data = load_modal_data(args.modal_data, args.strut_frames)
-        zeta = data.zeta if data.zeta is not None else modal_damping(
-            data.frequencies_hz, args.cfg.damping_ratio, args.cfg.damping_groups)
+        zeta = data.zeta if data.zeta is not None else config_damping(data.frequencies_hz,
+                                                                       args.cfg)
         plant = from_modal_data(data.frequencies_hz, data.point_shapes, data.strut_frames,
                                 list(args.cfg.inputs), list(args.cfg.outputs), zeta,
                                 meta={'source': data.source})

@@ -23,6 +23,7 @@ from pentapod_sim.fe.machine_data import load_machine
 from pentapod_sim.modes.solver import solve_modes
 from pentapod_sim.paths import config_dir
 from pentapod_sim.plant.config import (
+    damping_file_path,
     load_reduction_config,
     ReductionConfig,
     relevance_rule,
@@ -68,6 +69,15 @@ def modal_damping(frequencies_hz: npt.ArrayLike, damping_ratio: npt.ArrayLike,
     for group in groups:
         zeta[(freq >= group.f_min) & (freq < group.f_max)] = group.ratio
     return zeta
+
+
+def config_damping(frequencies_hz: npt.ArrayLike, cfg: ReductionConfig) -> np.ndarray:
+    """Damping ratio of every mode by the config: its damping_file, else ratio and groups."""
+    path = damping_file_path(cfg)
+    if path is not None:
+        from pentapod_sim.plant.damping_file import load_damping_file
+        return load_damping_file(path).ratios(frequencies_hz)
+    return modal_damping(frequencies_hz, cfg.damping_ratio, getattr(cfg, 'damping_groups', ()))
 
 
 def from_modal_data(frequencies_hz: npt.ArrayLike, point_shapes: Mapping[str, npt.ArrayLike],
@@ -169,7 +179,7 @@ def plant_from_fe(fe, reduction_cfg: ReductionConfig, progress: Callable[[str], 
     say(f'{modes.n_modes} modes, {modes.frequencies[0]:.2f} .. {modes.frequencies[-1]:.2f} Hz')
     inputs, outputs = list(cfg.inputs), list(cfg.outputs)
     chord = getattr(cfg, 'chord_position', 0.5)
-    zeta = modal_damping(modes.frequencies, cfg.damping_ratio, getattr(cfg, 'damping_groups', ()))
+    zeta = config_damping(modes.frequencies, cfg)
     plant_all = from_modal_data(modes.frequencies, modal_points(fe.points, modes.shapes),
                                 fe.strut_frames, inputs, outputs, zeta, chord_position=chord)
     keep = keep_by_relevance(plant_all, cfg.relevance)
