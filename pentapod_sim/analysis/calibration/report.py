@@ -116,8 +116,9 @@ def overlay_plot(cal: Calibration, responses: list, references: list,
     import matplotlib.pyplot as plt
     pairs = [(o, i) for i, q in enumerate(references) for o, r in enumerate(responses)
              if str(r) == str(q)]
-    pairs += [(o, i) for o in range(len(responses)) for i in range(len(references))
-              if (o, i) not in pairs]
+    rest = [(o, i) for o in range(len(responses)) for i in range(len(references))
+            if (o, i) not in pairs]
+    pairs += sorted(rest, key=lambda oi: -np.abs(cal.measured[oi]).max())   # largest first
     pairs = pairs[:max_panels]
     fig, axes = plt.subplots(len(pairs), 1, figsize=(9, 2.4 * len(pairs)), sharex=True,
                              squeeze=False)
