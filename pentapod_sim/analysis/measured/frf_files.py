@@ -159,7 +159,8 @@ def write_csv(path: str | os.PathLike, data: MeasuredFrfs) -> Path:
         for i, r in enumerate(data.responses):
             for k, q in enumerate(data.references):
                 for f, h in zip(data.freq, data.H[i, k]):
-                    writer.writerow([r, q, repr(float(f)), repr(h.real), repr(h.imag)])
+                    writer.writerow([r, q, repr(float(f)), repr(float(h.real)),
+                                     repr(float(h.imag))])
     return Path(path)
 
 
