@@ -11,6 +11,7 @@ All subcommands read config/reduction.yaml (``--config``) and write to ``--out``
     statespace closed-loop --damper tcp_force_x=20000 --poles   # + poles per mode (MAC)
     statespace build --position P1         # out/statespace/plant_P1.npz
     statespace build --modal-data modes.csv --strut-frames frames.yaml
+    statespace build --fe-model machine.yaml --config my_reduction.yaml   # imported FE model
 """
 from __future__ import annotations
 
@@ -25,7 +26,13 @@ import sys
 
 import numpy as np
 
-from pentapod_sim.cli import add_model_arguments, configure_logging, model_from_args, run_command
+from pentapod_sim.cli import (
+    add_model_arguments,
+    configure_logging,
+    model_from_args,
+    model_label,
+    run_command,
+)
 from pentapod_sim.errors import ConfigError
 from pentapod_sim.plant import frf, frf_plot, reduction
 from pentapod_sim.plant.build import (
@@ -47,6 +54,8 @@ DEFAULT_DAMPERS = [f'strut{i}_bending_moment_{k}=2e4' for i in range(1, 6) for k
 
 
 def _positions(args) -> list[str]:
+    if args.fe_model_file:                    # an imported model has the one pose it was made at
+        return [model_label(args)]
     return [p for p in (args.position or ','.join(args.cfg.positions)).split(',') if p]
 
 

@@ -111,13 +111,13 @@ def load_damping_file(path: str | os.PathLike) -> DampingFile:
 
 def write_damping_file(path: str | os.PathLike, data: DampingFile, header: str = '') -> Path:
     """Write ``data`` as YAML (exact floats; ``header`` as comment lines on top)."""
-    def clean(obj):
+    def clean(obj: object) -> object:
         if isinstance(obj, dict):
             return {k: clean(v) for k, v in obj.items() if v is not None and v != ()}
         if isinstance(obj, (list, tuple)):
             return [clean(v) for v in obj]
         return float(obj) if isinstance(obj, (float, np.floating)) and math.isfinite(obj) else obj
-    text = {'modes': [vars(m) for m in data.modes]}
+    text: dict[str, object] = {'modes': [vars(m) for m in data.modes]}
     if data.rayleigh is not None:
         text['rayleigh'] = vars(data.rayleigh)
     if data.bands:

@@ -137,4 +137,4 @@ def overlay_plot(cal: Calibration, responses: list, references: list,
     axes[0, 0].set_title(title or 'measured and model receptances (green: paired modes)',
                          fontsize=9)
     axes[-1, 0].set_xlabel('frequency [Hz]')
-    return save_figure(fig, path)
+    return save_figure(fig, Path(path))

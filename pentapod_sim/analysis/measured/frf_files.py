@@ -174,7 +174,7 @@ def write_uff58(path: str | os.PathLike, data: MeasuredFrfs, numbers: dict[str, 
     BagError
         For a label without a node number or a port label (UFF needs node and direction).
     """
-    blocks = []
+    blocks: list[str] = []
     for i, r in enumerate(data.responses):
         for k, q in enumerate(data.references):
             for label in (r, q):
