@@ -235,3 +235,14 @@ def test_asymmetric_matrix_is_refused(tmp_path):
                                       '2,1,2,1,1e3'])
     with pytest.raises(ModelFileError, match='stiffness: not symmetric'):
         load_fe_model(path)
+
+
+def test_every_description_and_settings_key_is_in_the_docs():
+    from dataclasses import fields
+
+    from pentapod_sim.analysis.calibration.settings import CalibrationSettings
+    from pentapod_sim.fe.imported.description import FEDescription
+    text = (Path(__file__).resolve().parents[1] / 'docs' / 'own_machine.md').read_text()
+    missing = [f.name for cls in (FEDescription, CalibrationSettings) for f in fields(cls)
+               if not f.metadata.get('internal') and f'`{f.name}`' not in text]
+    assert missing == []
