@@ -183,3 +183,20 @@ def test_settings_errors_name_the_key():
     with pytest.raises(ConfigError, match="mac_mn: unknown key; did you mean 'mac_min'"):
         build(CalibrationSettings, {'mac_mn': 0.9}, 'cal.yaml')
     assert replace(CalibrationSettings(), names={'3': 'tcp'}).node_names == {3: 'tcp'}
+
+
+def test_a_new_calibration_gives_a_new_plant_cache_key(tmp_path, monkeypatch):
+    import shutil
+
+    from pentapod_sim.plant import build, config
+    for name in ('machine.yaml', 'positions.yaml'):
+        shutil.copy(default_path().parent / name, tmp_path / name)
+    text = yaml.safe_load(default_path().read_text())
+    text['damping_file'] = 'damping.yaml'
+    (tmp_path / 'reduction.yaml').write_text(yaml.safe_dump(text))
+    monkeypatch.setattr(build, 'config_dir', lambda: tmp_path)
+    monkeypatch.setattr(config, 'config_dir', lambda: tmp_path)
+    (tmp_path / 'damping.yaml').write_text('modes: []\ndefault_ratio: 0.002\n')
+    first = build.model_cache_key('P1')
+    (tmp_path / 'damping.yaml').write_text('modes: []\ndefault_ratio: 0.003\n')
+    assert build.model_cache_key('P1') != first

@@ -260,13 +260,16 @@ def model_cache_key(position: str) -> str:
     SHA-256 (hex, 16 chars) over the configuration a built model depends on.
 
     Covers machine.yaml, positions.yaml and reduction.yaml of
-    :func:`pentapod_sim.paths.config_dir`, the position name and the package version, so any
-    edit gives a new cache file.
+    :func:`pentapod_sim.paths.config_dir` (and the damping file reduction.yaml names), the
+    position name and the package version, so any edit gives a new cache file.
     """
     digest = hashlib.sha256(f'{position}|{__version__}'.encode())
     for name in ('machine.yaml', 'positions.yaml', 'reduction.yaml'):
         path = config_dir() / name
         digest.update(path.read_bytes() if path.exists() else b'')
+    damping = damping_file_path(load_reduction_config())
+    if damping is not None:                 # a new calibration must not load a stale plant
+        digest.update(damping.read_bytes() if damping.exists() else b'missing')
     return digest.hexdigest()[:16]
 
 
