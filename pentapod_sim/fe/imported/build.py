@@ -68,11 +68,14 @@ def _on_dofs(labels: Labels, matrix: sp.csr_matrix, dofs: Labels) -> sp.csr_matr
     return sp.csr_matrix((coo.data, (where[coo.row], where[coo.col])), shape=(len(dofs),) * 2)
 
 
+def _keys(labels: Labels) -> npt.NDArray[np.int64]:
+    """One sortable integer per (node, component); component -1..5 fits in 3 bits."""
+    return labels[:, 0] * 8 + (labels[:, 1] + 1)
+
+
 def _positions(dofs: Labels, wanted: Labels) -> npt.NDArray[np.int64]:
     """Index into the (node, component)-sorted ``dofs`` of every row of ``wanted``."""
-    keys = dofs[:, 0] * 8 + (dofs[:, 1] + 1)      # component -1..5 fits in 3 bits
-    index = np.searchsorted(keys, wanted[:, 0] * 8 + (wanted[:, 1] + 1))
-    return index.astype(np.int64)
+    return np.searchsorted(_keys(dofs), _keys(wanted)).astype(np.int64)
 
 
 def _check_symmetric(matrix: sp.csr_matrix, what: str) -> None:
@@ -103,13 +106,16 @@ def _kept_dofs(k: sp.csr_matrix, m: sp.csr_matrix, desc: FEDescription
     return ~(empty | penalty)
 
 
-def _point_matrix(name: str, node: int, offset: npt.NDArray[np.float64], dofs: Labels,
-                  ) -> sp.csr_matrix:
-    """(6, n) observation matrix of a point at ``offset`` [m] from a node's DOFs."""
-    n = len(dofs)
-    index = {c: i for c in range(6)
-             if (i := int(_positions(dofs, np.array([[node, c]]))[0])) < n
-             and dofs[i, 0] == node and dofs[i, 1] == c}
+def _point_matrix(name: str, node: int, offset: npt.NDArray[np.float64],
+                  keys: npt.NDArray[np.int64]) -> sp.csr_matrix:
+    """(6, n) observation matrix of a point at ``offset`` [m] from a node's DOFs.
+
+    ``keys``: :func:`_keys` of the model's sorted DOF labels.
+    """
+    n = len(keys)
+    wanted = node * 8 + np.arange(6) + 1
+    where = np.searchsorted(keys, wanted)
+    index = {c: int(i) for c, (i, k) in enumerate(zip(where, wanted)) if i < n and keys[i] == k}
     missing = [POINT_COMPONENTS[c] for c in range(3) if c not in index]
     if missing:
         raise ModelFileError(f'point {name!r}: node {node} has no DOF {", ".join(missing)} in '
@@ -174,12 +180,13 @@ def model_from_description(desc: FEDescription) -> FEModel:
     xyz = xyz * desc.length_unit
     where = {int(label): i for i, label in enumerate(labels)}
     points, positions = {}, {}
+    keys = _keys(dofs)
     for name, point in desc.points.items():
         if point.node not in where:
             raise ModelFileError(f'{desc.source}: points.{name}.node = {point.node}: no such '
                                  f'node in {desc.nodes}')
         offset = np.asarray(point.offset, dtype=float) * desc.length_unit
-        points[name] = _point_matrix(name, point.node, offset, dofs)
+        points[name] = _point_matrix(name, point.node, offset, keys)
         positions[name] = xyz[where[point.node]] + offset
     files = [Path(desc.source)] + [desc.path(f) for f in
                                    ([desc.matrices] if desc.matrices else

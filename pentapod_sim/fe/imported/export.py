@@ -25,7 +25,20 @@ from pentapod_sim.fe.model import FEModel
 WRITTEN_FORMATS = ('matrix-market', 'abaqus')
 
 
-def point_node(fe: FEModel, name: str) -> tuple[int, npt.NDArray[np.float64]]:
+class _NodeDofs:
+    """DOF indices of each node of a DOF map, found by bisection (sorted once)."""
+
+    def __init__(self, nodes: npt.NDArray[np.int64]) -> None:
+        self.order = np.argsort(nodes, kind='stable')
+        self.sorted = nodes[self.order]
+
+    def __call__(self, node: int) -> npt.NDArray[np.int64]:
+        lo, hi = np.searchsorted(self.sorted, [node, node + 1])
+        return self.order[lo:hi]
+
+
+def point_node(fe: FEModel, name: str, lookup: _NodeDofs | None = None
+               ) -> tuple[int, npt.NDArray[np.float64]]:
     """
     Node and offset [m] of a named point that is a node or rigidly attached to one.
 
@@ -36,33 +49,35 @@ def point_node(fe: FEModel, name: str) -> tuple[int, npt.NDArray[np.float64]]:
     """
     if fe.dofs is None:
         raise ModelFileError('the FE model has no DOF map (FEModel.dofs); cannot export it')
-    T = fe.points[name].toarray()
-    candidates = [int(fe.dofs.nodes[j]) for j in np.flatnonzero(T[0] == 1.0)
-                  if fe.dofs.components[j] == 0]
+    lookup = lookup or _NodeDofs(fe.dofs.nodes)
+    T = sp.csr_matrix(fe.points[name])
+    first = T.getrow(0)
+    candidates = [int(fe.dofs.nodes[j]) for j, v in zip(first.indices, first.data)
+                  if v == 1.0 and fe.dofs.components[j] == 0]
     for node in candidates:
-        cols = {int(fe.dofs.components[j]): j for j in np.flatnonzero(fe.dofs.nodes == node)}
+        cols = {int(fe.dofs.components[j]): int(j) for j in lookup(node)}
         if not {0, 1, 2} <= set(cols):
             continue
         rotations = {3, 4, 5} <= set(cols)
         r = (np.array([T[1, cols[5]], T[2, cols[3]], T[0, cols[4]]]) if rotations
              else np.zeros(3))
         lever = -np.array([[0, -r[2], r[1]], [r[2], 0, -r[0]], [-r[1], r[0], 0]])
-        rebuilt = np.zeros_like(T)
-        for c in range(6):
-            if c in cols:
-                rebuilt[c, cols[c]] = 1.0
-        for c in range(3):
-            for k in range(3 if rotations else 0):
-                rebuilt[c, cols[3 + k]] += lever[c, k]
-        if np.array_equal(rebuilt, T):
+        entries = [(c, cols[c], 1.0) for c in range(6) if c in cols]
+        entries += [(c, cols[3 + k], lever[c, k]) for c in range(3)
+                    for k in range(3 if rotations else 0) if lever[c, k] != 0.0]
+        rows, columns, values = zip(*entries)
+        rebuilt = sp.csr_matrix((values, (rows, columns)), shape=T.shape)
+        if (rebuilt != T).nnz == 0:
             return node, r
     raise ModelFileError(f'point {name!r} is not a node, nor a rigid offset of one')
 
 
 def _description(fe: FEModel, fmt: str, files: dict) -> dict:
     points: dict[str, dict] = {}
+    assert fe.dofs is not None
+    lookup = _NodeDofs(fe.dofs.nodes)
     for name in fe.points:
-        node, offset = point_node(fe, name)
+        node, offset = point_node(fe, name, lookup)
         points[name] = {'node': node}
         if np.any(offset != 0.0):
             points[name]['offset'] = [float(v) for v in offset]
