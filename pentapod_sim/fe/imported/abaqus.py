@@ -54,9 +54,11 @@ def read(path: str | os.PathLike) -> tuple[npt.NDArray[np.int64], sp.csr_matrix]
     dof_number = np.concatenate([keys[:, 1], keys[:, 3]])
     if np.any(dof_number < 1):
         raise ModelFileError(f'{path}: DOF numbers start at 1, found {dof_number.min()}')
-    pairs = np.concatenate([keys[:, 0:2], keys[:, 2:4]])
-    unique, index = np.unique(pairs, axis=0, return_inverse=True)
-    index = index.ravel()
+    if np.any(dof_number >= 64):
+        raise ModelFileError(f'{path}: DOF number {dof_number.max()} (Abaqus has fewer than 64)')
+    flat = np.concatenate([keys[:, 0] * 64 + keys[:, 1], keys[:, 2] * 64 + keys[:, 3]])
+    codes, index = np.unique(flat, return_inverse=True)   # sorted by node, then DOF
+    unique = np.column_stack([codes // 64, codes % 64])
     rows, cols = index[:len(data)], index[len(data):]
     n = len(unique)
     both = sp.coo_matrix((np.ones(len(data)), (np.minimum(rows, cols), np.maximum(rows, cols))),
