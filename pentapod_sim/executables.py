@@ -20,6 +20,7 @@ EXECUTABLES = {
     'modes': 'pentapod_sim.cli.modes:main',
     'statespace': 'pentapod_sim.cli.statespace:main',
     'analyze': 'pentapod_sim.cli.analyze:main',
+    'calibrate': 'pentapod_sim.cli.calibrate:main',
     'study': 'pentapod_damper.study.__main__:main',
     'sweep': 'pentapod_damper.sweep.__main__:main',
 }

@@ -14,6 +14,7 @@ PACKAGES = ('pentapod_sim', 'pentapod_damper')
 #: rosdep has none, as the comments in package.xml say).
 IMPORT_KEYS = {
     'ament_index_python': 'ament_index_python',
+    'ansys': 'python3-ansys-mapdl-reader-pip',
     'builtin_interfaces': 'builtin_interfaces',
     'control': 'python-control-pip',
     'dask': 'python3-dask-pip',
@@ -28,6 +29,7 @@ IMPORT_KEYS = {
     'mcap_ros2': 'mcap-ros2-support',
     'numpy': 'python3-numpy',
     'pyarrow': 'python3-pyarrow-pip',
+    'pyuff': 'python3-pyuff-pip',
     'rcl_interfaces': 'rcl_interfaces',
     'rclpy': 'rclpy',
     'rosgraph_msgs': 'rosgraph_msgs',

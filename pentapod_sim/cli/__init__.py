@@ -95,9 +95,13 @@ def add_model_arguments(parser: argparse.ArgumentParser, position: str = 'P1') -
     Add the shared options that select and mesh the FE model.
 
     ``--machine PATH``, ``--positions PATH``, ``--position NAME``, and either
-    ``--element-size H`` [m] or ``--refine N`` (element size of the machine file divided by N).
+    ``--element-size H`` [m] or ``--refine N`` (element size of the machine file divided by N);
+    or ``--fe-model FILE.yaml``, an FE model of another code (docs/own_machine.md).
     """
     group = parser.add_argument_group('model')
+    group.add_argument('--fe-model', dest='fe_model_file', default=None, metavar='FILE.yaml',
+                       help='imported FE model description (matrix files of another FE code) '
+                       'instead of the machine file')
     group.add_argument('--machine', default=None,
                        help='machine parameter file (default: config/machine.yaml)')
     group.add_argument('--positions', default=None,
@@ -126,6 +130,9 @@ def model_from_args(args: argparse.Namespace) -> FEModel:
         If a file or value is invalid, the position name is unknown or the position cannot
         be reached (the message names the positions file).
     """
+    if getattr(args, 'fe_model_file', None):
+        from pentapod_sim.fe.imported.build import load_fe_model
+        return load_fe_model(args.fe_model_file)
     from pentapod_sim.fe import (
         assembly,
         machine_data,  # heavy imports only when a model is built
@@ -151,6 +158,14 @@ def model_from_args(args: argparse.Namespace) -> FEModel:
     except UnreachablePoseError as err:
         raise ConfigError(f'{path}: position {args.position!r} cannot be reached with '
                           f'{machine.source}: {err}') from None
+
+
+def model_label(args: argparse.Namespace) -> str:
+    """Name of the model in outputs: the imported description's stem, else the position."""
+    from pathlib import Path
+    if getattr(args, 'fe_model_file', None):
+        return Path(args.fe_model_file).stem
+    return args.position
 
 
 def configure_logging(verbose: bool = False) -> None:

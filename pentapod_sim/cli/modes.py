@@ -6,12 +6,13 @@ Examples::
     modes --position P1                       # all modes below 750 Hz, default mesh
     modes --position P2 --rows 40 --out out/modes/P2
     modes --position P1 --refine 260 --n-modes 500 --no-neuber   # paper scale (~800k DOF)
+    modes --fe-model machine.yaml --f-max 400     # an imported FE model (docs/own_machine.md)
 
 Prints the mode table (no., frequency [Hz], dominant TCP direction, cause by strain energy,
 cause by one-elasticity-at-a-time models, strain-energy shares [%]) and the totals (DOF
 count, solve time [s], modes below 750 Hz by Sturm count); writes ``modes.csv``,
 ``energy_shares.png`` and ``mode_distribution.png`` to ``--out``
-(default ``out/modes/<position>``).
+(default ``out/modes/<position>``, ``out/modes/<description stem>`` for ``--fe-model``).
 """
 from __future__ import annotations
 
@@ -28,6 +29,7 @@ from pentapod_sim.cli import (
     CommandParser,
     configure_logging,
     model_from_args,
+    model_label,
     run_command,
 )
 from pentapod_sim.errors import ModalError
@@ -98,22 +100,29 @@ def run(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     model = model_from_args(args)
     t_build = time.perf_counter() - t0
-    LOGGER.info('model at %s: %d DOF, built in %.2f s', args.position, model.n_dof, t_build)
+    label = model_label(args)
+    LOGGER.info('model %s: %d DOF, built in %.2f s', label, model.n_dof, t_build)
+    if args.fe_model_file:
+        mass = model.meta['rigid_body_mass_kg']
+        print(f'imported {args.fe_model_file} ({model.meta["format"]}): {model.n_dof} DOF '
+              f'({model.meta["dropped_dofs"]} dropped), rigid-body mass x/y/z '
+              f'{mass[0]:.6g}/{mass[1]:.6g}/{mass[2]:.6g} kg, stiffness groups '
+              f'{", ".join(model.stiffness_groups)}, points {len(model.points)}')
     modes = _solve(model, args)
     t_solve = modes.stats['solve_time_s']
     table = analyse_causes(model, modes, neuber=not args.no_neuber, alpha=args.alpha,
                            rotation_length=args.rotation_length)
     t_causes = time.perf_counter() - t0 - t_build - t_solve
-    out = args.out if args.out is not None else Path('out') / 'modes' / args.position
+    out = args.out if args.out is not None else Path('out') / 'modes' / label
     out.mkdir(parents=True, exist_ok=True)
     table.to_csv(out / 'modes.csv')
-    title = f'{args.position}, {model.n_dof} DOF'
+    title = f'{label}, {model.n_dof} DOF'
     plot_energy_shares(table, out / 'energy_shares.png', n_modes=max(args.rows, 60),
                        title=f'strain energy per group, {title}')
     plot_mode_distribution(modes.frequencies, out / 'mode_distribution.png',
                            f_max=modes.f_max, title=f'mode distribution, {title}')
     print(table.format_table(args.rows))
-    print(f'\nposition {args.position}: {model.n_dof} DOF, {modes.n_modes} modes '
+    print(f'\n{label}: {model.n_dof} DOF, {modes.n_modes} modes '
           f'{modes.frequencies[0]:.2f}-{modes.frequencies[-1]:.2f} Hz')
     print(f'modes below {PAPER_BAND_HZ:g} Hz (Sturm count): {_band_count(model, modes)}')
     print(f'build {t_build:.2f} s, modal solve {t_solve:.2f} s '

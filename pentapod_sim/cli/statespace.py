@@ -11,6 +11,7 @@ All subcommands read config/reduction.yaml (``--config``) and write to ``--out``
     statespace closed-loop --damper tcp_force_x=20000 --poles   # + poles per mode (MAC)
     statespace build --position P1         # out/statespace/plant_P1.npz
     statespace build --modal-data modes.csv --strut-frames frames.yaml
+    statespace build --fe-model machine.yaml --config my_reduction.yaml   # imported FE model
 """
 from __future__ import annotations
 
@@ -32,15 +33,16 @@ from pentapod_sim.cli import (
     CommandParser,
     configure_logging,
     model_from_args,
+    model_label,
     run_command,
 )
 from pentapod_sim.errors import ConfigError
 from pentapod_sim.fe.model import FEModel
 from pentapod_sim.plant import frf, frf_plot, reduction
 from pentapod_sim.plant.build import (
+    config_damping,
     from_modal_data,
     keep_by_relevance,
-    modal_damping,
     plant_from_fe,
     reduce_plant,
 )
@@ -60,6 +62,8 @@ DEFAULT_DAMPERS = [f'strut{i}_bending_moment_{k}=2e4' for i in range(1, 6) for k
 
 
 def _positions(args: argparse.Namespace) -> list[str]:
+    if args.fe_model_file:                    # an imported model has the one pose it was made at
+        return [model_label(args)]
     return [p for p in (args.position or ','.join(args.cfg.positions)).split(',') if p]
 
 
@@ -308,8 +312,8 @@ def cmd_build(args: argparse.Namespace) -> int:
     if args.modal_data:
         from pentapod_sim.plant.external_modes import load_modal_data
         data = load_modal_data(args.modal_data, args.strut_frames)
-        zeta = data.zeta if data.zeta is not None else modal_damping(
-            data.frequencies_hz, args.cfg.damping_ratio, args.cfg.damping_groups)
+        zeta = data.zeta if data.zeta is not None else config_damping(data.frequencies_hz,
+                                                                       args.cfg)
         plant = from_modal_data(data.frequencies_hz, data.point_shapes, data.strut_frames,
                                 list(args.cfg.inputs), list(args.cfg.outputs), zeta,
                                 meta={'source': data.source})

@@ -33,7 +33,7 @@ from pentapod_sim.errors import ConfigError
 from pentapod_sim.fe import beam
 from pentapod_sim.fe.geometry import layout_from_params, N_STRUTS, solve_pose, StrutState
 from pentapod_sim.fe.machine_data import load_positions, MachineParams, RhsSection
-from pentapod_sim.fe.model import FEModel
+from pentapod_sim.fe.model import DofMap, FEModel
 
 LOG = logging.getLogger(__name__)
 Array = npt.NDArray[np.float64]
@@ -354,7 +354,10 @@ def build_model(machine: MachineParams, pose: npt.ArrayLike | str,
                 'build_seconds': time.perf_counter() - t0}
     LOG.info('built FE model: %d DOF, %d beam elements in %.2f s', stiffness.shape[0],
              meta['n_beam_elements'], meta['build_seconds'])
+    free = np.setdiff1d(np.arange(mesh.n_nodes), list(mesh.slaves))  # T's column order
+    dofs = DofMap(np.repeat(free + 1, 6), np.tile(np.arange(6), free.size),
+                  np.arange(1, mesh.n_nodes + 1), xyz.copy())       # labels: node index + 1
     return FEModel(K=stiffness, M=mass, stiffness_groups=groups, points=points,
                    point_positions={n: xyz[i].copy() for n, i in mesh.named.items()},
                    strut_frames=state.frames.copy(), mass_parts=dict(mesh.mass_parts),
-                   pose=pose.copy(), meta=meta)
+                   pose=pose.copy(), meta=meta, dofs=dofs)

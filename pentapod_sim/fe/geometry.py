@@ -136,6 +136,10 @@ def _strut_frames(e1: Array) -> Array:
     return np.stack([e1, e2, e3], axis=1)
 
 
+#: The strut frame convention (rows e1, e2, e3 from the strut axes e1), public for imported models.
+strut_frames = _strut_frames
+
+
 def _basic_ik(layout: Layout, pose: Array) -> tuple[Array, Array, Array, Array]:
     """Return rotation, WP joint centres, WP ring azimuths (platform frame) and lengths."""
     rot = rotation(pose[3], pose[4])

@@ -15,6 +15,32 @@ import scipy.sparse as sp
 
 #: Order of the six rows of a point's observation matrix.
 POINT_COMPONENTS = ('ux', 'uy', 'uz', 'rx', 'ry', 'rz')
+#: Component number of a DOF that is none of the six (an FE code's internal or extra DOF).
+OTHER_COMPONENT = -1
+
+
+@dataclass(frozen=True)
+class DofMap:
+    """
+    Which node and component every DOF of the matrices belongs to, and where the nodes are.
+
+    Attributes
+    ----------
+    nodes : (n,) ndarray of int
+        Node label of each DOF (row/column of K and M).
+    components : (n,) ndarray of int
+        Component of each DOF: 0..5 for ``POINT_COMPONENTS`` (ux, uy, uz, rx, ry, rz in the
+        global frame), ``OTHER_COMPONENT`` for any other DOF.
+    labels : (N,) ndarray of int
+        Labels of the nodes whose coordinates are known.
+    xyz : (N, 3) ndarray
+        Their global coordinates [m].
+    """
+
+    nodes: npt.NDArray[np.int64]
+    components: npt.NDArray[np.int64]
+    labels: npt.NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
+    xyz: npt.NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 3)))
 
 
 @dataclass(frozen=True)
@@ -46,6 +72,9 @@ class FEModel:
         Platform pose x, y, z [m], a, b [rad] the model was built for.
     meta : dict
         Free-form provenance (parameter file, its hash, mesh size, ...).
+    dofs : DofMap or None
+        Node and component of every DOF, and the node coordinates (what a matrix file
+        exchanged with another FE code needs); None where the builder does not know them.
     """
 
     K: sp.csr_matrix
@@ -57,6 +86,7 @@ class FEModel:
     mass_parts: dict[str, float] = field(default_factory=dict)
     pose: npt.NDArray[np.float64] = field(default_factory=lambda: np.zeros(5))
     meta: dict[str, Any] = field(default_factory=dict)
+    dofs: DofMap | None = None
 
     @property
     def n_dof(self) -> int:

@@ -24,6 +24,7 @@ from pentapod_sim.fe.model import FEModel
 from pentapod_sim.modes.solver import solve_modes
 from pentapod_sim.paths import config_dir
 from pentapod_sim.plant.config import (
+    damping_file_path,
     DampingGroup,
     load_reduction_config,
     ReductionConfig,
@@ -70,6 +71,15 @@ def modal_damping(frequencies_hz: npt.ArrayLike, damping_ratio: npt.ArrayLike,
     for group in groups:
         zeta[(freq >= group.f_min) & (freq < group.f_max)] = group.ratio
     return zeta
+
+
+def config_damping(frequencies_hz: npt.ArrayLike, cfg: ReductionConfig) -> np.ndarray:
+    """Damping ratio of every mode by the config: its damping_file, else ratio and groups."""
+    path = damping_file_path(cfg)
+    if path is not None:
+        from pentapod_sim.plant.damping_file import load_damping_file
+        return load_damping_file(path).ratios(frequencies_hz)
+    return modal_damping(frequencies_hz, cfg.damping_ratio, getattr(cfg, 'damping_groups', ()))
 
 
 def from_modal_data(frequencies_hz: npt.ArrayLike, point_shapes: Mapping[str, npt.ArrayLike],
@@ -173,7 +183,7 @@ def plant_from_fe(fe: FEModel, reduction_cfg: ReductionConfig,
     say(f'{modes.n_modes} modes, {modes.frequencies[0]:.2f} .. {modes.frequencies[-1]:.2f} Hz')
     inputs, outputs = list(cfg.inputs), list(cfg.outputs)
     chord = cfg.chord_position
-    zeta = modal_damping(modes.frequencies, cfg.damping_ratio, cfg.damping_groups)
+    zeta = config_damping(modes.frequencies, cfg)
     plant_all = from_modal_data(modes.frequencies, modal_points(fe.points, modes.shapes),
                                 fe.strut_frames, inputs, outputs, zeta, chord_position=chord)
     keep = keep_by_relevance(plant_all, cfg.relevance)
@@ -254,13 +264,16 @@ def model_cache_key(position: str) -> str:
     SHA-256 (hex, 16 chars) over the configuration a built model depends on.
 
     Covers machine.yaml, positions.yaml and reduction.yaml of
-    :func:`pentapod_sim.paths.config_dir`, the position name and the package version, so any
-    edit gives a new cache file.
+    :func:`pentapod_sim.paths.config_dir` (and the damping file reduction.yaml names), the
+    position name and the package version, so any edit gives a new cache file.
     """
     digest = hashlib.sha256(f'{position}|{__version__}'.encode())
     for name in ('machine.yaml', 'positions.yaml', 'reduction.yaml'):
         path = config_dir() / name
         digest.update(path.read_bytes() if path.exists() else b'')
+    damping = damping_file_path(load_reduction_config())
+    if damping is not None:                 # a new calibration must not load a stale plant
+        digest.update(damping.read_bytes() if damping.exists() else b'missing')
     return digest.hexdigest()[:16]
 
 

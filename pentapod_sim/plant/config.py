@@ -128,9 +128,13 @@ class ReductionConfig:
         default=(), description='damping ratios of modes in frequency bands (override)')
     chord_position: float = spec('-', NON_NEGATIVE, default=0.5, bounds=(0.0, 1.0),
                                  description='chord point of the chord ports, BP (0) to WP (1)')
+    damping_file: str | None = spec(default=None, description='calibrated modal damping '
+                                    '(calibrate writes it); replaces damping_ratio and groups')
     source: str = internal()
 
     def __post_init__(self) -> None:
+        if self.damping_file is not None and self.damping_groups:
+            raise ConfigError('damping_file replaces damping_groups: give one of them')
         bands = sorted((g.f_min, g.f_max) for g in self.damping_groups)
         for (lo1, hi1), (lo2, _) in zip(bands, bands[1:]):
             if lo2 < hi1:
@@ -161,6 +165,13 @@ def load_reduction_config(path: str | os.PathLike[str] | None = None) -> Reducti
     """
     path = Path(path) if path is not None else default_path()
     return replace(load(ReductionConfig, path), source=str(path))
+
+
+def damping_file_path(cfg: ReductionConfig) -> Path | None:
+    """The config's ``damping_file``, relative to the config file's folder (None if unset)."""
+    if cfg.damping_file is None:
+        return None
+    return Path(cfg.source).parent / cfg.damping_file if cfg.source else Path(cfg.damping_file)
 
 
 def relevance_rule(rule: RelevanceRule | Mapping[str, Any]) -> RelevanceRule:
