@@ -25,15 +25,15 @@ import sys
 
 import numpy as np
 
-from pentapod_sim.cli import configure_logging, model_from_args, run_command
+from pentapod_sim.cli import CommandParser, configure_logging, model_from_args, run_command
 from pentapod_sim.errors import ModalError
 
 LOGGER = logging.getLogger('calibrate')
 
 
 def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog='calibrate', description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = CommandParser(prog='calibrate', description=__doc__,
+                           formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument('--measured', required=True,
                         help='measured FRFs: UFF 58 (.uff, .unv) or long-form CSV (.csv)')
     parser.add_argument('--model', required=True,
