@@ -11,7 +11,6 @@ announces, nor more than :data:`~pentapod_sim.analysis.bag.mcap_chunks.MAX_CHUNK
 from __future__ import annotations
 
 import dataclasses
-import io
 import struct
 from types import SimpleNamespace
 from typing import Optional
@@ -23,11 +22,9 @@ from pentapod_sim.analysis.bag.mcap_chunks import (
     chunk_header,
     internals,
     InternalsChanged,
-    lz4_frame,
-    MAX_CHUNK_BYTES,
     parse_record,
+    prefix_bytes,
     RecordDamage,
-    zstandard,
 )
 
 RECORD = struct.Struct('<BQ')
@@ -118,20 +115,7 @@ def _cut_chunk_bytes(body: bytes) -> tuple:
     if name_length > 16 or len(body) < at + 8:
         raise RecordDamage('the file ends inside the chunk header')
     compression = body[CHUNK_FIXED.size:at].decode('ascii', 'replace')
-    present = body[at + 8:]
-    limit = min(size, MAX_CHUNK_BYTES)
-    try:
-        if compression == '':
-            return start, end, compression, present[:limit]
-        if compression == 'zstd' and zstandard is not None:
-            reader = zstandard.ZstdDecompressor().stream_reader(io.BytesIO(present))
-            return start, end, compression, reader.read(limit)
-        if compression == 'lz4' and lz4_frame is not None:
-            out = lz4_frame.LZ4FrameDecompressor().decompress(present, max_length=limit)
-            return start, end, compression, out
-    except Exception as err:  # zstandard.ZstdError, lz4's RuntimeError: undecodable prefix
-        raise RecordDamage(f'{compression} prefix undecodable ({err})') from None
-    raise RecordDamage(f'chunk compression {compression!r} is not supported')
+    return start, end, compression, prefix_bytes(compression, body[at + 8:], size)
 
 
 def framed(body: bytes, length: Optional[int] = None) -> bool:
