@@ -13,9 +13,10 @@ from __future__ import annotations
 import dataclasses
 import struct
 from types import SimpleNamespace
-from typing import Optional
+from typing import Optional, TYPE_CHECKING, TypedDict
 
 import numpy as np
+import numpy.typing as npt
 
 from pentapod_sim.analysis.bag.mcap_chunks import (
     chunk_bytes,
@@ -26,6 +27,9 @@ from pentapod_sim.analysis.bag.mcap_chunks import (
     prefix_bytes,
     RecordDamage,
 )
+
+if TYPE_CHECKING:       # the classes come from api() at run time (InternalsChanged if changed)
+    from mcap.records import Channel, Schema
 
 RECORD = struct.Struct('<BQ')
 MESSAGE = struct.Struct('<HIQQ')           # channel, sequence, log time, publish time
@@ -55,9 +59,16 @@ class ChunkContent:
     end_ns: int
     compression: str
     data: bytes
-    messages: np.ndarray
-    others: list
+    messages: npt.NDArray[np.int64]
+    others: list[Schema | Channel]
     cut: bool
+
+
+class ChunkSpan(TypedDict, total=False):
+    """The log-time span [ns] of a chunk, as its header announces it."""
+
+    start_ns: int
+    end_ns: int
 
 
 def chunk_content(mcap: SimpleNamespace, body: bytes, complete: bool) -> ChunkContent:
@@ -74,7 +85,9 @@ def chunk_content(mcap: SimpleNamespace, body: bytes, complete: bool) -> ChunkCo
         start, end, compression = header.start_ns, header.end_ns, header.compression
     else:
         start, end, compression, data = _cut_chunk_bytes(body)
-    messages, others, off = [], [], 0
+    messages: list[tuple[int, ...]] = []
+    others: list[Schema | Channel] = []
+    off = 0
     kinds = {OP.SCHEMA: 'Schema', OP.CHANNEL: 'Channel'}
     while off < len(data):
         if len(data) - off < 9:
@@ -106,7 +119,7 @@ def chunk_content(mcap: SimpleNamespace, body: bytes, complete: bool) -> ChunkCo
     return ChunkContent(start, end, compression, data, table, others, not complete)
 
 
-def _cut_chunk_bytes(body: bytes) -> tuple:
+def _cut_chunk_bytes(body: bytes) -> tuple[int, int, str, bytes]:
     """Header fields and the records decodable from a chunk cut by the file end."""
     if len(body) < CHUNK_FIXED.size:
         raise RecordDamage('the file ends inside the chunk header')
@@ -130,7 +143,7 @@ def framed(body: bytes, length: Optional[int] = None) -> bool:
         records
 
 
-def chunk_span(body: bytes) -> dict:
+def chunk_span(body: bytes) -> ChunkSpan:
     """The log-time span a chunk header announces (empty if the header is cut)."""
     if len(body) < 16:
         return {}
