@@ -15,6 +15,7 @@ import pytest
 import yaml
 
 from fixtures.bags import chunk_table, message_layout, N_STEPS, recorded, write_bag
+from pentapod_sim.analysis.bag.mcap_chunks import prefix_bytes, RecordDamage
 from pentapod_sim.cli import analyze
 from pentapod_sim.errors import BagError
 from pentapod_sim.recording.recover import ORIGINALS, recover_bag, RECOVERY_RECORD
@@ -124,6 +125,27 @@ def test_a_cut_compressed_chunk_keeps_what_decodes_and_never_wrong_data(good, tm
         assert got[:len(complete)] == complete
         assert got[len(complete):] == as_rows(messages[len(complete):len(got)])
         assert len(got) == len(complete) or cut >= chunks[5].end - 3
+
+
+@pytest.mark.parametrize('compression', ['', 'zstd', 'lz4'])
+def test_a_cut_compressed_stream_gives_its_whole_blocks_and_no_more(compression):
+    """The 2 kB chunks above are one block each; a 600 kB chunk has several (zstd 128 kB)."""
+    import lz4.frame
+    import zstandard
+    raw = np.random.default_rng(3).bytes(600 * 1024)      # incompressible: blocks stored whole
+    packed = {'': raw, 'zstd': zstandard.ZstdCompressor().compress(raw),
+              'lz4': lz4.frame.compress(raw)}[compression]
+    for fraction in (0.3, 0.6, 0.95):
+        present = packed[:int(len(packed) * fraction)]
+        out = prefix_bytes(compression, present, len(raw))
+        assert raw.startswith(out)
+        assert len(out) > len(present) - 130 * 1024      # at most one block is incomplete
+    assert prefix_bytes(compression, packed[:len(packed) // 2], 1000) == raw[:1000]
+    if compression:
+        with pytest.raises(RecordDamage, match='prefix undecodable'):
+            prefix_bytes(compression, b'\x00' * 64, len(raw))
+    with pytest.raises(RecordDamage, match="compression 'bz2' is not supported"):
+        prefix_bytes('bz2', packed, len(raw))
 
 
 @pytest.mark.parametrize('compression', ['', 'zstd'])

@@ -14,7 +14,7 @@ import argparse
 import logging
 import signal
 import sys
-from typing import Callable, TYPE_CHECKING
+from typing import Any, Callable, Iterable, overload, TYPE_CHECKING, TypeVar
 
 from pentapod_sim.errors import (
     BagError,
@@ -33,6 +33,7 @@ USER_ERRORS = (ConfigError, UnreachablePoseError, PortError, ModelFileError, Bag
 EXIT_USER_ERROR = 1
 #: Exit code of a command stopped by Ctrl-C (128 + SIGINT, the shell's convention).
 EXIT_SIGINT = 128 + signal.SIGINT
+_N = TypeVar('_N')
 
 
 class CommandParser(argparse.ArgumentParser):
@@ -46,11 +47,20 @@ class CommandParser(argparse.ArgumentParser):
     refused with a line saying where it belongs.
     """
 
-    def __init__(self, *args, **kwargs) -> None:
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
         kwargs.setdefault('allow_abbrev', False)
         super().__init__(*args, **kwargs)
 
-    def parse_args(self, args=None, namespace=None):  # type: ignore[override]
+    # the overloads of argparse's own (typeshed): the namespace given is the one returned
+    @overload
+    def parse_args(self, args: Iterable[str] | None = None,
+                   namespace: None = None) -> argparse.Namespace: ...
+    @overload
+    def parse_args(self, args: Iterable[str] | None, namespace: _N) -> _N: ...
+    @overload
+    def parse_args(self, *, namespace: _N) -> _N: ...
+
+    def parse_args(self, args: Iterable[str] | None = None, namespace: object = None) -> object:
         """Parse like argparse; name a main-command option found after the sub-command."""
         parsed, extra = self.parse_known_args(args, namespace)
         if extra:

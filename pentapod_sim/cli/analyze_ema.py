@@ -19,10 +19,11 @@ from pentapod_sim.analysis.ema.identify import DEFAULT_MAX_ORDER, identify_modes
 from pentapod_sim.analysis.ema.poles import Tolerances
 from pentapod_sim.analysis.ema.tables import mode_table, write_frf_csv, write_modes_csv
 from pentapod_sim.analysis.frf.from_run import frfs_from_bag, RunFrfs
+from pentapod_sim.cli import CommandParser
 from pentapod_sim.errors import BagError
 
 
-def add_parser(subs: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+def add_parser(subs: argparse._SubParsersAction[CommandParser]) -> None:
     """Add the ``modes`` subcommand to the ``analyze`` subparsers."""
     sub = subs.add_parser('modes', help='modal identification (pLSCF + LSFD) of a recorded run')
     sub.add_argument('bag', help='bag folder or .mcap file (with its excitation record)')

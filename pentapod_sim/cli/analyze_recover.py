@@ -10,16 +10,18 @@ writes the intact part as a valid bag (summary, footer, metadata.yaml) with
 """
 from __future__ import annotations
 
+import argparse
 import sys
 import time
 
+from pentapod_sim.cli import CommandParser
 from pentapod_sim.recording.recover import recover_bag, SUFFIX
 
 #: Progress lines on stderr: the first after this long [s], then at most one per period.
 PROGRESS_PERIOD = 1.0
 
 
-def add_parser(subs) -> None:
+def add_parser(subs: argparse._SubParsersAction[CommandParser]) -> None:
     """Add the ``recover`` subcommand to the ``analyze`` subparsers."""
     sub = subs.add_parser('recover', help='rewrite a bag cut by a crash into a valid bag, '
                                           'reporting what was lost')
@@ -38,7 +40,7 @@ def add_parser(subs) -> None:
     sub.add_argument('--dry-run', action='store_true', help='report only; write nothing')
 
 
-def cmd_recover(args) -> int:
+def cmd_recover(args: argparse.Namespace) -> int:
     """Recover one bag and print the report."""
     recovery = recover_bag(args.bag, args.to, in_place=args.in_place,
                            expected_steps=args.expected_steps,

@@ -11,24 +11,25 @@ announces, nor more than :data:`~pentapod_sim.analysis.bag.mcap_chunks.MAX_CHUNK
 from __future__ import annotations
 
 import dataclasses
-import io
 import struct
 from types import SimpleNamespace
-from typing import Optional
+from typing import Optional, TYPE_CHECKING, TypedDict
 
 import numpy as np
+import numpy.typing as npt
 
 from pentapod_sim.analysis.bag.mcap_chunks import (
     chunk_bytes,
     chunk_header,
     internals,
     InternalsChanged,
-    lz4_frame,
-    MAX_CHUNK_BYTES,
     parse_record,
+    prefix_bytes,
     RecordDamage,
-    zstandard,
 )
+
+if TYPE_CHECKING:       # the classes come from api() at run time (InternalsChanged if changed)
+    from mcap.records import Channel, Schema
 
 RECORD = struct.Struct('<BQ')
 MESSAGE = struct.Struct('<HIQQ')           # channel, sequence, log time, publish time
@@ -58,9 +59,16 @@ class ChunkContent:
     end_ns: int
     compression: str
     data: bytes
-    messages: np.ndarray
-    others: list
+    messages: npt.NDArray[np.int64]
+    others: list[Schema | Channel]
     cut: bool
+
+
+class ChunkSpan(TypedDict, total=False):
+    """The log-time span [ns] of a chunk, as its header announces it."""
+
+    start_ns: int
+    end_ns: int
 
 
 def chunk_content(mcap: SimpleNamespace, body: bytes, complete: bool) -> ChunkContent:
@@ -77,7 +85,9 @@ def chunk_content(mcap: SimpleNamespace, body: bytes, complete: bool) -> ChunkCo
         start, end, compression = header.start_ns, header.end_ns, header.compression
     else:
         start, end, compression, data = _cut_chunk_bytes(body)
-    messages, others, off = [], [], 0
+    messages: list[tuple[int, ...]] = []
+    others: list[Schema | Channel] = []
+    off = 0
     kinds = {OP.SCHEMA: 'Schema', OP.CHANNEL: 'Channel'}
     while off < len(data):
         if len(data) - off < 9:
@@ -109,7 +119,7 @@ def chunk_content(mcap: SimpleNamespace, body: bytes, complete: bool) -> ChunkCo
     return ChunkContent(start, end, compression, data, table, others, not complete)
 
 
-def _cut_chunk_bytes(body: bytes) -> tuple:
+def _cut_chunk_bytes(body: bytes) -> tuple[int, int, str, bytes]:
     """Header fields and the records decodable from a chunk cut by the file end."""
     if len(body) < CHUNK_FIXED.size:
         raise RecordDamage('the file ends inside the chunk header')
@@ -118,20 +128,7 @@ def _cut_chunk_bytes(body: bytes) -> tuple:
     if name_length > 16 or len(body) < at + 8:
         raise RecordDamage('the file ends inside the chunk header')
     compression = body[CHUNK_FIXED.size:at].decode('ascii', 'replace')
-    present = body[at + 8:]
-    limit = min(size, MAX_CHUNK_BYTES)
-    try:
-        if compression == '':
-            return start, end, compression, present[:limit]
-        if compression == 'zstd' and zstandard is not None:
-            reader = zstandard.ZstdDecompressor().stream_reader(io.BytesIO(present))
-            return start, end, compression, reader.read(limit)
-        if compression == 'lz4' and lz4_frame is not None:
-            out = lz4_frame.LZ4FrameDecompressor().decompress(present, max_length=limit)
-            return start, end, compression, out
-    except Exception as err:  # zstandard.ZstdError, lz4's RuntimeError: undecodable prefix
-        raise RecordDamage(f'{compression} prefix undecodable ({err})') from None
-    raise RecordDamage(f'chunk compression {compression!r} is not supported')
+    return start, end, compression, prefix_bytes(compression, body[at + 8:], size)
 
 
 def framed(body: bytes, length: Optional[int] = None) -> bool:
@@ -146,7 +143,7 @@ def framed(body: bytes, length: Optional[int] = None) -> bool:
         records
 
 
-def chunk_span(body: bytes) -> dict:
+def chunk_span(body: bytes) -> ChunkSpan:
     """The log-time span a chunk header announces (empty if the header is cut)."""
     if len(body) < 16:
         return {}

@@ -21,11 +21,13 @@ compares it with ``mcap recover`` and ``ros2 bag reindex``.
 from __future__ import annotations
 
 import logging
+import os
 from pathlib import Path
 import shutil
-from typing import Callable, Optional
+from typing import Any, Callable, Mapping, Optional
 
 import numpy as np
+import numpy.typing as npt
 import yaml
 
 from pentapod_sim.analysis.bag.mcap_chunks import InternalsChanged
@@ -39,15 +41,19 @@ from pentapod_sim.recording.recovery_report import (
     TopicRecovery,
 )
 from pentapod_sim.recording.recovery_writer import ORIGINALS, RECOVERY_RECORD, write_bag
+from pentapod_sim.recording.run_end import RunStatus
 from pentapod_sim.recording.salvage import FileSurvey, survey_file
 
 LOGGER = logging.getLogger(__name__)
 #: Default output: the bag folder's name with this suffix, next to it.
 SUFFIX = '-recovered'
 __all__ = ['ORIGINALS', 'recover_bag', 'RECOVERY_RECORD', 'SUFFIX']
+#: Topic -> log times [ns] of its kept messages, per file and chunk.
+_Stamps = dict[str, list[npt.NDArray[np.int64]]]
 
 
-def recover_bag(bag, output=None, *, in_place: bool = False, expected_steps: Optional[int] = None,
+def recover_bag(bag: str | os.PathLike[str], output: str | os.PathLike[str] | None = None, *,
+                in_place: bool = False, expected_steps: Optional[int] = None,
                 keep_unverified: bool = True, dry_run: bool = False,
                 progress: Optional[Callable[[str, int, int], None]] = None) -> Recovery:
     """
@@ -123,13 +129,13 @@ def recover_bag(bag, output=None, *, in_place: bool = False, expected_steps: Opt
     return recovery
 
 
-def _bag_files(source: Path) -> tuple[list, dict]:
+def _bag_files(source: Path) -> tuple[list[Path], dict[str, Any]]:
     """The MCAP files of a bag and its metadata.yaml (``{}`` if absent or unreadable)."""
     if source.is_file():
         return [source], {}
     if not source.is_dir():
         raise BagError(f'no bag at {source}')
-    info: dict = {}
+    info: Any = {}             # the YAML document, until it is checked to be a mapping
     meta = source / 'metadata.yaml'
     if meta.is_file():
         try:
@@ -146,7 +152,7 @@ def _bag_files(source: Path) -> tuple[list, dict]:
     return files, info if isinstance(info, dict) else {}
 
 
-def _output_folder(source: Path, output, in_place: bool) -> Path:
+def _output_folder(source: Path, output: str | os.PathLike[str] | None, in_place: bool) -> Path:
     if in_place:
         if output is not None:
             raise BagError('give either an output folder or in-place recovery, not both')
@@ -161,7 +167,7 @@ def _output_folder(source: Path, output, in_place: bool) -> Path:
     return out
 
 
-def _listed(yaml_info: dict) -> dict:
+def _listed(yaml_info: Mapping[str, Any]) -> dict[str, int]:
     """Messages per topic that metadata.yaml counted (the writer's last flush)."""
     try:
         return {e['topic_metadata']['name']: int(e['message_count'])
@@ -170,18 +176,19 @@ def _listed(yaml_info: dict) -> dict:
         return {}
 
 
-def _report(source: Path, surveys: list, yaml_info: dict,
+def _report(source: Path, surveys: list[FileSurvey], yaml_info: Mapping[str, Any],
             expected_steps: Optional[int]) -> Recovery:
     """Kept, lost and missing steps per topic, from the surveys and the bag's own counts."""
-    topics: dict = {}
-    damage: list = []
-    statuses: list = []
-    stamps: dict = {}
+    topics: dict[str, TopicRecovery] = {}
+    damage: list[LostRange] = []
+    statuses: list[dict[str, str]] = []
+    stamps: _Stamps = {}
     exact_totals = all(s.statistics is not None for s in surveys)
-    expected: dict = {}
+    expected: dict[str, int] = {}
     for survey in surveys:
         name = survey.path.name
-        kept, orphans = survey.counts(), {}
+        kept = survey.counts()
+        orphans: dict[str, int] = {}          # 'channel <id>' -> messages
         for channel, n in kept.items():
             record = survey.channels.get(channel)
             if record is None:
@@ -233,7 +240,8 @@ def _topic(survey: FileSurvey, channel: int) -> str:
     return record.topic if record is not None else f'channel {channel}'
 
 
-def _status_values(survey: FileSurvey, channel: int, payloads: list) -> list:
+def _status_values(survey: FileSurvey, channel: int,
+                   payloads: list[bytes]) -> list[dict[str, str]]:
     """Key/value mappings of the run-status messages (undecodable ones are left out)."""
     from mcap_ros2.decoder import DecoderFactory  # only for bags with a run status
     schema = survey.schemas.get(survey.channels[channel].schema_id)
@@ -252,7 +260,8 @@ def _status_values(survey: FileSurvey, channel: int, payloads: list) -> list:
     return values
 
 
-def _steps(recovery: Recovery, status, expected_steps: Optional[int], stamps: dict) -> None:
+def _steps(recovery: Recovery, status: Optional[RunStatus], expected_steps: Optional[int],
+           stamps: _Stamps) -> None:
     """Expected and missing steps of the per-step topics."""
     recovery.run = status
     steps, exact = None, False
@@ -276,7 +285,8 @@ def _steps(recovery: Recovery, status, expected_steps: Optional[int], stamps: di
             entry.steps = step_gaps(times, steps, exact, dt_ns, first_ns)
 
 
-def _phase(progress, phase: str) -> Optional[Callable[[int, int], None]]:
+def _phase(progress: Optional[Callable[[str, int, int], None]],
+           phase: str) -> Optional[Callable[[int, int], None]]:
     if progress is None:
         return None
     return lambda done, total: progress(phase, done, total)

@@ -18,9 +18,11 @@ index and time spans.
 from __future__ import annotations
 
 import dataclasses
-from typing import Optional, Sequence
+from pathlib import Path
+from typing import Mapping, Optional, Sequence
 
 import numpy as np
+import numpy.typing as npt
 
 from pentapod_sim.errors import BagError
 from pentapod_sim.recording.run_end import RunStatus
@@ -37,7 +39,7 @@ class LostRange:
     start: int
     end: int
     reason: str
-    lost: Optional[dict] = None
+    lost: Optional[dict[str, int]] = None
     start_ns: Optional[int] = None
     end_ns: Optional[int] = None
 
@@ -55,6 +57,10 @@ class LostRange:
         return f'{self.file} bytes {self.start}..{self.end}: {self.reason}; {loss}{span}'
 
 
+#: A run of missing steps: first step, last step, first stamp [s], last stamp [s].
+StepRun = tuple[int, int, float, float]
+
+
 @dataclasses.dataclass
 class StepGaps:
     """Steps of one per-step topic: expected (``exact`` or a lower bound), missing and where."""
@@ -62,7 +68,7 @@ class StepGaps:
     expected: int
     exact: bool
     missing: int
-    gaps: list            # [(first step, last step, first stamp [s], last stamp [s])]
+    gaps: list[StepRun]
 
     def describe(self) -> str:
         expected = f'{self.expected}' if self.exact else f'>= {self.expected}'
@@ -136,15 +142,15 @@ class Recovery:
         Steps the run had (``steps_exact`` False: a lower bound), None if unknown.
     """
 
-    source: object
-    output: object
-    files: list
-    damage: list
-    topics: dict
+    source: Path
+    output: Optional[Path]
+    files: list[str]
+    damage: list[LostRange]
+    topics: dict[str, TopicRecovery]
     run: Optional[RunStatus] = None
     expected_steps: Optional[int] = None
     steps_exact: bool = False
-    notes: list = dataclasses.field(default_factory=list)
+    notes: list[str] = dataclasses.field(default_factory=list)
 
     @property
     def intact(self) -> bool:
@@ -170,7 +176,7 @@ class Recovery:
         lines += [f'  {t.describe()}' for _, t in sorted(self.topics.items())]
         return '\n'.join(lines)
 
-    def record(self) -> dict:
+    def record(self) -> dict[str, str]:
         """Key/value strings of the ``pentapod_recovery`` metadata record of the output."""
         lost = {t: (f'{r.lost}' if r.lost_exact else f'>= {r.lost}')
                 for t, r in self.topics.items() if r.lost or not r.lost_exact}
@@ -188,12 +194,12 @@ class Recovery:
                 'missing_steps': _flow(missing)}
 
 
-def _flow(mapping: dict) -> str:
+def _flow(mapping: Mapping[str, object]) -> str:
     """A mapping as one-line YAML (``{a: 1, b: 2}``)."""
     return '{' + ', '.join(f'{k}: {v}' for k, v in mapping.items()) + '}'
 
 
-def last_run_status(values: Sequence[dict]) -> Optional[RunStatus]:
+def last_run_status(values: Sequence[Mapping[str, str]]) -> Optional[RunStatus]:
     """The run status with the most steps (an ended one on a tie) among key/value mappings."""
     found = []
     for pairs in values:
@@ -206,7 +212,7 @@ def last_run_status(values: Sequence[dict]) -> Optional[RunStatus]:
     return max(found, key=lambda s: (s.steps, s.ended))
 
 
-def step_gaps(stamps_ns: np.ndarray, expected: int, exact: bool, dt_ns: int,
+def step_gaps(stamps_ns: npt.NDArray[np.int64], expected: int, exact: bool, dt_ns: int,
               first_ns: int) -> StepGaps:
     """
     Missing steps of a per-step topic.
@@ -226,7 +232,7 @@ def step_gaps(stamps_ns: np.ndarray, expected: int, exact: bool, dt_ns: int,
     present = np.zeros(max(expected, 0), bool)
     present[steps[(steps >= 0) & (steps < expected)]] = True
     missing = np.flatnonzero(~present)
-    gaps = []
+    gaps: list[StepRun] = []
     if len(missing):
         runs = np.split(missing, np.flatnonzero(np.diff(missing) > 1) + 1)
         gaps = [(int(r[0]), int(r[-1]), (first_ns + int(r[0]) * dt_ns) * 1e-9,

@@ -12,8 +12,10 @@ from __future__ import annotations
 
 import datetime
 from pathlib import Path
-from typing import Callable, Optional
+from types import SimpleNamespace
+from typing import Any, Callable, Mapping, Optional, Sequence
 
+from mcap.records import Attachment, Metadata
 from mcap.writer import CompressionType, Writer
 import yaml
 
@@ -42,14 +44,15 @@ _COMPRESSION = {'': CompressionType.NONE, 'zstd': CompressionType.ZSTD,
                 'lz4': CompressionType.LZ4}
 
 
-def write_bag(folder: Path, name: str, surveys: list, recovery: Recovery, yaml_info: dict,
+def write_bag(folder: Path, name: str, surveys: Sequence[FileSurvey], recovery: Recovery,
+              yaml_info: Mapping[str, Any],
               progress: Optional[Callable[[str, int, int], None]] = None) -> None:
     """Write the recovered files, the ``rosbag2`` record and metadata.yaml into ``folder``."""
     mcap = api()
     custom = {str(k): str(v) for k, v in (yaml_info.get('custom_data') or {}).items()}
     if not custom:
-        custom = next((dict(p.record.metadata) for s in surveys for p in s.pieces
-                       if p.kind == 'metadata' and p.record.name == RUN_METADATA_NAME), {})
+        found = (p.record for s in surveys for p in s.pieces if isinstance(p.record, Metadata))
+        custom = next((dict(r.metadata) for r in found if r.name == RUN_METADATA_NAME), {})
     record = recovery.record()
     record.update(recovered_utc=datetime.datetime.now(datetime.timezone.utc).isoformat(
         timespec='seconds'), package_version=__version__)
@@ -67,9 +70,11 @@ def write_bag(folder: Path, name: str, surveys: list, recovery: Recovery, yaml_i
     write_metadata_yaml(folder, info)
 
 
-def _entries(surveys: list, name: str) -> tuple[list, dict]:
+def _entries(surveys: Sequence[FileSurvey],
+             name: str) -> tuple[list[FileEntry], dict[str, dict[int, int]]]:
     """metadata.yaml ``files`` entries and, per file, messages per channel to be written."""
-    entries, written = [], {}
+    entries: list[FileEntry] = []
+    written: dict[str, dict[int, int]] = {}
     for k, survey in enumerate(surveys):
         path = f'{name}_{k}.mcap'
         kept = {c: n for c, n in survey.counts().items() if c in survey.channels and n}
@@ -81,9 +86,9 @@ def _entries(surveys: list, name: str) -> tuple[list, dict]:
     return entries, written
 
 
-def _topic_entries(surveys: list, recovery: Recovery) -> list:
+def _topic_entries(surveys: Sequence[FileSurvey], recovery: Recovery) -> list[TopicEntry]:
     """metadata.yaml topics with the QoS text of their MCAP channel (rosbags compares them)."""
-    found: dict = {}
+    found: dict[str, TopicEntry] = {}
     for survey in surveys:
         for record in survey.channels.values():
             if record.topic in found:
@@ -100,11 +105,12 @@ def _topic_entries(surveys: list, recovery: Recovery) -> list:
     return list(found.values())
 
 
-def _write_file(mcap, path: Path, survey: FileSurvey, record: dict, rosbag2: str,
-                progress: Optional[Callable[[str, int, int], None]]) -> dict:
+def _write_file(mcap: SimpleNamespace, path: Path, survey: FileSurvey, record: dict[str, str],
+                rosbag2: str,
+                progress: Optional[Callable[[str, int, int], None]]) -> dict[int, int]:
     """Write one recovered MCAP file; return messages written per (source) channel."""
     header = survey.header
-    counts: dict = {}
+    counts: dict[int, int] = {}
     with open(path, 'wb') as stream, open(survey.path, 'rb') as source:
         writer = Writer(stream, chunk_size=CHUNK_SIZE,
                         compression=_COMPRESSION.get(survey.compression or '',
@@ -123,11 +129,13 @@ def _write_file(mcap, path: Path, survey: FileSurvey, record: dict, rosbag2: str
                 progress(f'write {path.name}', piece.offset, survey.size)
             source.seek(piece.offset)
             raw = source.read(piece.end - piece.offset)
-            if piece.kind == 'metadata' and piece.record.name != ROSBAG2_RECORD:
-                writer.add_metadata(piece.record.name, dict(piece.record.metadata))
-            elif piece.kind == 'attachment':
-                a = piece.record
-                writer.add_attachment(a.create_time, a.log_time, a.name, a.media_type, a.data)
+            parsed = piece.record
+            if isinstance(parsed, Metadata):
+                if parsed.name != ROSBAG2_RECORD:
+                    writer.add_metadata(parsed.name, dict(parsed.metadata))
+            elif isinstance(parsed, Attachment):
+                writer.add_attachment(parsed.create_time, parsed.log_time, parsed.name,
+                                      parsed.media_type, parsed.data)
             elif piece.kind == 'chunk':
                 content = chunk_content(mcap, raw[9:], piece.complete)
                 rows = content.messages if piece.complete else content.messages[:piece.count]
@@ -145,7 +153,8 @@ def _write_file(mcap, path: Path, survey: FileSurvey, record: dict, rosbag2: str
     return counts
 
 
-def _copy_messages(writer: Writer, raw: bytes, channels: dict, counts: dict) -> None:
+def _copy_messages(writer: Writer, raw: bytes, channels: Mapping[int, int],
+                   counts: dict[int, int]) -> None:
     """Copy a run of Message records (an unchunked file)."""
     off = 0
     while off < len(raw):

@@ -10,7 +10,7 @@ from __future__ import annotations
 import dataclasses
 import os
 from pathlib import Path
-from typing import Mapping, Optional, Sequence
+from typing import Any, Mapping, Optional, Sequence
 
 import yaml
 
@@ -27,7 +27,7 @@ class TopicEntry:
 
     name: str
     msg_type: str
-    qos_profiles: object
+    qos_profiles: list[dict[str, Any]] | str
     count: int
     serialization_format: str = 'cdr'
     type_description_hash: str = ''
@@ -49,7 +49,8 @@ def _span(start_ns: Optional[int], end_ns: Optional[int]) -> tuple[int, int]:
 
 
 def bagfile_information(files: Sequence[FileEntry], topics: Sequence[TopicEntry],
-                        custom_data: Mapping[str, str], ros_distro: str = 'jazzy') -> dict:
+                        custom_data: Mapping[str, str],
+                        ros_distro: str = 'jazzy') -> dict[str, Any]:
     """
     Build the ``rosbag2_bagfile_information`` mapping of a bag.
 
@@ -103,12 +104,12 @@ def dump_yaml(data: object) -> str:
     return yaml.dump(data, Dumper=_NoAliasDumper, sort_keys=False)
 
 
-def record_text(info: Mapping) -> str:
+def record_text(info: Mapping[str, Any]) -> str:
     """The ``serialized_metadata`` value of the MCAP ``rosbag2`` record for ``info``."""
     return dump_yaml(dict(info)).strip()
 
 
-def write_metadata_yaml(folder: Path, info: Mapping) -> None:
+def write_metadata_yaml(folder: Path, info: Mapping[str, Any]) -> None:
     """Atomically (write + rename) replace ``folder``/metadata.yaml with ``info``."""
     text = dump_yaml({'rosbag2_bagfile_information': dict(info)})
     tmp = Path(folder) / 'metadata.yaml.tmp'
@@ -116,8 +117,9 @@ def write_metadata_yaml(folder: Path, info: Mapping) -> None:
     os.replace(tmp, Path(folder) / 'metadata.yaml')
 
 
-class _NoAliasDumper(yaml.SafeDumper):
+# PyYAML carries no type information here, so its classes are Any to the type checker
+class _NoAliasDumper(yaml.SafeDumper):  # type: ignore[misc]
     """Safe YAML dumper that writes repeated objects in full (no &id anchors)."""
 
-    def ignore_aliases(self, data) -> bool:
+    def ignore_aliases(self, data: object) -> bool:
         return True

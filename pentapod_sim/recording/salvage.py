@@ -30,12 +30,13 @@ import mmap
 import os
 from pathlib import Path
 import struct
-from typing import Any, Callable, Optional
+from types import SimpleNamespace
+from typing import Any, Callable, Optional, TYPE_CHECKING
 import zlib
 
 import numpy as np
 
-from pentapod_sim.analysis.bag.mcap_chunks import parse_record, RecordDamage
+from pentapod_sim.analysis.bag.mcap_chunks import Int64s, parse_record, RecordDamage
 from pentapod_sim.errors import BagError
 from pentapod_sim.recording.chunk_salvage import (
     api,
@@ -48,6 +49,9 @@ from pentapod_sim.recording.chunk_salvage import (
     OP,
     RECORD,
 )
+
+if TYPE_CHECKING:       # the classes come from api() at run time (InternalsChanged if changed)
+    from mcap import records
 
 MAGIC = b'\x89MCAP0\r\n'
 _SUMMARY_OPS = {8, 10, 13, 14}             # chunk, attachment, metadata index; summary offset
@@ -65,7 +69,7 @@ class DamagedRange:
     start: int
     end: int
     reason: str
-    lost: Optional[dict] = None
+    lost: Optional[dict[int, int]] = None
     start_ns: Optional[int] = None
     end_ns: Optional[int] = None
 
@@ -79,7 +83,7 @@ class Piece:
     end: int                   # end of the bytes used (the file end for a cut chunk)
     complete: bool = True      # False: a cut chunk, its complete records kept unverified
     count: int = 0             # messages of a chunk kept (a cut chunk: its first ``count``)
-    record: object = None      # the parsed Metadata or Attachment record
+    record: records.Metadata | records.Attachment | None = None   # of those two kinds
 
 
 @dataclasses.dataclass
@@ -88,30 +92,30 @@ class FileSurvey:
 
     path: Path
     size: int
-    header: Any = None                  # the mcap Header record
-    schemas: dict = dataclasses.field(default_factory=dict)
-    channels: dict = dataclasses.field(default_factory=dict)
-    pieces: list = dataclasses.field(default_factory=list)
-    damage: list = dataclasses.field(default_factory=list)
-    times: dict = dataclasses.field(default_factory=dict)        # channel -> [log times]
-    loose: dict = dataclasses.field(default_factory=dict)        # same, outside chunks
-    unverified: dict = dataclasses.field(default_factory=dict)   # channel -> messages
-    payloads: dict = dataclasses.field(default_factory=dict)     # channel -> [CDR bytes]
-    statistics: Optional[dict] = None   # channel -> messages, from a CRC-checked summary
+    header: Optional[records.Header] = None
+    schemas: dict[int, records.Schema] = dataclasses.field(default_factory=dict)
+    channels: dict[int, records.Channel] = dataclasses.field(default_factory=dict)
+    pieces: list[Piece] = dataclasses.field(default_factory=list)
+    damage: list[DamagedRange] = dataclasses.field(default_factory=list)
+    times: dict[int, list[Int64s]] = dataclasses.field(default_factory=dict)  # log times [ns]
+    loose: dict[int, list[int]] = dataclasses.field(default_factory=dict)     # same, unchunked
+    unverified: dict[int, int] = dataclasses.field(default_factory=dict)   # channel -> messages
+    payloads: dict[int, list[bytes]] = dataclasses.field(default_factory=dict)  # CDR bytes
+    statistics: Optional[dict[int, int]] = None  # channel -> messages, from a CRC-checked summary
     footer: bool = False
     compression: Optional[str] = None   # of the first intact chunk
 
-    def log_times(self, channel: int) -> np.ndarray:
+    def log_times(self, channel: int) -> Int64s:
         """(N,) int64 log times [ns] of the messages kept on ``channel``, in file order."""
         parts = self.times.get(channel, []) + [np.array(self.loose.get(channel, []), np.int64)]
         return np.concatenate(parts)
 
-    def counts(self) -> dict:
+    def counts(self) -> dict[int, int]:
         """``{channel id: messages kept}``."""
         return {c: len(self.log_times(c)) for c in set(self.times) | set(self.loose)}
 
 
-def survey_file(path: Path, payload_topics: frozenset = frozenset(),
+def survey_file(path: Path, payload_topics: frozenset[str] = frozenset(),
                 keep_unverified: bool = True,
                 progress: Optional[Callable[[int, int], None]] = None) -> FileSurvey:
     """
@@ -147,19 +151,30 @@ def survey_file(path: Path, payload_topics: frozenset = frozenset(),
     return survey
 
 
+@dataclasses.dataclass
+class _Summary:
+    """Records of the summary section, used once its CRC is checked."""
+
+    schemas: dict[int, records.Schema] = dataclasses.field(default_factory=dict)
+    channels: dict[int, records.Channel] = dataclasses.field(default_factory=dict)
+    statistics: Optional[records.Statistics] = None
+
+
 class _Walker:
     """One walk through the records of a file (see the module docstring)."""
 
-    def __init__(self, mcap, data, survey: FileSurvey, payload_topics, keep_unverified):
+    def __init__(self, mcap: SimpleNamespace, data: mmap.mmap, survey: FileSurvey,
+                 payload_topics: frozenset[str], keep_unverified: bool) -> None:
         self.mcap, self.data, self.survey, self.size = mcap, data, survey, len(data)
         self.payload_topics, self.keep_unverified = payload_topics, keep_unverified
         self.skipped: Optional[DamagedRange] = None   # a damaged chunk: its indexes follow
-        self.summary: dict = {'schemas': {}, 'channels': {}, 'statistics': None}
+        self.summary = _Summary()
+        self.ended = False        # past the data section (a Data End or summary record seen)
 
-    def damage(self, start, end, reason, **fields) -> DamagedRange:
-        if self.ended:
-            fields.setdefault('lost', {})     # after the data section: no message in it
-        entry = DamagedRange(int(start), int(end), reason, **fields)
+    def damage(self, start: int, end: int, reason: str, lost: Optional[dict[int, int]] = None,
+               start_ns: Optional[int] = None, end_ns: Optional[int] = None) -> DamagedRange:
+        lost = {} if lost is None and self.ended else lost   # past the data: nothing lost
+        entry = DamagedRange(int(start), int(end), reason, lost, start_ns, end_ns)
         self.survey.damage.append(entry)
         return entry
 
@@ -238,7 +253,7 @@ class _Walker:
             record = parse_record(mcap, 'Schema' if opcode == OP.SCHEMA else 'Channel', body)
             self.add_other(record, self.summary if self.ended else None)
         elif opcode == OP.MESSAGE_INDEX:
-            index: Any = parse_record(mcap, 'MessageIndex', body)
+            index: records.MessageIndex = parse_record(mcap, 'MessageIndex', body)
             if self.skipped is not None:
                 lost = self.skipped.lost if self.skipped.lost is not None else {}
                 lost[index.channel_id] = lost.get(index.channel_id, 0) + len(index.records)
@@ -255,7 +270,7 @@ class _Walker:
         elif opcode == OP.HEADER:
             survey.header = parse_record(mcap, 'Header', body)
         elif opcode == OP.STATISTICS:
-            self.summary['statistics'] = parse_record(mcap, 'Statistics', body)
+            self.summary.statistics = parse_record(mcap, 'Statistics', body)
         elif opcode == OP.DATA_END:
             self.ended = True
         elif opcode == OP.FOOTER:
@@ -263,14 +278,13 @@ class _Walker:
         elif opcode in _SUMMARY_OPS:
             self.ended = True      # indexes are rebuilt by the writer
 
-    ended = False
-
-    def add_other(self, record, summary: Optional[dict]) -> None:
+    def add_other(self, record: records.Schema | records.Channel,
+                  summary: Optional[_Summary]) -> None:
         """A Schema or Channel record; one of the summary waits for the summary's CRC."""
         kind = 'channels' if hasattr(record, 'topic') else 'schemas'
-        known = getattr(self.survey, kind)
+        known: dict[int, Any] = getattr(self.survey, kind)
         if summary is not None and record.id not in known:
-            summary[kind][record.id] = record
+            getattr(summary, kind)[record.id] = record
         else:
             known.setdefault(record.id, record)
 
@@ -368,7 +382,7 @@ class _Walker:
         return bool(len(rows)) and bool(np.isin(rows[:, 0], list(known)).all()) and bool(
             ((rows[:, 2] >= content.start_ns) & (rows[:, 2] <= content.end_ns)).all())
 
-    def footer(self, pos: int, footer) -> None:
+    def footer(self, pos: int, footer: records.Footer) -> None:
         """Check the summary's CRC; a good summary adds its channels and statistics."""
         self.survey.footer = True
         summary, start = self.summary, footer.summary_start
@@ -378,8 +392,9 @@ class _Walker:
                 self.damage(start, pos, 'summary section damaged (CRC mismatch): ignored and '
                             'rebuilt', lost={})
                 return
-        for kind in ('schemas', 'channels'):
-            for key, record in summary[kind].items():
-                getattr(self.survey, kind).setdefault(key, record)
-        if summary['statistics'] is not None:
-            self.survey.statistics = dict(summary['statistics'].channel_message_counts)
+        for key, schema in summary.schemas.items():
+            self.survey.schemas.setdefault(key, schema)
+        for key, channel in summary.channels.items():
+            self.survey.channels.setdefault(key, channel)
+        if summary.statistics is not None:
+            self.survey.statistics = dict(summary.statistics.channel_message_counts)

@@ -210,6 +210,34 @@ def chunk_bytes(body: Body, header: ChunkHeader) -> Body:
     return records
 
 
+def prefix_bytes(compression: str, present: bytes, size: int) -> bytes:
+    """
+    Return the records decodable from the bytes present of a Chunk cut by the end of its file.
+
+    ``present`` are the compressed records up to the cut, ``size`` the uncompressed size the
+    chunk header announces. Uncompressed, every byte present is returned; zstd and lz4 give
+    their whole compressed blocks (the streaming decoders stop at the last complete one). At
+    most ``size`` and :data:`MAX_CHUNK_BYTES` bytes are produced; nothing is CRC-checked.
+
+    Raises
+    ------
+    RecordDamage
+        If the bytes do not decode or the compression is not supported.
+    """
+    limit = min(size, MAX_CHUNK_BYTES)
+    try:
+        if compression == '':
+            return present[:limit]
+        if compression == 'zstd' and zstandard is not None:
+            reader = zstandard.ZstdDecompressor().stream_reader(io.BytesIO(present))
+            return reader.read(limit)
+        if compression == 'lz4' and lz4_frame is not None:
+            return lz4_frame.LZ4FrameDecompressor().decompress(present, max_length=limit)
+    except Exception as err:  # zstandard.ZstdError, lz4's RuntimeError: undecodable prefix
+        raise RecordDamage(f'{compression} prefix undecodable ({err})') from None
+    raise RecordDamage(f'chunk compression {compression!r} is not supported')
+
+
 def split_chunk(mcap: SimpleNamespace, body: Body) -> SplitChunk:
     """
     Verify one Chunk record body and split it into its records.
