@@ -22,11 +22,17 @@ import argparse
 import logging
 from pathlib import Path
 import sys
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from pentapod_sim.cli import CommandParser, configure_logging, model_from_args, run_command
 from pentapod_sim.errors import ModalError
+
+if TYPE_CHECKING:       # imported by the functions that use them
+    from pentapod_sim.analysis.calibration.settings import CalibrationSettings
+    from pentapod_sim.analysis.measured.frf_files import MeasuredFrfs
+    from pentapod_sim.fe.model import FEModel
 
 LOGGER = logging.getLogger('calibrate')
 
@@ -55,7 +61,7 @@ def _parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _settings(args):
+def _settings(args: argparse.Namespace) -> CalibrationSettings:
     from pentapod_sim.analysis.calibration.settings import load_settings
     settings = load_settings(args.settings)
     changes = {k: v for k, v in (('band', tuple(args.band) if args.band else None),
@@ -75,7 +81,7 @@ def _settings(args):
     return build(CalibrationSettings, data, 'command line')
 
 
-def _model(args):
+def _model(args: argparse.Namespace) -> tuple[FEModel, str]:
     """(FE model, label) from --model: a description file or a position name."""
     model_args = argparse.Namespace(fe_model_file=None, machine=None, positions=None,
                                     position=args.model, element_size=None, refine=None)
@@ -85,7 +91,7 @@ def _model(args):
     return model_from_args(model_args), args.model
 
 
-def _measured(args, settings):
+def _measured(args: argparse.Namespace, settings: CalibrationSettings) -> MeasuredFrfs:
     from pentapod_sim.analysis.measured.frf_files import read_csv, read_uff58
     if Path(args.measured).suffix.lower() == '.csv':
         return read_csv(args.measured, settings.quantity)
@@ -157,7 +163,7 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _has_port(fe, name: str) -> bool:
+def _has_port(fe: FEModel, name: str) -> bool:
     from pentapod_sim.errors import PortError
     from pentapod_sim.plant.ports import port
     try:

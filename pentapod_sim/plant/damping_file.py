@@ -49,7 +49,7 @@ class Rayleigh:
     alpha: float = spec('1/s', description='mass-proportional coefficient')
     beta: float = spec('s', description='stiffness-proportional coefficient')
 
-    def ratio(self, omega: npt.ArrayLike) -> np.ndarray:
+    def ratio(self, omega: npt.ArrayLike) -> npt.NDArray[np.float64]:
         """Damping ratio [-] at angular frequencies ``omega`` [rad/s]."""
         omega = np.asarray(omega, dtype=float)
         return self.alpha / (2.0 * omega) + self.beta * omega / 2.0
@@ -75,7 +75,7 @@ class DampingFile:
             raise ConfigError('give rayleigh or default_ratio: the fill of modes outside the '
                               'paired modes and bands')
 
-    def ratios(self, frequencies_hz: npt.ArrayLike) -> np.ndarray:
+    def ratios(self, frequencies_hz: npt.ArrayLike) -> npt.NDArray[np.float64]:
         """Damping ratio [-] of every mode of natural frequencies ``frequencies_hz`` [Hz]."""
         freq = np.asarray(frequencies_hz, dtype=float)
         omega = 2.0 * np.pi * freq
@@ -97,7 +97,7 @@ class DampingFile:
         return zeta
 
 
-def load_damping_file(path: str | os.PathLike) -> DampingFile:
+def load_damping_file(path: str | os.PathLike[str]) -> DampingFile:
     """
     Read and validate a calibrated damping file.
 
@@ -109,7 +109,7 @@ def load_damping_file(path: str | os.PathLike) -> DampingFile:
     return replace(load(DampingFile, path), source=str(path))
 
 
-def write_damping_file(path: str | os.PathLike, data: DampingFile, header: str = '') -> Path:
+def write_damping_file(path: str | os.PathLike[str], data: DampingFile, header: str = '') -> Path:
     """Write ``data`` as YAML (exact floats; ``header`` as comment lines on top)."""
     def clean(obj: object) -> object:
         if isinstance(obj, dict):

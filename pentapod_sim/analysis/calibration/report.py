@@ -15,10 +15,13 @@ from __future__ import annotations
 import csv
 import os
 from pathlib import Path
+from typing import Mapping, Sequence, TypedDict
 
 import numpy as np
+import numpy.typing as npt
 
 from pentapod_sim.analysis.calibration.update import Calibration
+from pentapod_sim.analysis.measured.labels import DofLabel
 from pentapod_sim.figures import save_figure
 
 PAIR_COLUMNS = ('model_mode', 'model_f_hz', 'measured_f_hz', 'mac', 'zeta_model',
@@ -31,7 +34,30 @@ PEAK_FLOOR_DB = 20.0
 DOMINANCE = 0.5
 
 
-def pairing_rows(cal: Calibration) -> list[dict]:
+class PairRow(TypedDict):
+    """A line of the pairing table (PAIR_COLUMNS)."""
+
+    model_mode: int
+    model_f_hz: float
+    measured_f_hz: float
+    mac: float
+    zeta_model: float
+    zeta_measured: float
+
+
+class ErrorRow(TypedDict):
+    """Remaining error of one FRF (ERROR_COLUMNS), in dB (module docstring)."""
+
+    response: str
+    reference: str
+    peaks: int
+    peak_db_before: float
+    peak_db_after: float
+    rms_db_before: float
+    rms_db_after: float
+
+
+def pairing_rows(cal: Calibration) -> list[PairRow]:
     """One row per paired mode (PAIR_COLUMNS), by model frequency."""
     return [{'model_mode': int(j) + 1, 'model_f_hz': float(cal.model_hz[j]),
              'measured_f_hz': float(cal.identified_hz[i]), 'mac': float(m),
@@ -40,7 +66,8 @@ def pairing_rows(cal: Calibration) -> list[dict]:
             for i, j, m in zip(cal.pairing.measured, cal.pairing.model, cal.pairing.mac)]
 
 
-def _peak(freq: np.ndarray, mag: np.ndarray, f0: float, w: float) -> float:
+def _peak(freq: npt.NDArray[np.float64], mag: npt.NDArray[np.float64], f0: float,
+          w: float) -> float:
     """Largest ``mag`` within ``f0 (1 +- w)`` (the line nearest f0 if the window holds none)."""
     window = (freq >= f0 * (1 - w)) & (freq <= f0 * (1 + w))
     if not window.any():
@@ -62,7 +89,8 @@ def counted_peaks(cal: Calibration, o: int, i: int) -> list[tuple[int, int]]:
     return out
 
 
-def peak_errors(cal: Calibration, model: np.ndarray, o: int, i: int) -> tuple[int, float]:
+def peak_errors(cal: Calibration, model: npt.NDArray[np.complex128], o: int,
+                i: int) -> tuple[int, float]:
     """(number of counted peaks, largest |dB| error) of FRF (o, i) of ``model``."""
     meas, mag = np.abs(cal.measured[o, i]), np.abs(model[o, i])
     worst, peaks = 0.0, counted_peaks(cal, o, i)
@@ -74,23 +102,28 @@ def peak_errors(cal: Calibration, model: np.ndarray, o: int, i: int) -> tuple[in
     return len(peaks), (worst if peaks else np.nan)
 
 
-def error_rows(cal: Calibration, responses: list, references: list) -> list[dict]:
+def _rms_db(cal: Calibration, model: npt.NDArray[np.complex128], o: int, i: int) -> float:
+    """RMS of ``20 log10 |H_model / H_measured|`` of FRF (o, i) over the band's lines."""
+    ratio = np.abs(model[o, i]) / np.abs(cal.measured[o, i])
+    return float(np.sqrt(np.mean((20 * np.log10(ratio)) ** 2)))
+
+
+def error_rows(cal: Calibration, responses: Sequence[DofLabel],
+               references: Sequence[DofLabel]) -> list[ErrorRow]:
     """Remaining error of every FRF before and after the calibration (ERROR_COLUMNS)."""
-    rows = []
+    rows: list[ErrorRow] = []
     for o, r in enumerate(responses):
         for i, q in enumerate(references):
-            row: dict = {'response': str(r), 'reference': str(q)}
-            for tag, model in (('before', cal.before), ('after', cal.after)):
-                count, worst = peak_errors(cal, model, o, i)
-                ratio = np.abs(model[o, i]) / np.abs(cal.measured[o, i])
-                row['peaks'] = count
-                row[f'peak_db_{tag}'] = worst
-                row[f'rms_db_{tag}'] = float(np.sqrt(np.mean((20 * np.log10(ratio)) ** 2)))
-            rows.append(row)
+            peaks, before = peak_errors(cal, cal.before, o, i)
+            _, after = peak_errors(cal, cal.after, o, i)     # the same peaks (of the measurement)
+            rows.append({'response': str(r), 'reference': str(q), 'peaks': peaks,
+                         'peak_db_before': before, 'peak_db_after': after,
+                         'rms_db_before': _rms_db(cal, cal.before, o, i),
+                         'rms_db_after': _rms_db(cal, cal.after, o, i)})
     return rows
 
 
-def format_pairing(rows: list[dict]) -> str:
+def format_pairing(rows: Sequence[PairRow]) -> str:
     """The pairing table as text."""
     lines = [f'{"mode":>4} {"f model":>9} {"f meas.":>9} {"MAC":>6} {"ζ model":>9} '
              f'{"ζ meas.":>9}']
@@ -99,7 +132,8 @@ def format_pairing(rows: list[dict]) -> str:
     return '\n'.join(lines)
 
 
-def write_rows(path: str | os.PathLike, rows: list[dict], columns: tuple) -> Path:
+def write_rows(path: str | os.PathLike[str], rows: Sequence[Mapping[str, object]],
+               columns: Sequence[str]) -> Path:
     """Write rows as CSV."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -110,8 +144,8 @@ def write_rows(path: str | os.PathLike, rows: list[dict], columns: tuple) -> Pat
     return path
 
 
-def overlay_plot(cal: Calibration, responses: list, references: list,
-                 path: str | os.PathLike, max_panels: int = 6, title: str = '') -> Path:
+def overlay_plot(cal: Calibration, responses: Sequence[DofLabel], references: Sequence[DofLabel],
+                 path: str | os.PathLike[str], max_panels: int = 6, title: str = '') -> Path:
     """PNG: |H| of measured, model before and updated model, for the driving points first."""
     import matplotlib.pyplot as plt
     pairs = [(o, i) for i, q in enumerate(references) for o, r in enumerate(responses)

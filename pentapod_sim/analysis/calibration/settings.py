@@ -56,7 +56,7 @@ class CalibrationSettings:
         return {int(k): v for k, v in self.names.items()}
 
 
-def load_settings(path: str | os.PathLike | None = None) -> CalibrationSettings:
+def load_settings(path: str | os.PathLike[str] | None = None) -> CalibrationSettings:
     """The settings of ``path``, or the defaults."""
     if path is None:
         return CalibrationSettings()

@@ -30,12 +30,15 @@ from pentapod_sim.analysis.ema.poles import Tolerances
 from pentapod_sim.analysis.measured.frf_files import MeasuredFrfs
 from pentapod_sim.analysis.measured.model_dofs import label_rows
 from pentapod_sim.errors import BagError
+from pentapod_sim.fe.model import FEModel
 from pentapod_sim.plant.config import DampingGroup
 from pentapod_sim.plant.damping_file import DampingFile, PairedMode, Rayleigh
 
 LOG = logging.getLogger(__name__)
 #: Share of the gap to the neighbouring model mode by which a sub-band is widened.
 BAND_OVERLAP = 0.3
+#: An identified mode: f [Hz], zeta, shape (No,), centrality in its sub-band, constants (No, Ni).
+_Found = tuple[float, float, npt.NDArray[np.complex128], float, npt.NDArray[np.complex128]]
 
 
 @dataclass
@@ -67,20 +70,20 @@ class Calibration:
         Identification sub-bands [Hz].
     """
 
-    identified_hz: np.ndarray
-    identified_zeta: np.ndarray
-    identified_shapes: np.ndarray
-    identified_constants: np.ndarray
-    model_hz: np.ndarray
-    zeta_before: np.ndarray
-    zeta_after: np.ndarray
+    identified_hz: npt.NDArray[np.float64]
+    identified_zeta: npt.NDArray[np.float64]
+    identified_shapes: npt.NDArray[np.complex128]
+    identified_constants: npt.NDArray[np.complex128]
+    model_hz: npt.NDArray[np.float64]
+    zeta_before: npt.NDArray[np.float64]
+    zeta_after: npt.NDArray[np.float64]
     pairing: Pairing
     damping: DampingFile
-    freq: np.ndarray
-    measured: np.ndarray
-    before: np.ndarray
-    after: np.ndarray
-    sub_bands: list = field(default_factory=list)
+    freq: npt.NDArray[np.float64]
+    measured: npt.NDArray[np.complex128]
+    before: npt.NDArray[np.complex128]
+    after: npt.NDArray[np.complex128]
+    sub_bands: list[tuple[float, float]] = field(default_factory=list)
 
 
 def sub_bands(model_hz: npt.ArrayLike, band: tuple[float, float],
@@ -103,11 +106,11 @@ def sub_bands(model_hz: npt.ArrayLike, band: tuple[float, float],
     return out
 
 
-def _identify(measured: MeasuredFrfs, bands: list, settings: CalibrationSettings,
-              say: Callable[[str], None]
-              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    found: list[tuple[float, float, np.ndarray, float, np.ndarray]] = []  # f, zeta, shape,
-    #                                                  centrality, modal constants (No, Ni)
+def _identify(measured: MeasuredFrfs, bands: list[tuple[float, float]],
+              settings: CalibrationSettings, say: Callable[[str], None]
+              ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64],
+                         npt.NDArray[np.complex128], npt.NDArray[np.complex128]]:
+    found: list[_Found] = []
     for k, (lo, hi) in enumerate(bands, start=1):
         say(f'identifying modes in {lo:.2f}-{hi:.2f} Hz (sub-band {k} of {len(bands)})')
         try:
@@ -123,7 +126,7 @@ def _identify(measured: MeasuredFrfs, bands: list, settings: CalibrationSettings
             centrality = 1.0 - abs(f - 0.5 * (lo + hi)) / (0.5 * (hi - lo))
             found.append((float(f), float(z), u[:, 0] * s[0], centrality, constants[:, :, r]))
     found.sort(key=lambda item: item[0])
-    kept: list = []
+    kept: list[_Found] = []
     for item in found:                                  # one mode seen by two bands: keep one
         if kept and abs(item[0] / kept[-1][0] - 1.0) < Tolerances().tol_freq:
             if item[3] > kept[-1][3]:
@@ -138,8 +141,10 @@ def _identify(measured: MeasuredFrfs, bands: list, settings: CalibrationSettings
             np.column_stack([k[2] for k in kept]), np.stack([k[4] for k in kept], axis=2))
 
 
-def model_receptance(c: np.ndarray, b: np.ndarray, omega: np.ndarray, zeta: np.ndarray,
-                     residual: np.ndarray, freq: npt.ArrayLike) -> np.ndarray:
+def model_receptance(c: npt.NDArray[np.float64], b: npt.NDArray[np.float64],
+                     omega: npt.NDArray[np.float64], zeta: npt.NDArray[np.float64],
+                     residual: npt.NDArray[np.float64], freq: npt.ArrayLike
+                     ) -> npt.NDArray[np.complex128]:
     """``sum_r c_r b_r / (omega_r^2 - w^2 + 2 j zeta_r omega_r w) + residual``, (No, Ni, F)."""
     w = 2 * np.pi * np.asarray(freq, dtype=float)
     out = np.empty((c.shape[0], b.shape[1], w.size), dtype=complex)
@@ -147,10 +152,11 @@ def model_receptance(c: np.ndarray, b: np.ndarray, omega: np.ndarray, zeta: np.n
         ww = w[start:start + 512]
         den = omega[:, None] ** 2 - ww[None, :] ** 2 + 2j * (zeta * omega)[:, None] * ww[None, :]
         out[:, :, start:start + 512] = np.einsum('or,ri,rf->oif', c, b, 1.0 / den)
-    return out + residual[:, :, None]
+    out += residual[:, :, None]
+    return out
 
 
-def calibrate(fe, frequencies_hz: npt.ArrayLike, shapes: npt.ArrayLike,
+def calibrate(fe: FEModel, frequencies_hz: npt.ArrayLike, shapes: npt.ArrayLike,
               zeta_model: npt.ArrayLike, measured: MeasuredFrfs,
               settings: CalibrationSettings = CalibrationSettings(),
               progress: Callable[[str], None] | None = None) -> Calibration:

@@ -26,13 +26,15 @@ import numpy.typing as npt
 
 from pentapod_sim.analysis.frf.estimation import FrfResult
 from pentapod_sim.analysis.frf.export import uff58_block
-from pentapod_sim.analysis.measured.labels import parse_label, uff_label
+from pentapod_sim.analysis.measured.labels import DofLabel, parse_label, uff_label
 from pentapod_sim.errors import BagError
 
 #: UFF specific data type of the ordinate -> (quantity, power of j w that makes a receptance).
 UFF_QUANTITIES = {8: ('displacement', 0), 11: ('velocity', 1), 12: ('acceleration', 2)}
 POWERS = dict(UFF_QUANTITIES.values())
 CSV_COLUMNS = ('response', 'reference', 'frequency_hz', 'real', 'imag')
+#: One FRF of a file: (response, reference).
+Pair = tuple[DofLabel, DofLabel]
 
 
 @dataclass
@@ -54,15 +56,16 @@ class MeasuredFrfs:
         The file.
     """
 
-    freq: np.ndarray
-    H: np.ndarray
-    responses: list
-    references: list
+    freq: npt.NDArray[np.float64]
+    H: npt.NDArray[np.complex128]
+    responses: list[DofLabel]
+    references: list[DofLabel]
     quantity: str = 'displacement'
     source: str = ''
 
 
-def to_receptance(freq: npt.ArrayLike, H: npt.ArrayLike, quantity: str) -> np.ndarray:
+def to_receptance(freq: npt.ArrayLike, H: npt.ArrayLike,
+                  quantity: str) -> npt.NDArray[np.complex128]:
     """Receptance from a receptance, mobility or accelerance (``H / (j w)^p``)."""
     if quantity not in POWERS:
         raise BagError(f'unknown FRF quantity {quantity!r}; known: {", ".join(POWERS)}')
@@ -71,7 +74,8 @@ def to_receptance(freq: npt.ArrayLike, H: npt.ArrayLike, quantity: str) -> np.nd
         return np.asarray(H) / jw ** POWERS[quantity]
 
 
-def _matrix(pairs: dict, responses: list, references: list, source: str) -> np.ndarray:
+def _matrix(pairs: dict[Pair, npt.NDArray[np.complex128]], responses: list[DofLabel],
+            references: list[DofLabel], source: str) -> npt.NDArray[np.complex128]:
     missing = [f'{r}/{q}' for r in responses for q in references if (r, q) not in pairs]
     if missing:
         raise BagError(f'{source}: the FRFs do not fill the response x reference matrix; '
@@ -79,7 +83,7 @@ def _matrix(pairs: dict, responses: list, references: list, source: str) -> np.n
     return np.array([[pairs[(r, q)] for q in references] for r in responses])
 
 
-def read_uff58(path: str | os.PathLike, names: dict[int, str] | None = None) -> MeasuredFrfs:
+def read_uff58(path: str | os.PathLike[str], names: dict[int, str] | None = None) -> MeasuredFrfs:
     """
     FRFs of a UFF file (datasets 58 of function type 4; other datasets are skipped).
 
@@ -105,7 +109,9 @@ def read_uff58(path: str | os.PathLike, names: dict[int, str] | None = None) -> 
         raise BagError(f'{path}: ordinate types {sorted(map(str, kinds))}: expected one of '
                        '8 (displacement), 11 (velocity), 12 (acceleration)')
     quantity = UFF_QUANTITIES[next(iter(kinds))][0]
-    pairs, responses, references = {}, [], []
+    pairs: dict[Pair, npt.NDArray[np.complex128]] = {}
+    responses: list[DofLabel] = []
+    references: list[DofLabel] = []
     for s in sets:
         if len(s['x']) != len(freq) or not np.allclose(s['x'], freq, rtol=1e-9, atol=0):
             raise BagError(f'{path}: FRF {s["rsp_node"]}:{s["rsp_dir"]} / {s["ref_node"]}:'
@@ -119,9 +125,9 @@ def read_uff58(path: str | os.PathLike, names: dict[int, str] | None = None) -> 
     return MeasuredFrfs(freq, H, responses, references, quantity, str(path))
 
 
-def read_csv(path: str | os.PathLike, quantity: str = 'displacement') -> MeasuredFrfs:
+def read_csv(path: str | os.PathLike[str], quantity: str = 'displacement') -> MeasuredFrfs:
     """FRFs of a long-form CSV (module docstring); ``quantity`` per unit force."""
-    pairs: dict = {}
+    pairs: dict[Pair, list[tuple[float, complex]]] = {}
     try:
         with open(path, newline='', encoding='utf-8') as stream:
             reader = csv.DictReader(stream)
@@ -141,7 +147,7 @@ def read_csv(path: str | os.PathLike, quantity: str = 'displacement') -> Measure
     responses = list(dict.fromkeys(r for r, _ in pairs))
     references = list(dict.fromkeys(q for _, q in pairs))
     freq = np.array([f for f, _ in next(iter(pairs.values()))])
-    values = {}
+    values: dict[Pair, npt.NDArray[np.complex128]] = {}
     for key, lines in pairs.items():
         f = np.array([v[0] for v in lines])
         if len(f) != len(freq) or not np.allclose(f, freq, rtol=1e-12, atol=0):
@@ -151,7 +157,7 @@ def read_csv(path: str | os.PathLike, quantity: str = 'displacement') -> Measure
     return MeasuredFrfs(freq, H, responses, references, quantity, str(path))
 
 
-def write_csv(path: str | os.PathLike, data: MeasuredFrfs) -> Path:
+def write_csv(path: str | os.PathLike[str], data: MeasuredFrfs) -> Path:
     """Write receptances in the long CSV form (exact doubles)."""
     with open(path, 'w', newline='', encoding='utf-8') as stream:
         writer = csv.writer(stream)
@@ -164,7 +170,14 @@ def write_csv(path: str | os.PathLike, data: MeasuredFrfs) -> Path:
     return Path(path)
 
 
-def write_uff58(path: str | os.PathLike, data: MeasuredFrfs, numbers: dict[str, int],
+def _uff_dof(label: DofLabel, numbers: dict[str, int]) -> tuple[int, int]:
+    """UFF node number and signed direction (+-1..6) of a point or node label."""
+    if label.component is None or label.target not in numbers:
+        raise BagError(f'UFF 58 export: {label} needs a node number and direction')
+    return numbers[label.target], int(label.sign * (label.component + 1))
+
+
+def write_uff58(path: str | os.PathLike[str], data: MeasuredFrfs, numbers: dict[str, int],
                 input_unit: str = 'N', output_unit: str = 'm') -> Path:
     """
     Write receptances as UFF 58 datasets (the project's writer); ``numbers``: target -> node.
@@ -177,15 +190,12 @@ def write_uff58(path: str | os.PathLike, data: MeasuredFrfs, numbers: dict[str, 
     blocks: list[str] = []
     for i, r in enumerate(data.responses):
         for k, q in enumerate(data.references):
-            for label in (r, q):
-                if label.is_port or label.target not in numbers:
-                    raise BagError(f'UFF 58 export: {label} needs a node number and direction')
+            (r_node, r_dir), (q_node, q_dir) = (_uff_dof(label, numbers) for label in (r, q))
             h = data.H[i, k]
             result = FrfResult(data.freq, h, h, h, np.ones(len(h)), input_unit, output_unit,
                                'measured', 1, None, f'{r} / {q}')
-            blocks.append(uff58_block(
-                result, numbers[r.target], int(r.sign * (r.component + 1)), numbers[q.target],
-                int(q.sign * (q.component + 1)), function_id=len(blocks) + 1))
+            blocks.append(uff58_block(result, r_node, r_dir, q_node, q_dir,
+                                      function_id=len(blocks) + 1))
     path = Path(path)
     path.write_text(''.join(blocks), encoding='ascii')
     return path

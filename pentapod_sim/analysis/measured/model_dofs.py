@@ -17,10 +17,11 @@ import scipy.sparse as sp
 
 from pentapod_sim.analysis.measured.labels import DofLabel
 from pentapod_sim.errors import ConfigError
+from pentapod_sim.fe.model import FEModel
 from pentapod_sim.plant.ports import INPUT_NAMES, OUTPUT_NAMES, port
 
 
-def label_row(fe, label: DofLabel) -> sp.csr_matrix:
+def label_row(fe: FEModel, label: DofLabel) -> sp.csr_matrix:
     """(1, n) observation row of a measured DOF on an FE model."""
     if label.is_port:
         if label.target not in INPUT_NAMES + OUTPUT_NAMES:
@@ -44,6 +45,6 @@ def label_row(fe, label: DofLabel) -> sp.csr_matrix:
     return sp.csr_matrix(([label.sign], ([0], [hit[0]])), shape=(1, fe.n_dof))
 
 
-def label_rows(fe, labels: Sequence[DofLabel]) -> sp.csr_matrix:
+def label_rows(fe: FEModel, labels: Sequence[DofLabel]) -> sp.csr_matrix:
     """(len(labels), n) observation rows of measured DOFs."""
     return sp.vstack([label_row(fe, label) for label in labels]).tocsr()

@@ -15,11 +15,13 @@ import csv
 from dataclasses import dataclass
 import os
 from pathlib import Path
-from typing import Sequence
+from typing import Any, Sequence
 
 import numpy as np
+import numpy.typing as npt
 
 from pentapod_sim.errors import BagError
+from pentapod_sim.fe.model import FEModel
 from pentapod_sim.plant.ports import port
 
 NODE_COLUMNS = ('uff_node', 'name')
@@ -29,13 +31,14 @@ NODE_COLUMNS = ('uff_node', 'name')
 class ModeShapes:
     """Frequencies [Hz] (m,), shapes (N, 6, m) at named nodes, and the names (N,)."""
 
-    frequencies_hz: np.ndarray
-    shapes: np.ndarray
-    names: list
-    positions: np.ndarray | None = None
+    frequencies_hz: npt.NDArray[np.float64]
+    shapes: npt.NDArray[np.float64]
+    names: list[str]
+    positions: npt.NDArray[np.float64] | None = None
 
 
-def model_shapes(fe, frequencies_hz, shapes, names: Sequence[str] | None = None) -> ModeShapes:
+def model_shapes(fe: FEModel, frequencies_hz: npt.ArrayLike, shapes: npt.NDArray[np.float64],
+                 names: Sequence[str] | None = None) -> ModeShapes:
     """
     Shapes of the computed modes at named points (default all) or FE nodes (``'node:<N>'``).
 
@@ -53,6 +56,8 @@ def model_shapes(fe, frequencies_hz, shapes, names: Sequence[str] | None = None)
     for name in names:
         if name.startswith('node:'):
             label = int(name.split(':', 1)[1])
+            if fe.dofs is None:
+                raise BagError(f'UFF 55 export: the model has no DOF map to find node {label}')
             T = np.zeros((6, fe.n_dof))
             for c in range(6):
                 hit = np.flatnonzero((fe.dofs.nodes == label) & (fe.dofs.components == c))
@@ -70,12 +75,13 @@ def model_shapes(fe, frequencies_hz, shapes, names: Sequence[str] | None = None)
                       np.array(positions))
 
 
-def write_uff55(path: str | os.PathLike, data: ModeShapes, zeta=None) -> Path:
+def write_uff55(path: str | os.PathLike[str], data: ModeShapes,
+                zeta: npt.ArrayLike | None = None) -> Path:
     """Write datasets 15 (coordinates) and 55 (one per mode) and the node name CSV."""
     import pyuff
     path = Path(path)
     numbers = np.arange(1, len(data.names) + 1)
-    sets = []
+    sets: list[dict[str, Any]] = []           # pyuff's datasets
     if data.positions is not None and np.all(np.isfinite(data.positions)):
         xyz = np.asarray(data.positions, dtype=float)
         sets.append(pyuff.prepare_15(node_nums=numbers, def_cs=np.zeros(len(numbers), int),
@@ -108,7 +114,7 @@ def _names_path(path: Path) -> Path:
     return path.with_name(f'{path.stem}_nodes.csv')
 
 
-def read_uff55(path: str | os.PathLike) -> ModeShapes:
+def read_uff55(path: str | os.PathLike[str]) -> ModeShapes:
     """Read datasets 55 (and the node name CSV beside the file, if there)."""
     import pyuff
     path = Path(path)
@@ -141,7 +147,8 @@ def read_uff55(path: str | os.PathLike) -> ModeShapes:
                       [names[str(n)] for n in nodes], positions)
 
 
-def write_port_values(path: str | os.PathLike, fe, frequencies_hz, shapes,
+def write_port_values(path: str | os.PathLike[str], fe: FEModel,
+                      frequencies_hz: npt.NDArray[np.float64], shapes: npt.NDArray[np.float64],
                       port_names: Sequence[str]) -> Path:
     """Modal value of each port per mode (``p^T phi``) as CSV: mode, frequency, ports."""
     vectors = np.array([port(fe.points, fe.strut_frames, n).vector for n in port_names])

@@ -24,7 +24,7 @@ from pentapod_sim.errors import ModelFileError
 from pentapod_sim.fe.model import OTHER_COMPONENT
 
 
-def _table(path: str | os.PathLike, columns: int, what: str) -> npt.NDArray[np.float64]:
+def _table(path: str | os.PathLike[str], columns: int, what: str) -> npt.NDArray[np.float64]:
     try:
         data = np.loadtxt(path, delimiter=',', comments='*', ndmin=2, dtype=float)
     except (OSError, ValueError) as err:
@@ -35,7 +35,7 @@ def _table(path: str | os.PathLike, columns: int, what: str) -> npt.NDArray[np.f
     return data
 
 
-def read(path: str | os.PathLike) -> tuple[npt.NDArray[np.int64], sp.csr_matrix]:
+def read(path: str | os.PathLike[str]) -> tuple[npt.NDArray[np.int64], sp.csr_matrix]:
     """
     DOF labels and matrix of a ``.mtx`` file in the MATRIX INPUT format.
 
@@ -72,7 +72,7 @@ def read(path: str | os.PathLike) -> tuple[npt.NDArray[np.int64], sp.csr_matrix]
     return np.column_stack([unique[:, 0], components]), matrix
 
 
-def write(path: str | os.PathLike, matrix: sp.spmatrix, labels: npt.ArrayLike,
+def write(path: str | os.PathLike[str], matrix: sp.spmatrix, labels: npt.ArrayLike,
           title: str = '') -> Path:
     """
     Write a symmetric matrix as Abaqus MATRIX INPUT text (lower triangle, exact doubles).
@@ -93,8 +93,8 @@ def write(path: str | os.PathLike, matrix: sp.spmatrix, labels: npt.ArrayLike,
     return Path(path)
 
 
-def read_nodes(path: str | os.PathLike) -> tuple[npt.NDArray[np.int64],
-                                                 npt.NDArray[np.float64]]:
+def read_nodes(path: str | os.PathLike[str]) -> tuple[npt.NDArray[np.int64],
+                                                      npt.NDArray[np.float64]]:
     """Labels (N,) and coordinates (N, 3) of the ``*NODE`` blocks of an Abaqus input file."""
     labels, xyz = [], []
     try:
@@ -125,7 +125,7 @@ def read_nodes(path: str | os.PathLike) -> tuple[npt.NDArray[np.int64],
     return np.array(labels, dtype=np.int64), np.array(xyz, dtype=float)
 
 
-def write_nodes(path: str | os.PathLike, labels: npt.ArrayLike, xyz: npt.ArrayLike) -> Path:
+def write_nodes(path: str | os.PathLike[str], labels: npt.ArrayLike, xyz: npt.ArrayLike) -> Path:
     """Write node coordinates as one Abaqus ``*NODE`` block (exact doubles)."""
     with open(path, 'w', encoding='ascii') as stream:
         stream.write('*NODE\n')

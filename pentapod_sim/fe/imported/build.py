@@ -137,7 +137,8 @@ def _point_matrix(name: str, node: int, offset: npt.NDArray[np.float64],
     return sp.csr_matrix((vals, (rows, cols)), shape=(6, n))
 
 
-def _frames(desc: FEDescription, positions: dict[str, np.ndarray]) -> npt.NDArray[np.float64]:
+def _frames(desc: FEDescription, positions: dict[str, npt.NDArray[np.float64]]
+            ) -> npt.NDArray[np.float64]:
     """Strut frames: given, from the joint points (the project's convention), or NaN."""
     if desc.strut_frames is not None:
         return np.asarray(desc.strut_frames, dtype=float)
@@ -214,7 +215,7 @@ def _rigid_mass(mass: sp.csr_matrix, components: npt.NDArray[np.int64]) -> list[
     return out
 
 
-def load_fe_model(path: str | os.PathLike) -> FEModel:
+def load_fe_model(path: str | os.PathLike[str]) -> FEModel:
     """
     Read an FE model description (YAML) and the files it names.
 

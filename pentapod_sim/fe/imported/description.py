@@ -94,7 +94,7 @@ class FEDescription:
         return {} if self.stiffness is None else {'structure': self.stiffness}
 
 
-def load_description(path: str | os.PathLike) -> FEDescription:
+def load_description(path: str | os.PathLike[str]) -> FEDescription:
     """
     Read and validate an FE model description.
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import Mapping
 
 import numpy as np
 import numpy.typing as npt
@@ -72,8 +73,9 @@ def point_node(fe: FEModel, name: str, lookup: _NodeDofs | None = None
     raise ModelFileError(f'point {name!r} is not a node, nor a rigid offset of one')
 
 
-def _description(fe: FEModel, fmt: str, files: dict) -> dict:
-    points: dict[str, dict] = {}
+def _description(fe: FEModel, fmt: str, files: Mapping[str, str | dict[str, str]]
+                 ) -> dict[str, object]:
+    points: dict[str, dict[str, int | list[float]]] = {}
     assert fe.dofs is not None
     lookup = _NodeDofs(fe.dofs.nodes)
     for name in fe.points:
@@ -81,14 +83,15 @@ def _description(fe: FEModel, fmt: str, files: dict) -> dict:
         points[name] = {'node': node}
         if np.any(offset != 0.0):
             points[name]['offset'] = [float(v) for v in offset]
-    text = {'format': fmt, 'length_unit': 1.0, 'mass_unit': 1.0, **files, 'points': points}
+    text: dict[str, object] = {'format': fmt, 'length_unit': 1.0, 'mass_unit': 1.0, **files,
+                               'points': points}
     if np.all(np.isfinite(fe.strut_frames)):
         text['strut_frames'] = np.asarray(fe.strut_frames, dtype=float).tolist()
     text['pose'] = [float(v) for v in fe.pose]
     return text
 
 
-def export_fe_model(fe: FEModel, folder: str | os.PathLike, fmt: str = 'matrix-market',
+def export_fe_model(fe: FEModel, folder: str | os.PathLike[str], fmt: str = 'matrix-market',
                     stem: str = 'machine') -> Path:
     """
     Write the model's M, K per stiffness group, DOF map, nodes and description.
@@ -124,7 +127,8 @@ def export_fe_model(fe: FEModel, folder: str | os.PathLike, fmt: str = 'matrix-m
         else:
             abaqus.write(path, matrix, labels, title)
         return path.name
-    files: dict = {'mass': write('mass', fe.M, 'mass [kg, kg m, kg m^2]')}
+    files: dict[str, str | dict[str, str]] = {
+        'mass': write('mass', fe.M, 'mass [kg, kg m, kg m^2]')}
     files['stiffness'] = {g: write(f'stiffness_{g}', k, f'stiffness of {g} [N/m, N, N m/rad]')
                           for g, k in fe.stiffness_groups.items()}
     if fmt == 'matrix-market':

@@ -34,8 +34,8 @@ def _reader() -> Any:
     return reader
 
 
-def read(path: str | os.PathLike) -> tuple[npt.NDArray[np.int64], sp.csr_matrix,
-                                           sp.csr_matrix]:
+def read(path: str | os.PathLike[str]) -> tuple[npt.NDArray[np.int64], sp.csr_matrix,
+                                                sp.csr_matrix]:
     """
     DOF labels, K and M of a ``.full`` file.
 
@@ -63,8 +63,8 @@ def read(path: str | os.PathLike) -> tuple[npt.NDArray[np.int64], sp.csr_matrix,
     return labels, symmetric(k), symmetric(m)
 
 
-def read_nodes(path: str | os.PathLike) -> tuple[npt.NDArray[np.int64],
-                                                 npt.NDArray[np.float64]]:
+def read_nodes(path: str | os.PathLike[str]) -> tuple[npt.NDArray[np.int64],
+                                                      npt.NDArray[np.float64]]:
     """Node numbers (N,) and coordinates (N, 3) of a MAPDL archive (``.cdb``)."""
     reader = _reader()
     try:

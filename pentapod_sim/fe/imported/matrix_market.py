@@ -36,7 +36,7 @@ def component_number(text: str, where: str) -> int:
     return number - 1 if 1 <= number <= 6 else OTHER_COMPONENT
 
 
-def read_matrix(path: str | os.PathLike) -> sp.csr_matrix:
+def read_matrix(path: str | os.PathLike[str]) -> sp.csr_matrix:
     """A square sparse matrix from a Matrix Market file (symmetric storage expanded)."""
     try:
         matrix = scipy.io.mmread(path)
@@ -49,14 +49,14 @@ def read_matrix(path: str | os.PathLike) -> sp.csr_matrix:
     return matrix
 
 
-def write_matrix(path: str | os.PathLike, matrix: sp.spmatrix, comment: str = '') -> Path:
+def write_matrix(path: str | os.PathLike[str], matrix: sp.spmatrix, comment: str = '') -> Path:
     """Write a symmetric matrix (lower triangle, 17 significant digits: exact doubles)."""
     scipy.io.mmwrite(path, sp.coo_matrix(matrix), comment=comment, symmetry='symmetric',
                      precision=17)
     return Path(path)
 
 
-def read_dof_map(path: str | os.PathLike) -> npt.NDArray[np.int64]:
+def read_dof_map(path: str | os.PathLike[str]) -> npt.NDArray[np.int64]:
     """(n, 2) node label and component (0..5 or OTHER_COMPONENT) of each matrix row."""
     try:
         with open(path, newline='', encoding='utf-8') as stream:
@@ -73,7 +73,7 @@ def read_dof_map(path: str | os.PathLike) -> npt.NDArray[np.int64]:
     return np.array(rows, dtype=np.int64).reshape(-1, 2)
 
 
-def write_dof_map(path: str | os.PathLike, labels: npt.ArrayLike) -> Path:
+def write_dof_map(path: str | os.PathLike[str], labels: npt.ArrayLike) -> Path:
     """Write the DOF map CSV of (n, 2) node labels and components 0..5."""
     labels = np.asarray(labels, dtype=np.int64)
     with open(path, 'w', newline='', encoding='utf-8') as stream:
@@ -83,7 +83,7 @@ def write_dof_map(path: str | os.PathLike, labels: npt.ArrayLike) -> Path:
     return Path(path)
 
 
-def read(path: str | os.PathLike, dof_map: npt.NDArray[np.int64]
+def read(path: str | os.PathLike[str], dof_map: npt.NDArray[np.int64]
          ) -> tuple[npt.NDArray[np.int64], sp.csr_matrix]:
     """DOF labels (n, 2) and matrix of one Matrix Market file, checked against the DOF map."""
     matrix = read_matrix(path)

@@ -17,7 +17,8 @@ from pentapod_sim.fe.imported import abaqus, mapdl_full
 NODE_COLUMNS = ('node', 'x', 'y', 'z')
 
 
-def read_csv(path: str | os.PathLike) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.float64]]:
+def read_csv(path: str | os.PathLike[str]) -> tuple[npt.NDArray[np.int64],
+                                                    npt.NDArray[np.float64]]:
     """Labels (N,) and coordinates (N, 3) of a node CSV."""
     try:
         with open(path, encoding='utf-8') as stream:
@@ -35,7 +36,7 @@ def read_csv(path: str | os.PathLike) -> tuple[npt.NDArray[np.int64], npt.NDArra
     return data[:, 0].astype(np.int64), data[:, 1:4]
 
 
-def write_csv(path: str | os.PathLike, labels: npt.ArrayLike, xyz: npt.ArrayLike) -> Path:
+def write_csv(path: str | os.PathLike[str], labels: npt.ArrayLike, xyz: npt.ArrayLike) -> Path:
     """Write a node CSV (exact doubles)."""
     with open(path, 'w', encoding='ascii') as stream:
         stream.write(','.join(NODE_COLUMNS) + '\n')
@@ -44,8 +45,8 @@ def write_csv(path: str | os.PathLike, labels: npt.ArrayLike, xyz: npt.ArrayLike
     return Path(path)
 
 
-def read_nodes(path: str | os.PathLike) -> tuple[npt.NDArray[np.int64],
-                                                 npt.NDArray[np.float64]]:
+def read_nodes(path: str | os.PathLike[str]) -> tuple[npt.NDArray[np.int64],
+                                                      npt.NDArray[np.float64]]:
     """Node labels and coordinates by the file's suffix: .csv, .inp (Abaqus) or .cdb (MAPDL)."""
     suffix = Path(path).suffix.lower()
     if suffix == '.csv':
