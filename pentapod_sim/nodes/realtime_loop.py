@@ -67,6 +67,10 @@ def run_realtime(node, executor, trace) -> LatenessStats:
         while mixer.missing(k) and now < deadline:
             executor.spin_once(timeout_sec=deadline - now)
             now = time.monotonic()
+        # answers that arrived while the plant itself had no CPU (stopped inside this wait, so
+        # it woke past the deadline) came in time: take them before counting a miss
+        for _ in mixer.missing(k):
+            executor.spin_once(timeout_sec=0.0)
         late = [s for s in mixer.missing(k) if s not in node.lost]
         if on_time:        # share of answered steps, over about the last 10 begun on time
             answered += 0.1 * ((not late) - answered)
