@@ -17,6 +17,7 @@ import yaml
 from pentapod_damper.study.config import load_study_config
 from pentapod_sim.errors import ConfigError
 from pentapod_sim.fe.machine_data import load_machine, load_positions
+from pentapod_sim.machining.materials import load_machining
 from pentapod_sim.plant.build import load_reduction_config
 from pentapod_sim.plant.ports import INPUT_NAMES, OUTPUT_NAMES
 from pentapod_sim.schema import build, NON_NEGATIVE, POSITIVE, read_mapping, spec
@@ -24,7 +25,8 @@ from pentapod_sim.schema import build, NON_NEGATIVE, POSITIVE, read_mapping, spe
 ROOT = Path(__file__).resolve().parents[1]
 CONFIG = ROOT / 'config'
 LOADERS = {'machine.yaml': load_machine, 'positions.yaml': load_positions,
-           'reduction.yaml': load_reduction_config, 'study.yaml': load_study_config}
+           'reduction.yaml': load_reduction_config, 'study.yaml': load_study_config,
+           'machining.yaml': load_machining}
 
 
 def _raw(name: str) -> dict:
@@ -51,6 +53,8 @@ def _write(tmp_path: Path, name: str, doc) -> Path:
     ('reduction.yaml', ['relevance', 1, 'rel_limit'], 'rel_limt', 'rel_limit'),
     ('study.yaml', ['analysis', 'nperseg'], 'npersg', 'nperseg'),
     ('study.yaml', ['step_response'], 'step_respons', 'step_response'),
+    ('machining.yaml', ['materials', 'steel', 'kienzle', 'exponent'], 'exponnt', 'exponent'),
+    ('machining.yaml', ['operations', 'steel_half_down', 'milling'], 'miling', 'milling'),
 ])
 def test_misspelt_key_is_refused_naming_file_path_and_closest_key(tmp_path, name, keys, wrong,
                                                                   right):
@@ -101,6 +105,19 @@ def test_the_issues_example_relevance_measure(tmp_path):
      "excitation.direction = 'w': must be one of x, y, z"),
     ('study.yaml', ['positions'], ['P1', 'P22'],
      "positions[1] = 'P22': must be one of P1, P2, P3, P4, P5; did you mean 'P2'?"),
+    ('machining.yaml', ['tools', 'endmill_4', 'teeth'], 4.5,
+     'tools.endmill_4.teeth = 4.5: expected an integer'),
+    ('machining.yaml', ['materials', 'aluminium', 'tangential'], -796e6,
+     'materials.aluminium.tangential = -796000000.0 N/m^2: must be > 0'),
+    ('machining.yaml', ['operations', 'aluminium_slot', 'radial_immersion'], 1.5,
+     'operations.aluminium_slot.radial_immersion = 1.5: must lie in (0, 1]'),
+    ('machining.yaml', ['operations', 'aluminium_slot', 'milling'], 'climb',
+     "operations.aluminium_slot.milling = 'climb': must be one of up, down"),
+    ('machining.yaml', ['operations', 'aluminium_slot', 'material'], 'aluminum',
+     "operations.aluminium_slot.material = 'aluminum': must be one of aluminium, steel; did "
+     "you mean 'aluminium'?"),
+    ('machining.yaml', ['spindle_speeds'], [24000.0, 1000.0],
+     'spindle_speeds = [24000.0, 1000.0] rpm must increase'),
 ])
 def test_wrong_value_names_file_key_value_and_unit(tmp_path, name, keys, value, message):
     doc = _raw(name)

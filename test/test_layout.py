@@ -16,6 +16,7 @@ STAGES = [
     ('pentapod_sim.modes',),
     ('pentapod_sim.plant',),
     ('pentapod_sim.sim', 'pentapod_sim.interface'),
+    ('pentapod_sim.machining',),
     ('pentapod_sim.recording', 'pentapod_sim.analysis', 'pentapod_sim.scenario',
      'pentapod_sim.live'),
     ('pentapod_sim.nodes', 'pentapod_sim.cli'),

@@ -11,6 +11,7 @@ Examples::
     analyze amplitudes BAG [--topic /pentapod/pma/state]
     analyze modes BAG [--band F1 F2] [--outputs TOPIC.FIELD ...]
     analyze recover BAG [--to DIR | --in-place]
+    analyze lobes BAG[,BAG2] [BAG[,BAG2] ...] [--operation NAME] [--speeds MIN MAX]
 """
 import argparse
 import csv
@@ -36,6 +37,8 @@ from pentapod_sim.analysis.frf.peaks import find_resonances, peak_reductions, Re
 from pentapod_sim.cli import CommandParser, run_command
 from pentapod_sim.cli.analyze_ema import add_parser as add_modes_parser
 from pentapod_sim.cli.analyze_ema import cmd_modes
+from pentapod_sim.cli.analyze_lobes import add_parser as add_lobes_parser
+from pentapod_sim.cli.analyze_lobes import cmd_lobes
 from pentapod_sim.cli.analyze_recover import add_parser as add_recover_parser
 from pentapod_sim.cli.analyze_recover import cmd_recover
 from pentapod_sim.errors import BagError
@@ -243,6 +246,7 @@ def build_parser() -> argparse.ArgumentParser:
     amp.add_argument('--nperseg', type=int, default=None)
     add_modes_parser(subs)
     add_recover_parser(subs)
+    add_lobes_parser(subs)
     return parser
 
 
@@ -253,6 +257,7 @@ def main(argv: list[str] | None = None) -> int:
                         format='%(levelname)s %(name)s: %(message)s')
     commands = {'info': cmd_info, 'frf': cmd_frf, 'time': cmd_time,
                 'amplitudes': cmd_amplitudes, 'modes': cmd_modes, 'recover': cmd_recover,
+                'lobes': cmd_lobes,
                 'peaks': lambda a: cmd_frf(a, plot=False)}
     return run_command('analyze', commands[args.command], args, errors=(ValueError,))
 
