@@ -18,10 +18,11 @@ from pentapod_damper.node_parameters import damper_laws, pma_law
 from pentapod_sim import interface, shutdown
 from pentapod_sim.errors import ConfigError
 from pentapod_sim.nodes import loop_check
-from pentapod_sim.nodes.loop_check import model_text, parallel, sort_models
+from pentapod_sim.nodes.loop_check import sort_models
 from pentapod_sim.nodes.run_status import status_values
+from pentapod_sim.nodes.source_model import model_text
 from pentapod_sim.recording.run_end import RunStatus
-from pentapod_sim.sim.controllers import controller_of, DiscreteController
+from pentapod_sim.sim.controllers import controller_of, DiscreteController, parallel
 
 DT = 1 / 4000.0
 

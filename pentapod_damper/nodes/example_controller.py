@@ -18,7 +18,7 @@ The contract (docs/nodes.md):
    node declares them from its table in pentapod_damper/node_parameters.py (registered in
    pentapod_sim/executables.py), which also refuses misspelt names and prints ``--help``.
 6. Optionally publish the linear model of your law once, for the plant's truncation check:
-   ``pentapod_sim.nodes.loop_check.publish_model(self, source_name, DiscreteController.static(
+   ``pentapod_sim.nodes.source_model.publish_model(self, source_name, DiscreteController.static(
    ['tcp_velocity_x'], ['tcp_force_x'], [[-gain]]).to_json())``. This example does not, so the
    plant names it as unchecked (docs/statespace.md).
 

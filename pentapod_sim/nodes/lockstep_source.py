@@ -6,7 +6,7 @@ none), waits until it holds every needed message of one stamp t_k, computes u_k 
 :meth:`LockstepSource.compute` and publishes it on /pentapod/forces/<source_name> with the
 same stamp. It publishes the linear model of its law once on
 /pentapod/controller_models/<source_name> for the plant's truncation check
-(:meth:`LockstepSource.linear_model`, :mod:`pentapod_sim.nodes.loop_check`). A re-published
+(:meth:`LockstepSource.linear_model`, :mod:`pentapod_sim.nodes.source_model`). A re-published
 step (same stamp again) gets the cached answer, so stateful laws advance exactly once per step.
 Messages with NaN/Inf or a missing joint are rejected, counted and warned about. In a composed
 run the plant's messages and the answers pass in-process (:meth:`LockstepSource.use_bus`,
@@ -38,7 +38,7 @@ from pentapod_sim.nodes.common import (
     subscribers_of,
 )
 from pentapod_sim.nodes.local_bus import LocalBus, Outlet
-from pentapod_sim.nodes.loop_check import model_text, publish_model
+from pentapod_sim.nodes.source_model import model_text, publish_model
 from pentapod_sim.parameters import ParameterTable
 
 

@@ -1,14 +1,9 @@
 """
 The plant's truncation check at start-up, over ROS: the sources' linear models, then the check.
 
-Every force source publishes the linear model of its law once, on
-``/pentapod/controller_models/<source>`` (:func:`pentapod_sim.interface.controller_model_topic`;
-std_msgs/String, reliable, transient local, depth 1, so a plant started later still gets it):
-the JSON text of :meth:`pentapod_sim.sim.controllers.DiscreteController.to_json`,
-``no feedback`` for a source that reads no plant output (the exciter), or ``no linear model:
-<reason>`` (a PMA with limits). :class:`pentapod_sim.nodes.lockstep_source.LockstepSource`
-publishes it for every testbed source (:func:`publish_model`); a user's controller may publish
-one the same way.
+Every force source publishes the linear model of its law once on its latched model topic
+(:mod:`pentapod_sim.nodes.source_model`, which has the message format; the sources' side imports
+nothing of this module and so no FE code).
 
 The plant (:mod:`pentapod_sim.nodes.plant_node`) collects the models once its sources appeared,
 for at most :data:`MODEL_TIMEOUT` s, and closes the sampled loop with them
@@ -31,15 +26,15 @@ import json
 import logging
 from pathlib import Path
 import time
-from typing import Callable, Mapping, Sequence
+from typing import Mapping, Sequence
 
-import scipy.linalg as sla
 from std_msgs.msg import String
 
 from pentapod_sim import shutdown
 from pentapod_sim.errors import ConfigError, RunError
 from pentapod_sim.interface import controller_model_topic, NO_FEEDBACK, NO_LINEAR_MODEL
-from pentapod_sim.nodes.common import qos, spin_until
+from pentapod_sim.nodes.common import spin_until
+from pentapod_sim.nodes.source_model import MODEL_QOS
 from pentapod_sim.plant.check_model import (
     check_cache_file,
     check_f_max,
@@ -51,45 +46,8 @@ from pentapod_sim.sim.stability import apply_policy, check_loop, LoopCheck, Unst
 
 #: Wall time [s] the plant waits for the models of its sources after they appeared.
 MODEL_TIMEOUT = 2.0
-MODEL_QOS = qos('model')
 
 
-# -- sources -------------------------------------------------------------------------------
-def parallel(controllers: Sequence[DiscreteController]) -> DiscreteController:
-    """The laws of one node side by side: one controller, ports and states concatenated."""
-    return DiscreteController(
-        [p for k in controllers for p in k.sensor_ports],
-        [p for k in controllers for p in k.actuator_ports],
-        *(sla.block_diag(*(getattr(k, m) for k in controllers)) for m in 'abcd'))
-
-
-def model_text(linear_model: Callable[[], DiscreteController], feedback: bool = True) -> str:
-    """
-    The message text of a source's law (see the module docstring).
-
-    Parameters
-    ----------
-    linear_model : callable
-        Returns the law's DiscreteController; a ConfigError says why it has none.
-    feedback : bool
-        False for a source that reads no plant output (``no feedback``).
-    """
-    if not feedback:
-        return NO_FEEDBACK
-    try:
-        return linear_model().to_json()
-    except ConfigError as err:
-        return f'{NO_LINEAR_MODEL}: {err}'
-
-
-def publish_model(node, source_name: str, text: str):
-    """Publish ``text`` once on the source's latched model topic; return the publisher."""
-    pub = node.create_publisher(String, controller_model_topic(source_name), MODEL_QOS)
-    pub.publish(String(data=text))
-    return pub
-
-
-# -- plant ---------------------------------------------------------------------------------
 def sort_models(texts: Mapping[str, str | None], plant: PlantModel
                 ) -> tuple[dict[str, DiscreteController], list[str], dict[str, str]]:
     """
