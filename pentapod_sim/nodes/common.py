@@ -231,8 +231,6 @@ def subscribers_of(node, publisher) -> tuple[set, bool]:
     return {info.node_name for info in graph}, publisher.get_subscription_count() >= len(graph)
 
 
-#: Wall time [s] between two checks of the plant's force topics' publishers during a run.
-GRAPH_CHECK_PERIOD = 0.25
 #: Wall time [s] a second publisher on a force topic gets to be discovered by node name.
 NAME_DISCOVERY = 2.0
 _UNKNOWN_NAME = '_NODE_NAME_UNKNOWN_'

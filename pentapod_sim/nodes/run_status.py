@@ -10,6 +10,7 @@ as text values; ``message`` is the state. During a run a timer on the steady clo
 from __future__ import annotations
 
 import time
+from typing import Callable
 
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from rclpy.clock import Clock, ClockType
@@ -30,38 +31,50 @@ def status_values(state: str, steps: int, dt: float, step_topics: list[str],
 
 
 class RunStatusPublisher:
-    """The run-status publisher of a plant node and its periodic timer."""
+    """
+    The run-status publisher of a plant node and its periodic timer.
 
-    def __init__(self, node, period: float):
-        self.node = node
+    Parameters
+    ----------
+    node : rclpy.node.Node
+        The plant node (creates the publisher and the timer; its name goes into each message).
+    dt : float
+        The plant's step [s].
+    period : float
+        Wall time between two ``running`` messages [s] (parameter ``status_period``).
+    tick : callable
+        Called by the timer; publishes a ``running`` message (:meth:`publish`).
+    """
+
+    def __init__(self, node, dt: float, period: float, tick: Callable[[], None]):
+        self.dt = dt
+        self.name = node.get_fully_qualified_name()
         self.pub = node.create_publisher(DiagnosticStatus, interface.RUN_STATUS, qos('status'))
-        self.timer = node.create_timer(period, self._tick,
+        self.timer = node.create_timer(period, tick,
                                        clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.timer.cancel()                # started by start()
-        self._last = (time.monotonic(), 0)
+        self.last = (time.monotonic(), 0)  # (wall time, steps) of the last message
 
-    def start(self) -> None:
-        """Publish ``running`` every period from now on."""
-        self._last = (time.monotonic(), self.node.core.k)
+    def start(self, steps: int) -> None:
+        """Publish ``running`` every period from now on (``steps``: run so far)."""
+        self.last = (time.monotonic(), steps)
         self.timer.reset()
 
     def stop(self) -> None:
         """No more periodic messages."""
         self.timer.cancel()
 
-    def _tick(self) -> None:
-        self.node.announce(interface.RUN_RUNNING, periodic=True)
-
-    def publish(self, state: str, step_topics: list[str]) -> None:
-        """Publish one status message of the node's current step count."""
-        node, now = self.node, time.monotonic()
-        steps = node.core.k
-        last_time, last_steps = self._last
+    def publish(self, state: str, steps: int, step_topics: list[str], deadline_misses: int,
+                rejected: int) -> None:
+        """Publish one status message: ``state`` after ``steps`` steps (docs/recording.md)."""
+        now = time.monotonic()
+        last_time, last_steps = self.last
         rate = (steps - last_steps) / (now - last_time) if now > last_time else 0.0
-        self._last = (now, steps)
-        values = status_values(state, steps, node.dt, step_topics, rate,
-                               sum(node.misses.values()), sum(node.mixer.rejected.values()))
+        self.last = (now, steps)
+        values = status_values(state, steps, self.dt, step_topics, rate, deadline_misses,
+                               rejected)
         level = DiagnosticStatus.WARN if state == interface.RUN_STOPPED else DiagnosticStatus.OK
         self.pub.publish(DiagnosticStatus(
-            level=level, name=node.get_fully_qualified_name(), message=state,
+            level=level, name=self.name, message=state,
             values=[KeyValue(key=k, value=v) for k, v in values.items()]))
+
