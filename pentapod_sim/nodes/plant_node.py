@@ -142,8 +142,9 @@ class PlantNode(Node):
                             self.timing.deadline_misses(), sum(self.mixer.rejected.values()))
 
     def wait_for_acks(self) -> None:
-        """Wait until every subscriber acknowledged every output (``ack_timeout``)."""
-        wait_for_acks(self, self.outputs.publishers(), self.params.ack_timeout)
+        """Wait until every subscriber acknowledged every output and status (``ack_timeout``)."""
+        wait_for_acks(self, self.outputs.publishers() + self.status.publishers(),
+                      self.params.ack_timeout)
 
     # -- the run ---------------------------------------------------------------------------
     def start_up(self, executor) -> None:
