@@ -76,6 +76,10 @@ class FullRateOutputs:
         """The per-step topic, if it is published every exchange now."""
         return [self.pub.topic_name] if self.active else []
 
+    def display_batches(self) -> tuple[list, int]:
+        """The display-batch publishers and the number of batches published."""
+        return self.display.publishers, self.display.published
+
     def flush(self) -> None:
         """Publish the open display batch (the run ended; not after the context shut down)."""
         if self._context.ok():

@@ -123,7 +123,7 @@ class PlantOutputs:
 
     def display_batches(self) -> tuple[list, int]:
         """The display-batch publishers and the number of batches published."""
-        return self.fullrate.display.publishers, self.fullrate.display.published
+        return self.fullrate.display_batches()
 
     def wait_for_subscribers(self, executor, wanted: list[str], timeout: float,
                              settle: float) -> None:
