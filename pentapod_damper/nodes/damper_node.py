@@ -21,8 +21,7 @@ from pentapod_damper.node_parameters import DAMPER, damper_laws
 from pentapod_sim.errors import ConfigError
 from pentapod_sim.nodes.common import run_node
 from pentapod_sim.nodes.lockstep_source import LockstepSource
-from pentapod_sim.nodes.loop_check import parallel
-from pentapod_sim.sim.controllers import controller_of, DiscreteController
+from pentapod_sim.sim.controllers import controller_of, DiscreteController, parallel
 
 
 class DamperNode(LockstepSource):

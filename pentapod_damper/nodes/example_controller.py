@@ -17,8 +17,11 @@ The contract (docs/nodes.md):
 5. Declare your parameters with descriptors (type, range, a description with the unit). This
    node declares them from its table in pentapod_damper/node_parameters.py (registered in
    pentapod_sim/executables.py), which also refuses misspelt names and prints ``--help``.
-6. Optionally publish the linear model of your law once, for the plant's truncation check:
-   ``pentapod_sim.nodes.loop_check.publish_model(self, source_name, DiscreteController.static(
+6. Optionally watch the plant's run status (``PlantRunWatch``, as below): stopped after the
+   plant's run ended (the scenario runner stops the sources then), the node says so and exits
+   0 instead of ``stopped by SIGINT`` and 130.
+7. Optionally publish the linear model of your law once, for the plant's truncation check:
+   ``pentapod_sim.nodes.source_model.publish_model(self, source_name, DiscreteController.static(
    ['tcp_velocity_x'], ['tcp_force_x'], [[-gain]]).to_json())``. This example does not, so the
    plant names it as unchecked (docs/statespace.md).
 
@@ -36,6 +39,7 @@ from pentapod_sim.nodes.common import (
     run_node,
     STATE_SUB_QOS,  # new steps only, no writer history
 )
+from pentapod_sim.nodes.run_status import PlantRunWatch
 
 
 class ExampleController(Node):
@@ -52,6 +56,11 @@ class ExampleController(Node):
         self.sub = self.create_subscription(JointState, TCP_STATE, self.on_state, STATE_SUB_QOS)
         self.last_stamp = None
         self.last_answer = None
+        self.plant_run = PlantRunWatch(self)
+
+    def stopped_after_run_end(self) -> bool:
+        """After a stop signal (run_node asks): True if the plant's run had ended: exit 0."""
+        return self.plant_run.explains_stop()
 
     def on_state(self, msg: JointState) -> None:
         """Answer one plant step."""

@@ -231,8 +231,6 @@ def subscribers_of(node, publisher) -> tuple[set, bool]:
     return {info.node_name for info in graph}, publisher.get_subscription_count() >= len(graph)
 
 
-#: Wall time [s] between two checks of the plant's force topics' publishers during a run.
-GRAPH_CHECK_PERIOD = 0.25
 #: Wall time [s] a second publisher on a force topic gets to be discovered by node name.
 NAME_DISCOVERY = 2.0
 _UNKNOWN_NAME = '_NODE_NAME_UNKNOWN_'
@@ -305,7 +303,10 @@ def run_node(factory: Callable[..., object], argv=None, run: Callable | None = N
 
     ``--help`` prints the usage and ``table`` and starts nothing. Returns 0 on a clean end,
     1 after printing one ``error: ...`` line on a ConfigError/RunError, and 128 + the signal
-    number after a clean stop on SIGINT, SIGTERM or SIGHUP (:mod:`pentapod_sim.shutdown`).
+    number after a clean stop on SIGINT, SIGTERM or SIGHUP (:mod:`pentapod_sim.shutdown`),
+    unless the node's ``stopped_after_run_end()`` says (and logs) that the plant's run had
+    ended before the signal: a source stopped after the run it served is a clean end, 0
+    (:class:`pentapod_sim.nodes.run_status.PlantRunWatch`).
     """
     global _process_args
     args = list(sys.argv if argv is None else argv)
@@ -324,6 +325,7 @@ def run_node(factory: Callable[..., object], argv=None, run: Callable | None = N
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     node = None
     code = 0
+    served = False           # stopped after the plant's run it served had ended
     try:
         node = factory()
         spinner = executor()
@@ -344,8 +346,12 @@ def run_node(factory: Callable[..., object], argv=None, run: Callable | None = N
         code = 1
     finally:
         if node is not None:
+            after_end = getattr(node, 'stopped_after_run_end', None)
+            served = code == 0 and shutdown.requested() and callable(after_end) and after_end()
             node.destroy_node()
         rclpy.try_shutdown()
+    if served:
+        return 0
     if code == 0 and shutdown.requested():
         print(f'stopped by {shutdown.signal_name()}', file=sys.stderr)
         code = shutdown.exit_code()

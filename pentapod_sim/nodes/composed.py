@@ -89,8 +89,7 @@ def run(composition: Composition, executor) -> None:
     try:
         plant_node.run(plant, executor)
     finally:
-        if plant.drain is not None and plant.context.ok():
-            plant.drain.flush(executor, FINAL_DRAIN)
+        plant.flush_bus(executor, FINAL_DRAIN)
     if not shutdown.requested():
         # deliveries still queued in-process: until every recorder drained the announced end
         # (at most the time rclpy's DDS deliveries need), else that time

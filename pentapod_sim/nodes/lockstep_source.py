@@ -6,11 +6,12 @@ none), waits until it holds every needed message of one stamp t_k, computes u_k 
 :meth:`LockstepSource.compute` and publishes it on /pentapod/forces/<source_name> with the
 same stamp. It publishes the linear model of its law once on
 /pentapod/controller_models/<source_name> for the plant's truncation check
-(:meth:`LockstepSource.linear_model`, :mod:`pentapod_sim.nodes.loop_check`). A re-published
+(:meth:`LockstepSource.linear_model`, :mod:`pentapod_sim.nodes.source_model`). A re-published
 step (same stamp again) gets the cached answer, so stateful laws advance exactly once per step.
 Messages with NaN/Inf or a missing joint are rejected, counted and warned about. In a composed
 run the plant's messages and the answers pass in-process (:meth:`LockstepSource.use_bus`,
-:mod:`pentapod_sim.nodes.local_bus`).
+:mod:`pentapod_sim.nodes.local_bus`). Stopped after the plant's run ended, a source says so and
+exits 0 (:class:`pentapod_sim.nodes.run_status.PlantRunWatch`).
 """
 from __future__ import annotations
 
@@ -38,7 +39,8 @@ from pentapod_sim.nodes.common import (
     subscribers_of,
 )
 from pentapod_sim.nodes.local_bus import LocalBus, Outlet
-from pentapod_sim.nodes.loop_check import model_text, publish_model
+from pentapod_sim.nodes.run_status import PlantRunWatch
+from pentapod_sim.nodes.source_model import model_text, publish_model
 from pentapod_sim.parameters import ParameterTable
 
 
@@ -61,6 +63,7 @@ class LockstepSource(Node):
         self.rejected = {}
         self.answered = 0
         self._last_warn = 0.0
+        self.plant_run = PlantRunWatch(self)
 
     def setup(self, sensor_ports: Sequence[str], actuator_ports: Sequence[str]) -> None:
         """Create the subscriptions for the sensors and the force publisher."""
@@ -140,6 +143,10 @@ class LockstepSource(Node):
     def publish_model(self) -> None:
         """Publish the current model again (e.g. after a gain changed)."""
         self.model_pub.publish(String(data=self.model_text()))
+
+    def stopped_after_run_end(self) -> bool:
+        """After a stop signal: True (logged) if the plant's run had ended before it came."""
+        return self.plant_run.explains_stop()
 
     def compute(self, stamp_ns: int, sensors: np.ndarray) -> np.ndarray:
         """Return efforts for ``actuator_ports`` at this step (N or N m)."""

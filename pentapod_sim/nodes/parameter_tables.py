@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 
 from pentapod_sim.parameters import Param, ParameterTable, Values
-from pentapod_sim.plant.check_model import DEFAULT_CHECK_F_MIN
+from pentapod_sim.plant.check_band import DEFAULT_CHECK_F_MIN
 from pentapod_sim.sim.excitation import ExcitationSpec, KINDS, PHASES, PULSE_SHAPES
 from pentapod_sim.sim.multirate import MAX_SUBSTEPS
 from pentapod_sim.sim.stepping import DEFAULT_MAX_STATE_NORM

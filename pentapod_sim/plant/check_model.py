@@ -15,7 +15,6 @@ import logging
 from pathlib import Path
 from typing import Callable
 
-import numpy as np
 import numpy.typing as npt
 
 from pentapod_sim.errors import ConfigError, ModelFileError
@@ -23,30 +22,12 @@ from pentapod_sim.fe.assembly import build_model
 from pentapod_sim.fe.machine_data import load_machine, MachineParams
 from pentapod_sim.fe.model import FEModel
 from pentapod_sim.plant.build import model_cache_key, plant_from_fe
+from pentapod_sim.plant.check_band import check_f_max as check_f_max
+from pentapod_sim.plant.check_band import DEFAULT_CHECK_F_MIN as DEFAULT_CHECK_F_MIN
 from pentapod_sim.plant.config import load_reduction_config, ReductionConfig
 from pentapod_sim.plant.model import PlantModel
 
 LOG = logging.getLogger(__name__)
-
-#: Default lowest cut-off of the check model's modes [Hz].
-DEFAULT_CHECK_F_MIN = 5000.0
-
-
-def check_f_max(sample_rate: float, f_min: float = DEFAULT_CHECK_F_MIN) -> float:
-    """
-    Cut-off of the check model's modes [Hz]: ``max(f_min, 2 * sample_rate)``.
-
-    Parameters
-    ----------
-    sample_rate : float
-        Sample rate of the loop [Hz], > 0.
-    f_min : float
-        Lowest cut-off [Hz], > 0 (default 5 kHz).
-    """
-    for name, value in (('sample_rate', sample_rate), ('check model f_min', f_min)):
-        if not np.isfinite(value) or value <= 0:
-            raise ConfigError(f'{name} must be > 0 Hz, got {value!r}')
-    return float(max(f_min, 2.0 * sample_rate))
 
 
 def check_model_from_fe(fe: FEModel, reduction_cfg: ReductionConfig, f_max: float,

@@ -6,8 +6,9 @@ A scenario file (config/scenarios/*.yaml) is an ordinary ROS 2 parameter file: o
 all (e.g. ``sample_rate``). The executable of a node follows from its name's prefix
 (:data:`pentapod_sim.executables.NODE_KINDS`: ``plant``, ``exciter``, ``damper*``, ``pma*``,
 ``example_controller*``, ``recorder*``). The runner starts the sources first, then the plant,
-waits for the plant to end, stops the others with SIGINT (SIGKILL after a grace period) and
-returns the plant's exit code (nonzero also if another node failed).
+waits for the plant to end, stops the others with SIGINT (SIGKILL after a grace period; a
+source that saw the plant's run end says so and exits 0) and returns the plant's exit code
+(nonzero also if another node failed).
 launch/testbed.launch.py uses the same parser.
 
 SIGINT, SIGTERM or SIGHUP to the runner is forwarded to every node; the nodes finish their
@@ -53,11 +54,15 @@ def node_command(node: ScenarioNode, params_files: list[Path]) -> list[str]:
     return cmd
 
 
-def stop(procs: dict[str, Proc], grace: float = 5.0) -> None:
-    """SIGINT every running process, SIGKILL (named) those still alive after ``grace`` s."""
-    for proc in procs.values():
-        if proc.poll() is None:
-            proc.send_signal(signal.SIGINT)
+def stop(procs: dict[str, Proc], grace: float = 5.0) -> dict[str, int | None]:
+    """
+    SIGINT every running process, SIGKILL (named) those still alive after ``grace`` s.
+
+    Returns the exit codes of the processes it stopped.
+    """
+    running = [name for name, proc in procs.items() if proc.poll() is None]
+    for name in running:
+        procs[name].send_signal(signal.SIGINT)
     end = time.monotonic() + grace
     for name, proc in procs.items():
         try:
@@ -66,6 +71,7 @@ def stop(procs: dict[str, Proc], grace: float = 5.0) -> None:
             LOG.error('node %s did not stop within %.0f s of SIGINT; killing it', name, grace)
             proc.kill()
             proc.wait()
+    return {name: procs[name].poll() for name in running}
 
 
 def drain_recorders(scenario: Scenario, procs: dict[str, Proc],
@@ -196,10 +202,13 @@ def _run_nodes(path: Path, plant_overrides: dict, timeout: float,
         failed = {n: p.poll() for n, p in procs.items() if p.poll() not in (0, None)
                   and not (forwarded and p.poll() == shutdown.exit_code())}
     finally:
-        stop(procs)
+        stopped = stop(procs)
         tmp.cleanup()
         for stream in logs:
             stream.close()
+    if code is not None and stopped and not forwarded:   # the plant ended by itself
+        LOG.info('stopped after the plant ended: %s', ', '.join(
+            f'{name} ({describe_exit(rc)})' for name, rc in stopped.items()))
     for name, rc in failed.items():
         if name not in reported:
             LOG.error('node %s %s', name, describe_exit(rc))
