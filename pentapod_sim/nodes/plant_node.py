@@ -17,7 +17,6 @@ import array
 import time
 
 import numpy as np
-from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
@@ -27,11 +26,8 @@ from pentapod_sim.interface import CLOCK, force_topic, stamp_ns, state_layouts, 
 from pentapod_sim.nodes import loop_check
 from pentapod_sim.nodes.answer_poll import AnswerPoller
 from pentapod_sim.nodes.common import (
-    declare_param,
-    declare_table,
     FORCE_SUB_QOS,
     GRAPH_CHECK_PERIOD,
-    node_args,
     run_node,
     set_stamp,
     shared_topic_error,
@@ -43,22 +39,24 @@ from pentapod_sim.nodes.common import (
 )
 from pentapod_sim.nodes.fullrate import FullRateOutputs
 from pentapod_sim.nodes.local_bus import Outlet
-from pentapod_sim.nodes.parameter_tables import PLANT
+from pentapod_sim.nodes.parameter_tables import PlantParams
 from pentapod_sim.nodes.realtime_loop import run_realtime
 from pentapod_sim.nodes.run_status import RunStatusPublisher
+from pentapod_sim.nodes.testbed_node import TestbedNode
 from pentapod_sim.plant.build import load_or_build_model
 from pentapod_sim.sim.multirate import MultiRatePlant
 from pentapod_sim.sim.stepping import ForceMixer, parse_sources
 from pentapod_sim.sim.trace import Trace
 
 
-class PlantNode(Node):
+class PlantNode(TestbedNode):
     """Discrete modal plant as a ROS 2 node (parameters: docs/parameters.md)."""
+
+    Params = PlantParams
 
     def __init__(self, **kwargs):
         super().__init__('plant', **kwargs)
-        self.params = declare_table(self, PLANT, node_args(kwargs.get('cli_args')))
-        ports = self._source_ports()
+        ports = self.params.source_ports
         model, origin = load_or_build_model(self.params.model_file, self.params.position,
                                             self.params.model_cache_dir)
         self.model = model
@@ -98,18 +96,6 @@ class PlantNode(Node):
         self.loop_models = loop_check.ModelCollector(self, self.mixer.sources)
         self._last_warn = {}
         self._next_refresh = 0.0
-
-    def _source_ports(self) -> dict[str, list[str]]:
-        """Declare ``source_ports.<source>`` of every source (ConfigError for other sources)."""
-        ports = {name: declare_param(self, PLANT, f'source_ports.{name}')
-                 for name in self.params.sources}
-        strays = sorted(name for name in self._parameter_overrides
-                        if name.startswith('source_ports.') and name not in
-                        {f'source_ports.{s}' for s in self.params.sources})
-        if strays:
-            raise ConfigError(f'parameter {strays[0]!r} names no source of parameter '
-                              f"'sources' = {self.params.sources}")
-        return ports
 
     def _n_steps(self) -> int:
         """Steps of the run from ``steps`` or ``duration``."""
@@ -359,7 +345,7 @@ def run(node: PlantNode, executor) -> None:
 
 def main(argv=None) -> int:
     """Entry point of ``ros2 run pentapod_testbed plant``."""
-    return run_node(PlantNode, argv, run, table=PLANT)
+    return run_node(PlantNode, argv, run)
 
 
 if __name__ == '__main__':
