@@ -111,7 +111,7 @@ def test_a_run_applies_study_settings_and_adds_a_recorder(tmp_path):
     rec = run.node('recorder').params
     assert rec.bag_name == 'bag' and yaml.safe_load(rec.run_info)['model_hash'] == 'abc'
     assert run.node('pma').params.proof_mass == 5.0
-    assert [n.name for n in run.nodes] == ['pma', 'exciter', 'recorder', 'plant']
+    assert [n.name for n in run.nodes] == ['exciter', 'pma', 'recorder', 'plant']  # file order
     doc = run.write(tmp_path / 'scenario.yaml').read_text()      # the run's one file
     assert '/**' not in doc and doc.count("'sample_rate': 2500.0") == 3
 

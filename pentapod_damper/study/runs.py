@@ -91,7 +91,7 @@ def study_scenario(scenario: str, position: str, model_file: Path, cfg: StudyCon
     scenario's own recorders are replaced by the run's, which every node waits for.
     """
     base = read_scenario(scenario)
-    run = base.without(n.name for n in base.of_role(RECORDER))
+    run = base.without(n.name for n in base.of_role(RECORDER) if n.name != 'recorder')
     duration = run_duration(cfg, kind, exciter)
     for node in run.nodes:
         changes: dict[str, Any] = {}
@@ -109,9 +109,11 @@ def study_scenario(scenario: str, position: str, model_file: Path, cfg: StudyCon
                            # the waited-for recorder gets every step even if it matches late
                            # (transient-local per-step writers; in a composition the hand-off)
                            subscriber_settle=0.0)
+        if node.role == RECORDER:
+            continue                              # replaced below
         if node.kind == 'exciter':
             signal = dict(exciter) if exciter else excitation_params(cfg, kind)
-            run = run.without([node.name]).with_node(node.name, {**signal, **changes})
+            run = run.with_node(node.name, {**signal, **changes})
         else:
             run = run.with_params(node.name, **changes)
     info = dict(run_info, scenario_parameters={   # the nodes' sections, as run

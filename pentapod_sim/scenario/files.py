@@ -156,9 +156,19 @@ class Scenario:
 
     def with_node(self, name: str, params: Mapping[str, Any], node_class: str | None = None
                   ) -> Scenario:
-        """The scenario with one more node (before the plant), checked like a file's."""
+        """
+        The scenario with the node ``name`` set to ``params`` alone, checked like a file's.
+
+        A node of that name is replaced in its place; a new one comes before the plant.
+        """
         node = _node(name, dict(params), {}, node_class, f'{self.path}: node {name!r}')
-        return _ordered(self.path, [n for n in self.nodes if n.name != name] + [node])
+        names = [n.name for n in self.nodes]
+        nodes = list(self.nodes)
+        if name in names:
+            nodes[names.index(name)] = node
+        else:
+            nodes.append(node)
+        return _ordered(self.path, nodes)
 
     def without(self, names: Iterable[str]) -> Scenario:
         """The scenario without the nodes ``names``."""
