@@ -21,7 +21,6 @@ import time
 from typing import Sequence
 
 import numpy as np
-from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
@@ -29,10 +28,8 @@ from std_msgs.msg import String
 from pentapod_sim.errors import ConfigError
 from pentapod_sim.interface import CLOCK, force_topic, port_location
 from pentapod_sim.nodes.common import (
-    declare_table,
     FORCE_QOS,
     INFO_QOS,
-    node_args,
     set_stamp,
     stamp_to_ns,
     STATE_SUB_QOS,
@@ -41,22 +38,20 @@ from pentapod_sim.nodes.common import (
 from pentapod_sim.nodes.local_bus import LocalBus, Outlet
 from pentapod_sim.nodes.run_status import PlantRunWatch
 from pentapod_sim.nodes.source_model import model_text, publish_model
-from pentapod_sim.parameters import ParameterTable
+from pentapod_sim.nodes.testbed_node import TestbedNode
 
 
-class LockstepSource(Node):
+class LockstepSource(TestbedNode):
     """
     A node that answers each plant step with forces on some input ports.
 
-    Subclasses pass their parameter table (which includes
-    :data:`pentapod_sim.nodes.parameter_tables.SOURCE_PARAMS`), find the values in
-    ``self.params``, call :meth:`setup` and implement :meth:`compute`.
+    Subclasses set ``Params`` (a subclass of
+    :class:`pentapod_sim.parameters.SourceParams`), find the values in ``self.params``, call
+    :meth:`setup` and implement :meth:`compute`.
     """
 
-    def __init__(self, default_name: str, table: ParameterTable, **kwargs):
+    def __init__(self, default_name: str, **kwargs):
         super().__init__(default_name, **kwargs)
-        self.params = declare_table(self, table, node_args(kwargs.get('cli_args')),
-                                    defaults={'source_name': self.get_name()})
         self.source_name = self.params.source_name or self.get_name()
         self.wait_for = self.params.wait_for_subscribers
         self.info_outs: list[Outlet] = []   # diagnostic publishers (info_outlet)
@@ -64,6 +59,10 @@ class LockstepSource(Node):
         self.answered = 0
         self._last_warn = 0.0
         self.plant_run = PlantRunWatch(self)
+
+    def param_defaults(self) -> dict:
+        """``source_name`` defaults to the node's name."""
+        return {'source_name': self.get_name()}
 
     def setup(self, sensor_ports: Sequence[str], actuator_ports: Sequence[str]) -> None:
         """Create the subscriptions for the sensors and the force publisher."""

@@ -21,25 +21,21 @@ from __future__ import annotations
 
 import time
 
-from rclpy.node import Node
-
 from pentapod_sim import interface, shutdown
 from pentapod_sim.errors import ConfigError, RunError
 from pentapod_sim.nodes.answer_poll import AnswerPoller
 from pentapod_sim.nodes.common import (
-    declare_param,
-    declare_table,
-    node_args,
     run_node,
     wait_for_acks,
 )
 from pentapod_sim.nodes.force_inputs import ForceInputs
 from pentapod_sim.nodes.local_bus import Drain, LocalBus, Outlet
 from pentapod_sim.nodes.loop_check import ModelCollector, TruncationCheck
-from pentapod_sim.nodes.parameter_tables import PLANT
+from pentapod_sim.nodes.parameter_tables import PlantParams
 from pentapod_sim.nodes.plant_exchange import PlantExchange
 from pentapod_sim.nodes.plant_outputs import PlantOutputs
 from pentapod_sim.nodes.run_status import RunStatusPublisher
+from pentapod_sim.nodes.testbed_node import TestbedNode
 from pentapod_sim.plant.build import load_or_build_model
 from pentapod_sim.sim.multirate import MultiRatePlant
 from pentapod_sim.sim.realtime import RealTime
@@ -48,13 +44,15 @@ from pentapod_sim.sim.timing import Lockstep, Timing, Waits
 from pentapod_sim.sim.trace import Trace
 
 
-class PlantNode(Node):
+class PlantNode(TestbedNode):
     """Discrete modal plant as a ROS 2 node (parameters: docs/parameters.md)."""
+
+    Params = PlantParams
 
     def __init__(self, **kwargs):
         super().__init__('plant', **kwargs)
-        self.params = p = declare_table(self, PLANT, node_args(kwargs.get('cli_args')))
-        ports = self._source_ports()
+        p = self.params
+        ports = p.source_ports
         self.model, origin = load_or_build_model(p.model_file, p.position, p.model_cache_dir)
         self.core = MultiRatePlant.from_model(self.model, p.sample_rate, p.substeps,
                                               p.max_state_norm)
@@ -81,18 +79,6 @@ class PlantNode(Node):
             RealTime(self.core, self.mixer, self.n_steps, waits, report_period=p.report_period,
                      lost_policy=p.lost_source_policy, log=self.get_logger()))
         self.bus_drain: Drain | None = None   # a composed plant's (join_bus)
-
-    def _source_ports(self) -> dict[str, list[str]]:
-        """Declare ``source_ports.<source>`` of every source (ConfigError for other sources)."""
-        ports = {name: declare_param(self, PLANT, f'source_ports.{name}')
-                 for name in self.params.sources}
-        strays = sorted(name for name in self._parameter_overrides
-                        if name.startswith('source_ports.') and name not in
-                        {f'source_ports.{s}' for s in self.params.sources})
-        if strays:
-            raise ConfigError(f'parameter {strays[0]!r} names no source of parameter '
-                              f"'sources' = {self.params.sources}")
-        return ports
 
     def _n_steps(self) -> int:
         """Steps of the run from ``steps`` or ``duration``."""
@@ -214,7 +200,7 @@ def run(node: PlantNode, executor) -> None:
 
 def main(argv=None) -> int:
     """Entry point of ``ros2 run pentapod_testbed plant``."""
-    return run_node(PlantNode, argv, run, table=PLANT)
+    return run_node(PlantNode, argv, run)
 
 
 if __name__ == '__main__':

@@ -34,6 +34,7 @@ from typing import Sequence
 import numpy as np
 
 from pentapod_sim.errors import ConfigError
+from pentapod_sim.parameters import sample_time
 from pentapod_sim.plant.check_model import (
     check_f_max,
     DEFAULT_CHECK_F_MIN,
@@ -255,5 +256,5 @@ def startup_check(plant: PlantModel, controllers: Sequence[DiscreteController],
     f_max = check_f_max(sample_rate, check_f_min)
     check_plant, origin = load_or_build_check_model(position, f_max, cache_dir)
     LOG.info('check model %s: %d modes', origin, check_plant.n_modes)
-    return check_loop(plant, check_plant, controllers, 1.0 / sample_rate, policy,
+    return check_loop(plant, check_plant, controllers, sample_time(sample_rate), policy,
                       label=f'plant at {position}')
