@@ -32,6 +32,7 @@ from pentapod_sim import interface, shutdown
 from pentapod_sim.errors import ConfigError, RunError
 from pentapod_sim.nodes.overrides import override_origins
 from pentapod_sim.parameters import all_tables, Param, ParameterTable, Values
+from pentapod_sim.scenario import network
 
 RCLError = rclpy_implementation.RCLError
 
@@ -317,6 +318,11 @@ def run_node(factory: Callable[..., object], argv=None, run: Callable | None = N
         print(f'error: {str(err).splitlines()[0]}', file=sys.stderr)
         return 1
     _process_args = args
+    try:                    # DDS on the loopback unless opened (docs/nodes.md, "Isolation")
+        network.prepare_process()
+    except (ConfigError, RunError) as err:
+        print(f'error: {err}', file=sys.stderr)
+        return 1
     # SIGINT/SIGTERM/SIGHUP only request a stop (pentapod_sim.shutdown); rclpy's own handlers
     # would invalidate the context at once, so a node could neither finish its step nor
     # publish, write its files or wait for acknowledgements.
@@ -326,6 +332,7 @@ def run_node(factory: Callable[..., object], argv=None, run: Callable | None = N
     code = 0
     try:
         node = factory()
+        network.check_sockets()             # the participant's sockets exist by now
         spinner = executor()
         if hasattr(node, 'add_to'):          # several nodes (a composed run)
             node.add_to(spinner)
