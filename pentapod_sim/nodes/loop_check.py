@@ -43,6 +43,7 @@ from pentapod_sim.nodes.common import qos, spin_until
 from pentapod_sim.plant.check_model import (
     check_cache_file,
     check_f_max,
+    CheckStopped,
     load_or_build_check_model,
 )
 from pentapod_sim.plant.model import PlantModel
@@ -190,8 +191,13 @@ def check_plant_model(node) -> tuple[PlantModel | None, str]:
     if not cached.exists():
         log.info(f'truncation check: building the check model of {position} (FE modes below '
                  f'{f_max:g} Hz) once; later runs load it from {node.params.model_cache_dir}')
-    with forwarded_logs(log):
-        check, origin = load_or_build_check_model(position, f_max, node.params.model_cache_dir)
+    try:
+        with forwarded_logs(log):
+            check, origin = load_or_build_check_model(position, f_max,
+                                                      node.params.model_cache_dir,
+                                                      stop=shutdown.requested)
+    except CheckStopped:        # check_at_start sees the stop request and skips the check
+        return None, ''
     log.info(f'check model {origin}: {check.n_modes} modes')
     return check, cached.name
 
@@ -222,7 +228,8 @@ def loop_result(node, models: Mapping[str, DiscreteController], check: PlantMode
     was, quiet.disabled = quiet.disabled, True      # the policy is applied (and logged) here
     try:    # seconds of LAPACK for a check model: a stop signal must not wait for them
         result = shutdown.unless_requested(lambda: check_loop(
-            node.model, check, list(models.values()), node.dt, 'warn', label))
+            node.model, check, list(models.values()), node.dt, 'warn', label,
+            lambda msg: shutdown.requested() or node.get_logger().info(msg)))
     finally:
         quiet.disabled = was
     if result is None:
