@@ -21,6 +21,7 @@ from pentapod_sim.errors import ConfigError
 from pentapod_sim.executables import module_of, NODE_KINDS
 from pentapod_sim.parameters import all_tables, did_you_mean, table_of
 from pentapod_sim.paths import scenario_dir
+from pentapod_sim.schema import read_mapping
 
 
 @dataclass(frozen=True)
@@ -99,12 +100,7 @@ def read_scenario(scenario: str | Path) -> Scenario:
         the file.
     """
     path = resolve(scenario)
-    try:
-        doc = yaml.safe_load(path.read_text(encoding='utf-8'))
-    except (OSError, yaml.YAMLError) as err:
-        raise ConfigError(f'cannot read scenario file {path}: {err}') from None
-    if not isinstance(doc, dict):
-        raise ConfigError(f'scenario file {path} is empty or not a mapping of node sections')
+    doc = read_mapping(path)        # one line for a file that is no YAML mapping
     shared_section = doc.get('/**') or {}
     if not isinstance(shared_section, dict):
         raise ConfigError(f"{path}: section '/**' is not a mapping")
