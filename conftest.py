@@ -9,6 +9,9 @@ before any test starts a node, so concurrent test runs, studies and users on thi
 share a domain, and nothing of a test listens on the network.
 """
 import os
+import signal
+
+import pytest
 
 _LEASES = []
 
@@ -34,3 +37,20 @@ def pytest_report_header(config):
     return (f"ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID')}{held}, "
             f"ROS_AUTOMATIC_DISCOVERY_RANGE={os.environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE')}, "
             f"FASTRTPS_DEFAULT_PROFILES_FILE={os.environ.get('FASTRTPS_DEFAULT_PROFILES_FILE')}")
+
+
+@pytest.fixture(autouse=True)
+def _stop_signal_handlers():
+    """
+    Give every test the stop-signal handlers the session started with.
+
+    A command or node run in-process (``runner.main``, ``run_node``) installs
+    :mod:`pentapod_sim.shutdown`'s handlers, which only record SIGTERM; a process forked
+    later by another test (a multiprocessing pool's worker) inherited them, ignored the
+    pool's SIGTERM at exit, and that test hung in ``Pool.terminate``.
+    """
+    from pentapod_sim.shutdown import STOP_SIGNALS
+    saved = {sig: signal.getsignal(sig) for sig in STOP_SIGNALS}
+    yield
+    for sig, handler in saved.items():
+        signal.signal(sig, handler)
