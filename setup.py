@@ -52,6 +52,7 @@ setup(
         ('share/' + PACKAGE + '/config', _files('config/*.yaml')),
         ('share/' + PACKAGE + '/config/scenarios', _files('config/scenarios/*.yaml')),
         ('share/' + PACKAGE + '/config/foxglove', _files('config/foxglove/*.json')),
+        ('share/' + PACKAGE + '/config/dds', _files('config/dds/*.xml')),
         ('share/' + PACKAGE + '/launch', _files('launch/*.launch.py')),
         ('lib/' + PACKAGE, _launchers()),
     ],

@@ -201,7 +201,8 @@ def test_installed_package_runs_from_the_install_space(colcon_install, tmp_path)
         steps=steps, duration=steps / 2000.0, topics=topics))
     run = inst.run(lib / 'scenario', 'scenario.yaml', '--timeout', '240', cwd=cwd)
     assert run.returncode == 0, run.stdout + run.stderr
-    assert 'ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST' in run.stdout + run.stderr  # isolated
+    assert 'ROS_AUTOMATIC_DISCOVERY_RANGE=SYSTEM_DEFAULT' in run.stdout + run.stderr  # isolated
+    assert (share / 'config' / 'dds' / 'loopback.xml').is_file()    # its DDS profile
     info = inst.run(lib / 'analyze', 'info', cwd / 'bags' / 'installed', cwd=cwd)
     assert info.returncode == 0, info.stdout + info.stderr
     counts = {line.split()[0]: int(line.split()[2]) for line in info.stdout.splitlines()

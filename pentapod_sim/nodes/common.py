@@ -29,6 +29,7 @@ from rclpy.utilities import remove_ros_args
 from pentapod_sim import interface, shutdown
 from pentapod_sim.errors import ConfigError, RunError
 from pentapod_sim.nodes.testbed_node import usage
+from pentapod_sim.scenario import network
 
 RCLError = rclpy_implementation.RCLError
 
@@ -197,6 +198,11 @@ def run_node(factory: Callable[..., object], argv=None, run: Callable | None = N
     except RCLError as err:            # e.g. a parameter file rcl cannot parse
         print(f'error: {str(err).splitlines()[0]}', file=sys.stderr)
         return 1
+    try:                    # DDS on the loopback unless opened (docs/nodes.md, "Isolation")
+        network.prepare_process()
+    except (ConfigError, RunError) as err:
+        print(f'error: {err}', file=sys.stderr)
+        return 1
     # SIGINT/SIGTERM/SIGHUP only request a stop (pentapod_sim.shutdown); rclpy's own handlers
     # would invalidate the context at once, so a node could neither finish its step nor
     # publish, write its files or wait for acknowledgements.
@@ -207,6 +213,7 @@ def run_node(factory: Callable[..., object], argv=None, run: Callable | None = N
     served = False           # stopped after the plant's run it served had ended
     try:
         node = factory()
+        network.check_sockets()             # the participant's sockets exist by now
         spinner = executor()
         if hasattr(node, 'add_to'):          # several nodes (a composed run)
             node.add_to(spinner)

@@ -38,6 +38,7 @@ from pentapod_sim.nodes.source_model import MODEL_QOS
 from pentapod_sim.plant.check_model import (
     check_cache_file,
     check_f_max,
+    CheckStopped,
     load_or_build_check_model,
 )
 from pentapod_sim.plant.model import PlantModel
@@ -175,8 +176,12 @@ class TruncationCheck:
         if not cached.exists():
             log.info(f'truncation check: building the check model of {position} (FE modes '
                      f'below {f_max:g} Hz) once; later runs load it from {self.cache_dir}')
-        with forwarded_logs(log):
-            check, origin = load_or_build_check_model(position, f_max, self.cache_dir)
+        try:
+            with forwarded_logs(log):
+                check, origin = load_or_build_check_model(position, f_max, self.cache_dir,
+                                                          stop=shutdown.requested)
+        except CheckStopped:        # the caller sees the stop request and skips the check
+            return None, ''
         log.info(f'check model {origin}: {check.n_modes} modes')
         return check, cached.name
 
@@ -205,7 +210,8 @@ class TruncationCheck:
         was, quiet.disabled = quiet.disabled, True  # the policy is applied (and logged) here
         try:    # seconds of LAPACK for a check model: a stop signal must not wait for them
             result = shutdown.unless_requested(lambda: check_loop(
-                self.plant, check, list(models.values()), self.dt, 'warn', label))
+                self.plant, check, list(models.values()), self.dt, 'warn', label,
+                lambda msg: shutdown.requested() or self.log.info(msg)))
         finally:
             quiet.disabled = was
         if result is None:
