@@ -119,28 +119,6 @@ def subscribers_of(node, publisher) -> tuple[set, bool]:
     return {info.node_name for info in graph}, publisher.get_subscription_count() >= len(graph)
 
 
-#: Wall time [s] a second publisher on a force topic gets to be discovered by node name.
-NAME_DISCOVERY = 2.0
-_UNKNOWN_NAME = '_NODE_NAME_UNKNOWN_'
-
-
-def shared_topic_error(topic: str, infos, first_seen: dict) -> str | None:
-    """
-    The refusal of a force topic with several publishers, naming every publishing node.
-
-    None while a publisher's node name is still undiscovered, for at most
-    :data:`NAME_DISCOVERY` s after ``topic`` was first seen shared (``first_seen``: topic ->
-    monotonic time, kept by the caller): a later check then names them.
-    """
-    now = time.monotonic()
-    if (any(i.node_name == _UNKNOWN_NAME for i in infos)
-            and now - first_seen.setdefault(topic, now) < NAME_DISCOVERY):
-        return None
-    nodes = ', '.join(sorted(f'{i.node_namespace.rstrip("/")}/{i.node_name}' for i in infos))
-    return (f'force topic {topic} has {len(infos)} publishers ({nodes}); one source per '
-            'topic (parameter shared_source_topics allows more)')
-
-
 def spin_until(executor, done: Callable[[], bool], timeout: float,
                poll: float = 0.05) -> bool:
     """Spin until ``done()`` or ``timeout`` [s] of wall time; return ``done()``."""
