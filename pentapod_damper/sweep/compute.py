@@ -19,8 +19,8 @@ from pentapod_damper.sweep.loops import DIRECTIONS, Loop, loop_columns
 from pentapod_damper.sweep.poses import AXES, UNITS
 from pentapod_damper.sweep.settings import SweepSettings
 from pentapod_sim.errors import UnreachablePoseError
-from pentapod_sim.fe.assembly import build_model
 from pentapod_sim.modes.causes import strain_energy_shares, tcp_directions
+from pentapod_sim.modes.frame_reduction import build_model
 from pentapod_sim.modes.solver import solve_modes
 from pentapod_sim.plant.build import plant_from_fe, reduce_plant
 

@@ -18,9 +18,9 @@ import numpy.typing as npt
 
 from pentapod_sim import __version__
 from pentapod_sim.errors import ConfigError, ModelFileError
-from pentapod_sim.fe.assembly import build_model
 from pentapod_sim.fe.machine_data import load_machine, MachineParams
 from pentapod_sim.fe.model import FEModel
+from pentapod_sim.modes.frame_reduction import build_model
 from pentapod_sim.modes.solver import solve_modes
 from pentapod_sim.paths import config_dir
 from pentapod_sim.plant.config import (

@@ -19,9 +19,9 @@ import numpy as np
 import numpy.typing as npt
 
 from pentapod_sim.errors import ConfigError, ModelFileError
-from pentapod_sim.fe.assembly import build_model
 from pentapod_sim.fe.machine_data import load_machine, MachineParams
 from pentapod_sim.fe.model import FEModel
+from pentapod_sim.modes.frame_reduction import build_model
 from pentapod_sim.plant.build import model_cache_key, plant_from_fe
 from pentapod_sim.plant.config import load_reduction_config, ReductionConfig
 from pentapod_sim.plant.model import PlantModel
