@@ -147,24 +147,6 @@ def _column_and_frame(mesh: _Mesh) -> tuple[list[int], dict[int, int], int]:
     return feet, bracket_col, bed
 
 
-def _plate_frame(mesh: _Mesh, cache: str | None) -> tuple[list[int], dict[int, int], int]:
-    """Plate frame superelement (cached Craig-Bampton reduction); feet, BP seats, bed."""
-    from pentapod_sim.fe.frame_model import load_reduced_frame  # needs scikit-fem, gmsh
-
-    fr = mesh.machine.frame
-    frame = load_reduced_frame(mesh.machine, cache)
-    nodes = [mesh.node(frame.points[name], name) for name in frame.interface]
-    mesh.superelement = (nodes, frame.groups, frame.M)
-    feet = [mesh.named[f'foot{i + 1}'] for i in range(N_STRUTS)]
-    seats = {i: mesh.named[f'bp_ring{i + 1}'] for i in range(N_STRUTS)}
-    mesh.frame_nodes.update(feet + list(seats.values()))
-    bed = mesh.named['bed']
-    mesh.mass(bed, fr.bed_mass, np.diag(fr.bed_inertia), 'bed')
-    for group, mass in frame.masses.items():
-        mesh.mass_parts[group] = mesh.mass_parts.get(group, 0.0) + mass
-    return feet, seats, bed
-
-
 def _struts_and_joints(mesh: _Mesh, state: StrutState, bracket_col: dict[int, int],
                        seats: dict[int, int] | None = None) -> None:
     """
@@ -236,6 +218,12 @@ def _triplets(blocks: Array, dofs: Array) -> Triplet:
     return (np.repeat(dofs, d, axis=1).ravel(), np.tile(dofs, (1, d)).ravel(), blocks.ravel())
 
 
+def _super_triplets(blk: Any, dofs: Array) -> Triplet:
+    """Triplets of a superelement matrix (dense, or sparse for an unreduced frame)."""
+    coo = sp.coo_matrix(blk)
+    return dofs[coo.row], dofs[coo.col], coo.data
+
+
 def _to_csr(parts: list[Triplet], n: int) -> sp.csr_matrix:
     """One COO -> CSR conversion (duplicates summed) of all collected triplets."""
     if not parts:
@@ -298,8 +286,8 @@ def _assemble(mesh: _Mesh) -> tuple[sp.csr_matrix, dict[str, sp.csr_matrix], sp.
         n_modal = m_super.shape[0] - 6 * len(nodes)
         dofs = np.concatenate([_dofs(nodes).ravel(), 6 * mesh.n_nodes + np.arange(n_modal)])
         for g, blk in k_super.items():
-            k_parts.setdefault(g, []).append(_triplets(blk[None], dofs[None]))
-        m_parts.append(_triplets(m_super[None], dofs[None]))
+            k_parts.setdefault(g, []).append(_super_triplets(blk, dofs))
+        m_parts.append(_super_triplets(m_super, dofs))
     n_full = 6 * mesh.n_nodes + n_modal
     k_full = {g: _to_csr(parts, n_full) for g, parts in k_parts.items()}
     m_full = _to_csr(m_parts, n_full)
@@ -324,7 +312,7 @@ def _resolve_pose(pose: npt.ArrayLike | str) -> Array:
 
 def build_model(machine: MachineParams, pose: npt.ArrayLike | str,
                 element_size: float | None = None, installed: bool = True,
-                frame_cache: str | None = None) -> FEModel:
+                frame_cache: Any = None) -> FEModel:
     """
     Assemble the FE model of the machine at a pose.
 
@@ -339,10 +327,10 @@ def build_model(machine: MachineParams, pose: npt.ArrayLike | str,
         paper's ~800,000 DOF.
     installed : bool
         If False, the foundation springs are left out (free structure, six rigid-body modes).
-    frame_cache : str, optional
-        Folder of reduced plate frames (``frame.model: shells``); default
-        ``$PENTAPOD_FRAME_CACHE`` or ``out/frames``. The frame must have been reduced
-        (``pentapod_sim.modes.frame_reduction.build_model`` does both).
+    frame_cache : str or ReducedFrame, optional
+        Folder of reduced plate frames (``frame.model: shells``; default
+        ``$PENTAPOD_FRAME_CACHE`` or ``out/frames``), or the frame superelement itself. The frame
+        must have been reduced (``pentapod_sim.modes.frame_reduction.build_model`` does both).
 
     Returns
     -------
@@ -362,7 +350,8 @@ def build_model(machine: MachineParams, pose: npt.ArrayLike | str,
     mesh = _Mesh(machine, h)
     seats = None
     if machine.frame.model == 'shells':
-        feet, seats, _ = _plate_frame(mesh, frame_cache)
+        from pentapod_sim.fe.frame_model import couple_frame  # needs scikit-fem, gmsh
+        feet, seats, _ = couple_frame(mesh, frame_cache)
         bracket_col: dict[int, int] = {}
     else:
         feet, bracket_col, _ = _column_and_frame(mesh)

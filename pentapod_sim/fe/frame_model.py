@@ -38,12 +38,14 @@ import scipy.sparse as sp
 
 from pentapod_sim.errors import ConfigError
 from pentapod_sim.fe.frame_mesh import FrameMesh, mesh_frame, PARTS
+from pentapod_sim.fe.geometry import N_STRUTS
 from pentapod_sim.fe.machine_data import MachineParams
 from pentapod_sim.fe.rigid import node_dofs, rigid_elimination
 from pentapod_sim.fe.shell import assemble, shell_element_matrices
 
-__all__ = ['cache_dir', 'frame_fe', 'FrameFE', 'FrameNotReducedError', 'interface_dofs',
-           'load_reduced', 'load_reduced_frame', 'ReducedFrame', 'save_reduced']
+__all__ = ['cache_dir', 'couple_frame', 'frame_fe', 'FrameFE', 'FrameNotReducedError',
+           'interface_dofs', 'load_reduced', 'load_reduced_frame', 'ReducedFrame', 'save_reduced',
+           'unreduced_frame']
 
 LOG = logging.getLogger(__name__)
 Array = npt.NDArray[np.float64]
@@ -273,6 +275,43 @@ def load_reduced_frame(machine: MachineParams, cache: str | os.PathLike[str] | N
 def remember(path: Path, frame: ReducedFrame) -> None:
     """Keep a reduced frame in this process's memory (after it was saved to ``path``)."""
     _MEMO[path] = frame
+
+
+def couple_frame(mesh: Any, cache: Any) -> tuple[list[int], dict[int, int], int]:
+    """
+    Add the plate frame superelement to a pose's mesh (``pentapod_sim.fe.assembly``).
+
+    ``cache`` is the folder of reduced frames or a :class:`ReducedFrame` (e.g. the unreduced
+    frame of :func:`unreduced_frame`). Makes the interface points' nodes, puts the bed mass on
+    'bed' and returns the foot nodes, the BP seat node of each strut (0..4) and the bed node.
+    """
+    fr = mesh.machine.frame
+    frame = cache if isinstance(cache, ReducedFrame) else load_reduced_frame(mesh.machine, cache)
+    nodes = [mesh.node(frame.points[name], name) for name in frame.interface]
+    mesh.superelement = (nodes, frame.groups, frame.M)
+    feet = [mesh.named[f'foot{i + 1}'] for i in range(N_STRUTS)]
+    seats = {i: mesh.named[f'bp_ring{i + 1}'] for i in range(N_STRUTS)}
+    mesh.frame_nodes.update(feet + list(seats.values()))
+    bed = mesh.named['bed']
+    mesh.mass(bed, fr.bed_mass, np.diag(fr.bed_inertia), 'bed')
+    for group, mass in frame.masses.items():
+        mesh.mass_parts[group] = mesh.mass_parts.get(group, 0.0) + mass
+    return feet, seats, bed
+
+
+def unreduced_frame(fe: FrameFE) -> ReducedFrame:
+    """
+    The full frame in the superelement's form (interface DOFs first, then every other DOF).
+
+    Coupled to a pose like the reduced frame, it gives the unreduced model: the reference the
+    reduction is checked and timed against.
+    """
+    n, nb = fe.n_dof, 6 * len(fe.interface)
+    order = np.concatenate([np.arange(n - nb, n), np.arange(n - nb)])
+    groups = {g: sp.csr_matrix(A[order][:, order]) for g, A in fe.groups.items()}
+    return ReducedFrame(fe.interface, dict(fe.points), groups,  # type: ignore[arg-type]
+                        sp.csr_matrix(fe.M[order][:, order]), np.zeros(0), dict(fe.masses),
+                        {'n_dof': n, 'unreduced': True})
 
 
 def interface_dofs(frame: FrameFE | ReducedFrame, name: str) -> npt.NDArray[np.int64]:
