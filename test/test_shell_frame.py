@@ -139,10 +139,11 @@ def test_beam_frame_stays_the_default():
     assert load_machine().frame.model == 'beams'
 
 
-def shell_machine(element_size=0.3, f_interest=300.0):
+def shell_machine(element_size=0.3, f_interest=300.0, mode_multiple=2.0):
     """The shipped machine on the plate frame, coarse (tests of a few seconds)."""
     m = load_machine()
-    sh = dataclasses.replace(m.shell_frame, element_size=element_size, f_interest=f_interest)
+    sh = dataclasses.replace(m.shell_frame, element_size=element_size, f_interest=f_interest,
+                             mode_multiple=mode_multiple)
     return dataclasses.replace(m, frame=dataclasses.replace(m.frame, model='shells'),
                                shell_frame=sh)
 
@@ -173,7 +174,10 @@ def test_reduced_frame_matches_the_full_frame(tmp_path):
     lam, phi = sla.eigh(red_k, red.M)
     f_red = np.sqrt(lam) / (2 * np.pi)
     n = full.n_modes
-    assert n >= 10 and np.count_nonzero(f_red < f_top) == n
+    assert n >= 10
+    # Rayleigh-Ritz: the reduced model is stiffer, never softer (a mode just below f_top may
+    # move just above it)
+    assert np.all(f_red[:n] >= full.frequencies * (1 - 1e-9))
     assert f_red[:n] == pytest.approx(full.frequencies, rel=0.005)
     b_full = np.concatenate([interface_dofs(fe, p) for p in red.interface])
     mac = mass_mac(full.shapes[b_full], phi[:red.n_boundary, :n], sp.identity(len(b_full)))

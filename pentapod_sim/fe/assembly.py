@@ -212,13 +212,13 @@ def _platform(mesh: _Mesh, state: StrutState) -> None:
 _dofs = node_dofs
 
 
-def _triplets(blocks: Array, dofs: Array) -> Triplet:
+def _triplets(blocks: Array, dofs: npt.NDArray[Any]) -> Triplet:
     """Element blocks (e, d, d) at DOF indices (e, d) -> COO rows, cols, values."""
     d = dofs.shape[1]
     return (np.repeat(dofs, d, axis=1).ravel(), np.tile(dofs, (1, d)).ravel(), blocks.ravel())
 
 
-def _super_triplets(blk: Any, dofs: Array) -> Triplet:
+def _super_triplets(blk: Any, dofs: npt.NDArray[Any]) -> Triplet:
     """Triplets of a superelement matrix (dense, or sparse for an unreduced frame)."""
     coo = sp.coo_matrix(blk)
     return dofs[coo.row], dofs[coo.col], coo.data
@@ -356,11 +356,11 @@ def build_model(machine: MachineParams, pose: npt.ArrayLike | str,
     else:
         feet, bracket_col, _ = _column_and_frame(mesh)
     inst = machine.installation
-    if installed:
-        for foot in feet:
-            mesh.spring(foot, None, np.eye(3), [inst.foot_stiffness_x, inst.foot_stiffness_y,
-                                                inst.foot_stiffness_z, 0.0, 0.0, 0.0],
-                        'installation')
+    k_feet = [inst.foot_stiffness_x, inst.foot_stiffness_y, inst.foot_stiffness_z]
+    if seats is not None and machine.shell_frame and machine.shell_frame.foot_stiffness:
+        k_feet = list(machine.shell_frame.foot_stiffness)
+    for foot in feet if installed else []:
+        mesh.spring(foot, None, np.eye(3), k_feet + [0.0, 0.0, 0.0], 'installation')
     _struts_and_joints(mesh, state, bracket_col, seats)
     _platform(mesh, state)
     LOG.debug('mesh: %d nodes, %d beam members; assembling', mesh.n_nodes, len(mesh.beams))

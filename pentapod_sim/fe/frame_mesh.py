@@ -183,17 +183,19 @@ def _gmsh_surfaces(layout: FramePlates, element_size: float
         node_tags, coords, _ = gmsh.model.mesh.getNodes()
         index = np.full(int(node_tags.max()) + 1, -1, dtype=np.int64)
         index[node_tags.astype(np.int64)] = np.arange(node_tags.size)
-        tris, thick, part = [], [], []
+        tris: list[npt.NDArray[np.int64]] = []
+        thick: list[Array] = []
+        part_of: list[npt.NDArray[np.int64]] = []
         for _, tag in gmsh.model.getEntities(2):
             types, _, nodes = gmsh.model.mesh.getElements(2, tag)
-            plate = layout.plates[owner[tag]]
+            _, wall, part_name = layout.plates[owner[tag]]
             for etype, enodes in zip(types, nodes):
                 if etype != 9:      # 6-node triangle
                     raise RuntimeError(f'gmsh made element type {etype}, expected 9')
                 tri = index[enodes.astype(np.int64)].reshape(-1, 6)
                 tris.append(tri)
-                thick.append(np.full(tri.shape[0], plate[1]))
-                part.append(np.full(tri.shape[0], PARTS.index(plate[2])))
+                thick.append(np.full(tri.shape[0], wall))
+                part_of.append(np.full(tri.shape[0], PARTS.index(part_name), dtype=np.int64))
         xyz = coords.reshape(-1, 3)
     finally:
         gmsh.finalize()
@@ -201,7 +203,7 @@ def _gmsh_surfaces(layout: FramePlates, element_size: float
     used = np.unique(tri_all)
     renumber = np.full(xyz.shape[0], -1, dtype=np.int64)
     renumber[used] = np.arange(used.size)
-    return xyz[used], renumber[tri_all], np.concatenate(thick), np.concatenate(part)
+    return xyz[used], renumber[tri_all], np.concatenate(thick), np.concatenate(part_of)
 
 
 @dataclass(frozen=True)

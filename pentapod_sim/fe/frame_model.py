@@ -188,7 +188,9 @@ def frame_key(machine: MachineParams, element_size: float, f_cut: float) -> str:
     """SHA-256 (hex, 16 chars) of everything the reduced frame depends on."""
     assert machine.shell_frame is not None
     data = {'format': FORMAT, 'frame': asdict(machine.frame),
-            'shell_frame': asdict(machine.shell_frame), 'steel': asdict(machine.materials.steel),
+            'shell_frame': {k: v for k, v in asdict(machine.shell_frame).items()
+                            if k != 'foot_stiffness'},        # the feet are not in the frame
+            'steel': asdict(machine.materials.steel),
             'bp_joints': [list(machine.bp_joints.angles), list(machine.bp_joints.z),
                           machine.bp_joints.radius],
             'element_size': float(element_size), 'f_cut': float(f_cut)}
@@ -204,12 +206,12 @@ def cache_dir(path: str | os.PathLike[str] | None = None) -> Path:
 def save_reduced(frame: ReducedFrame, path: Path) -> None:
     """Write a reduced frame to an .npz file (written under a temporary name, then renamed)."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    arrays = {f'group_{g}': a for g, a in frame.groups.items()}
+    arrays: dict[str, Any] = {f'group_{g}': a for g, a in frame.groups.items()}
     header = {'interface': list(frame.interface), 'masses': frame.masses, 'meta': frame.meta,
               'points': {k: v.tolist() for k, v in frame.points.items()}}
     tmp = path.with_name(f'{path.stem}.{os.getpid()}.tmp.npz')
-    np.savez(tmp, M=frame.M, frequencies=frame.frequencies, header=json.dumps(header),
-             **arrays)
+    arrays.update(M=frame.M, frequencies=frame.frequencies, header=np.array(json.dumps(header)))
+    np.savez(tmp, **arrays)
     os.replace(tmp, path)
 
 
@@ -309,7 +311,7 @@ def unreduced_frame(fe: FrameFE) -> ReducedFrame:
     n, nb = fe.n_dof, 6 * len(fe.interface)
     order = np.concatenate([np.arange(n - nb, n), np.arange(n - nb)])
     groups = {g: sp.csr_matrix(A[order][:, order]) for g, A in fe.groups.items()}
-    return ReducedFrame(fe.interface, dict(fe.points), groups,  # type: ignore[arg-type]
+    return ReducedFrame(fe.interface, dict(fe.points), groups,
                         sp.csr_matrix(fe.M[order][:, order]), np.zeros(0), dict(fe.masses),
                         {'n_dof': n, 'unreduced': True})
 

@@ -121,6 +121,9 @@ class ShellFrameParams:
     mode_multiple: float = spec('-', bounds=(1.0, 10.0),
                                 description='fixed-interface modes up to this multiple of '
                                             'f_interest')
+    foot_stiffness: tuple[float, ...] | None = spec(
+        'N/m', POSITIVE, length=3, default=None,
+        description='x, y, z stiffness of each foot with this frame (default: installation)')
 
 
 @_schema

@@ -132,6 +132,11 @@ def _local(form: skfem.BilinearForm, basis: skfem.Basis, weight: Array) -> Array
     return np.swapaxes(np.asarray(form.elemental(basis, c=c).tolocal()), 1, 2)
 
 
+def tr(a: Array) -> Array:
+    """Element-wise transpose of (E, n, n) matrices."""
+    return np.swapaxes(a, 1, 2)
+
+
 def _bases(xyz: Array, corners: IntArray, frames: Array
            ) -> tuple[skfem.Basis, skfem.Basis, IntArray]:
     """
@@ -204,7 +209,6 @@ def shell_element_matrices(mesh: ShellMesh, youngs_modulus: float, poisson: floa
     nx_s, ny_s, n0_s = (_local(f, low, shear) for f in (_nx, _ny, _n0))
     dxx_d, dyy_d, dxy_d = (_local(f, low, drl) for f in (_dxx, _dyy, _dxy))
     nx_d, ny_d, n0_d = (_local(f, full, drl) for f in (_nx, _ny, _n0))
-    tr = lambda a: np.swapaxes(a, 1, 2)  # noqa: E731  (element-wise transpose)
     n_el = tri.shape[0]
     # local fields 0..5 = u, v, w, theta_x, theta_y, theta_z, each 6 DOFs
     kl = np.zeros((n_el, 6, 6, 6, 6))
@@ -235,14 +239,14 @@ def shell_element_matrices(mesh: ShellMesh, youngs_modulus: float, poisson: floa
         ml[:, f + 3, f + 3] = n0_r
     # rotation to global DOFs: local field f at skfem DOF a = frame row (f % 3) . global
     # component block (f // 3) of the node at gmsh position position[a]
-    rot = np.zeros((n_el, 6, 6, 6, 6))              # (E, field, dof a, node pos, component)
+    rot5 = np.zeros((n_el, 6, 6, 6, 6))             # (E, field, dof a, node pos, component)
     ar = np.arange(6)
     for f in range(6):
         blk = 3 * (f // 3)
         for c in range(3):
-            rot[np.arange(n_el)[:, None], f, ar[None, :], position.T, blk + c] = \
+            rot5[np.arange(n_el)[:, None], f, ar[None, :], position.T, blk + c] = \
                 frames[:, f % 3, c][:, None]
-    rot = rot.reshape(n_el, 36, 36)
+    rot = rot5.reshape(n_el, 36, 36)
     k = np.einsum('eai,eab,ebj->eij', rot, kl.transpose(0, 1, 3, 2, 4).reshape(n_el, 36, 36),
                   rot, optimize=True)
     m = np.einsum('eai,eab,ebj->eij', rot, ml.transpose(0, 1, 3, 2, 4).reshape(n_el, 36, 36),

@@ -357,6 +357,3 @@ def analyse_causes(model: FEModel, modes: ModalResult, *, neuber: bool = True,
     return CauseTable(modes.frequencies, names, shares, cause, direction, freq, mac, ncause,
                       alpha, kinetic, local)
 
-
-# the plots live in their own module; imported here so that both names keep working
-from pentapod_sim.modes.cause_plots import plot_energy_shares, plot_mode_distribution  # noqa: E402,F401,I100
