@@ -10,9 +10,10 @@ from pentapod_damper.laws import ProofMassActuator, tcp_damper
 from pentapod_damper.scenario_laws import continuous_dampers, scenario_laws
 from pentapod_damper.study.analytic import discrete_frf, improvement_share, pma_requirements
 from pentapod_damper.study.config import load_study_config
-from pentapod_damper.study.pipeline import PositionModel, scenario_analytic
-from pentapod_damper.study.report import peak_rows, struts12_share, StudyResults, summary_rows
+from pentapod_damper.study.pipeline import scenario_analytic
+from pentapod_damper.study.records import PositionModel, StudyResults
 from pentapod_damper.study.runs import run_sections
+from pentapod_damper.study.tables import peak_rows, struts12_share, summary_rows
 from pentapod_sim.errors import ConfigError
 from pentapod_sim.plant.frf import closed_loop_frf
 from pentapod_sim.plant.ports import collocated_output
@@ -172,18 +173,18 @@ def test_report_rows_use_exact_peaks_and_the_truncation_check(tmp_path):
         res.analytic[('P1', scn)] = scenario_analytic(model, scn, cfg, res.freq)
     peak = {scn: _dense_peak(model_plant, res.analytic[('P1', scn)].dampers, res.freq, cfg)
             for scn in scenarios}
-    rows = {r['scenario']: r for r in summary_rows(res)}
+    rows = {r.scenario: r for r in summary_rows(res)}
     for scn in scenarios:
-        assert rows[scn]['peak_um_per_N'] == pytest.approx(peak[scn] * 1e6, rel=1e-6)
-        assert rows[scn]['peak_reduction'] == pytest.approx(peak['baseline'] / peak[scn],
-                                                            rel=1e-6)
-        assert rows[scn]['sampled_loop'] == 'stable on the plant (no check model)'
-        assert rows[scn]['plant_margin'] > 0
-    share = struts12_share(res)[0]['peak_share']
+        assert rows[scn].peak_um_per_N == pytest.approx(peak[scn] * 1e6, rel=1e-6)
+        assert rows[scn].peak_reduction == pytest.approx(peak['baseline'] / peak[scn],
+                                                         rel=1e-6)
+        assert rows[scn].sampled_loop == 'stable on the plant (no check model)'
+        assert rows[scn].plant_margin > 0
+    share = struts12_share(res)[0].peak_share
     base, part, full = (peak[s] for s in ('baseline', 'strut_damping_12', 'strut_damping_all'))
     assert share == pytest.approx((base - part) / (base - full), rel=1e-5)
     grid = {r['scenario']: r['grid_peak_um_per_N'] for r in peak_rows(res)}
-    assert all(grid[s] <= rows[s]['peak_um_per_N'] * (1 + 1e-12) for s in scenarios)
+    assert all(grid[s] <= rows[s].peak_um_per_N * (1 + 1e-12) for s in scenarios)
 
 
 def test_positions_without_the_step_position_are_a_named_error(tmp_path, capsys):
