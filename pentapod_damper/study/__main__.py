@@ -46,6 +46,8 @@ from pentapod_sim.scenario.domain import DOMAIN_VAR, user_domain
 COMMANDS = ('run', 'scenario', 'report', 'docs', 'damping', 'dynamics')
 #: The settings a run used (StudyConfig as JSON), read back by ``report``.
 SETTINGS = 'study_settings.json'
+#: Start and end of every stage [s after the study's start].
+TIMELINE = 'timeline.csv'
 
 
 def _say(msg: str) -> None:
@@ -105,7 +107,12 @@ def cmd_run(args: argparse.Namespace) -> int:
         res.timings[f'{stage}: first start to last end'] = span
         _say(f'{stage}: {count} tasks, {busy:.1f} s busy, {span:.1f} s from first start to '
              'last end')
+    share = progress.busy_share(args.jobs)
+    _say(f'{args.jobs} threads busy {share:.0%} of the time from the first stage to the last '
+         f'(each stage, start and end: {TIMELINE})')
+    res.timings[f'{args.jobs} threads busy [%]'] = 100.0 * share
     res.timings['total'] = time.perf_counter() - t_start
+    report.write_csv(progress.timeline(t_start), res.out_dir / TIMELINE)
     (res.out_dir / SETTINGS).write_text(json.dumps(dataclasses.asdict(cfg), indent=1))
     path = report.write_report(res, res.out_dir)
     _print_summary(res, path)

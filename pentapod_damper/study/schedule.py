@@ -28,6 +28,7 @@ from __future__ import annotations
 
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, fields
+import math
 import signal
 import time
 from typing import Any, Callable, Mapping
@@ -199,6 +200,22 @@ class Progress(Callback):
             line = result.describe() if hasattr(result, 'describe') else key
             if not (isinstance(result, Figures) and not result.paths):
                 self.say(f'({done}/{self.total}) {line}')
+
+    def timeline(self, origin: float) -> list[dict[str, Any]]:
+        """Every stage's task with its start and end [s after ``origin``], in start order."""
+        keys = sorted((k for k in self.finished if k in self.stage_of),
+                      key=self.started.__getitem__)
+        return [{'stage': self.stage_of[k], 'task': k, 'start_s': self.started[k] - origin,
+                 'end_s': self.finished[k] - origin} for k in keys]
+
+    def busy_share(self, jobs: int) -> float:
+        """Summed busy time of the stages over ``jobs`` times first start to last end."""
+        spans = self.timings()
+        if not spans:
+            return math.nan
+        start = min(self.started[k] for k in self.finished if k in self.stage_of)
+        end = max(self.finished[k] for k in self.finished if k in self.stage_of)
+        return sum(busy for _, busy, _ in spans.values()) / (jobs * (end - start))
 
     def timings(self) -> dict[str, tuple[float, float, int]]:
         """Stage -> (first start to last end, summed busy time, count) [s]."""
