@@ -194,3 +194,32 @@ def test_positions_without_the_step_position_are_a_named_error(tmp_path, capsys)
     err = capsys.readouterr().err
     assert 'step_response.position = P2 is not among the positions P1' in err
     assert 'Traceback' not in err
+
+
+def test_report_of_a_folder_without_a_run_names_what_it_lacks(tmp_path, capsys):
+    from pentapod_damper.study.__main__ import main
+    (tmp_path / 'summary.csv').write_text('position\n')
+    assert main(['report', '--out', str(tmp_path)]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f'study report: {tmp_path} is not the folder')
+    assert 'stability.csv' in err[0] and 'summary.csv' not in err[0]
+    assert 'study_settings.json' in err[0]
+
+
+def test_a_table_a_stage_adds_is_written_and_shown_in_the_report(tmp_path):
+    """The way in for a new stage's table: CSV file and report section, no report code."""
+    import dataclasses
+
+    from pentapod_damper.study.records import Table
+    from pentapod_damper.study.report import read_csv, rewrite_report, write_report
+    cfg = dataclasses.replace(load_study_config(), positions=(), scenarios=())
+    res = StudyResults(cfg, np.linspace(1.0, 10.0, 10), tmp_path)
+    res.tables.append(Table('damper_choice', 'Which damper to build', 'Cheapest first.',
+                            [{'damper': 'tcp', 'cost': 2.5}, {'damper': 'pma', 'cost': 11}]))
+    text = write_report(res, tmp_path).read_text()
+    assert read_csv(tmp_path / 'damper_choice.csv') == [{'damper': 'tcp', 'cost': '2.5'},
+                                                       {'damper': 'pma', 'cost': '11'}]
+    section = text.split('## Which damper to build\n\nCheapest first.\n\n')[1].split('\n\n')[0]
+    assert section.splitlines() == ['| damper | cost |', '|---|---|', '| tcp | 2.5 |',
+                                    '| pma | 11 |']
+    assert rewrite_report(tmp_path, cfg).read_text().split('\n', 3)[3] == text.split('\n', 3)[3]

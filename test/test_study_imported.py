@@ -86,6 +86,13 @@ def test_short_study_on_the_exported_own_model_gives_the_same_tables(tmp_path, e
     assert main(['--config', str(config), '--fe-model', str(exported), '--analytic-only',
                  '--out', str(imported)]) == 0
     _compare(own, imported, rtol=1e-6)
+    # the report is made from the tables alone: made again, it is the same
+    first = (imported / 'report.md').read_text().splitlines()
+    assert main(['report', '--out', str(imported)]) == 0
+    again = (imported / 'report.md').read_text().splitlines()
+    assert [line for line in again if not line.startswith('Generated')] == [
+        line for line in first if not line.startswith('Generated')]
+    assert '## Damping per mode' in again and '![' in ''.join(again)
     positions = {r['position'] for r in _rows(imported, 'summary')}
     assert positions == {'own_p1'}            # the model is named after its file
     assert (imported / 'models' / 'plant_own_p1.npz').is_file()

@@ -29,6 +29,7 @@ from __future__ import annotations
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, fields
 import math
+from pathlib import Path
 import signal
 import time
 from typing import Any, Callable, Mapping
@@ -82,20 +83,22 @@ class Graph:
 
     def add(self, stage: str, what: str, function: Callable[..., Any], *args: Any) -> Delayed:
         """The call ``function(*args)`` (args may hold results of other stages)."""
+        return self._call(stage, what, function, args, None)
+
+    def run(self, stage: str, what: str, function: Callable[..., Any], *args: Any) -> Delayed:
+        """A testbed run: on the lane (after the previous run) if there is one."""
+        self._last_run = self._call(stage, what, function, args,
+                                    self._last_run if self.lane else None)
+        return self._last_run
+
+    def _call(self, stage: str, what: str, function: Callable[..., Any], args: tuple[Any, ...],
+              after: Delayed | None) -> Delayed:
         key = f'{stage}: {what}'
         if key in self.stage_of:
             raise ValueError(f'two stages are named {key!r}')
         self.stage_of[key] = stage
-        call: Delayed = delayed(_stage, pure=False)(function, *args, dask_key_name=key)
-        return call
-
-    def run(self, stage: str, what: str, function: Callable[..., Any], *args: Any) -> Delayed:
-        """A testbed run: on the lane (after the previous run) if there is one."""
-        key = f'{stage}: {what}'
-        self.stage_of[key] = stage
-        call: Delayed = delayed(_stage, pure=False)(function, *args, dask_key_name=key,
-                                                    after=self._last_run if self.lane else None)
-        self._last_run = call
+        call: Delayed = delayed(_stage, pure=False)(function, *args, after=after,
+                                                    dask_key_name=key)
         return call
 
 
@@ -119,8 +122,8 @@ class StudyGraph:
         return {f.name: getattr(self, f.name) for f in fields(self) if f.name != 'graph'}
 
 
-def study_graph(cfg: StudyConfig, out_dir: Any, freq: FloatArray, runs: bool = True,
-                lane: bool = False, fe_model: Any = None) -> StudyGraph:
+def study_graph(cfg: StudyConfig, out_dir: Path, freq: FloatArray, runs: bool = True,
+                lane: bool = False, fe_model: Path | None = None) -> StudyGraph:
     """
     Every stage of the study and what it needs.
 
@@ -259,7 +262,7 @@ def compute(outputs: Any, stage_of: dict[str, str], jobs: int,
 
 
 def run_study(res: StudyResults, jobs: int, say: Callable[[str], None], runs: bool = True,
-              lane: bool = False, fe_model: Any = None) -> Progress:
+              lane: bool = False, fe_model: Path | None = None) -> Progress:
     """Every stage of the study, ``jobs`` at a time; ``res`` filled in the study's order."""
     g = study_graph(res.cfg, res.out_dir, res.freq, runs, lane, fe_model)
     values, progress = compute(g.outputs(), g.graph.stage_of, jobs, say)
