@@ -12,7 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 import math
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -292,7 +292,3 @@ def as_row(record: Any, drop_none: bool = True) -> Row:
     """A record's fields as a table row (fields that are None left out)."""
     return {k: v for k, v in vars(record).items() if not (drop_none and v is None)}
 
-
-def in_order(table: Mapping[Any, Any], keys: Sequence[Any]) -> dict[Any, Any]:
-    """``table`` with its entries in the order of ``keys`` (keys it lacks left out)."""
-    return {k: table[k] for k in keys if k in table}
