@@ -2,13 +2,14 @@
 Parameters of the damper, PMA and example-controller nodes, and the laws they configure.
 
 The one home of the laws' defaults, ranges and construction: the nodes
-(:mod:`pentapod_damper.nodes`) declare their parameters from these tables and build their laws
-with :func:`damper_laws` and :func:`pma_law`; the offline equivalents of a scenario
-(:mod:`pentapod_damper.scenario_laws`, the study) call the same functions with the scenario
-file's sections. ROS-free.
+(:mod:`pentapod_damper.nodes`) declare their parameters from these classes and build their laws
+with :meth:`DamperParams.laws` and :meth:`PmaParams.law`; the offline equivalents of a scenario
+(:mod:`pentapod_damper.scenario_laws`, the study) build the same from the scenario file's
+sections (:func:`damper_laws`, :func:`pma_law`). ROS-free.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any, Mapping
 
 from pentapod_damper.laws import (
@@ -21,131 +22,142 @@ from pentapod_damper.laws import (
     ViscousDamper,
 )
 from pentapod_sim.errors import ConfigError
-from pentapod_sim.nodes.parameter_tables import SAMPLE_RATE, SOURCE_PARAMS
-from pentapod_sim.parameters import Param, ParameterTable, Values
+from pentapod_sim.parameters import NodeParams, param, Sampled, SourceParams
 
 #: Upper bound of the damper gains.
 MAX_GAIN = 1.0e9
 
-#: Parameters of the actuator/sensor dynamics of a law (:class:`pentapod_damper.laws.Dynamics`).
-DYNAMICS_PARAMS = (
-    Param('filter_order', 'int', 0, 'low-pass between velocity sensor and actuator force: 0 = '
-          'none, 1 = first order, 2 = second order', '', 0, 2),
-    Param('bandwidth_hz', 'float', 0.0, 'corner frequency of the low-pass (below Nyquist)',
-          'Hz', 0.0, 1.0e6),
-    Param('filter_damping', 'float', 0.7071067811865476, 'damping ratio of the second-order '
-          'low-pass', '', 1.0e-3, 10.0),
-    Param('filter_hold', 'str', 'foh', "input assumption of the filter's exact discretisation: "
-          'foh = sensor signal linear between samples, zoh = held over each step (one more '
-          'sample of lag)', choices=('foh', 'zoh')),
-    Param('delay_steps', 'int', 0, 'pure delay of the force in samples: 0 = sampled feedback '
-          'with zero-order hold (u_k answers y_k), 1 = one-sample computational delay',
-          'samples', 0, 1000),
-)
 
-DAMPER = ParameterTable('damper', [
-    SAMPLE_RATE,
-    Param('bending_struts', 'integer[]', [], 'struts (1..5) with rotational bending dampers on '
-          'both cardan axes (end-rotation difference); [] or [0] = none'),
-    Param('bending_gain', 'float', 1000.0, 'bending damping b of each strut and cardan axis',
-          'N m s/rad', 0.0, MAX_GAIN, read_only=False),
-    Param('chord_struts', 'integer[]', [], 'struts (1..5) with translational chord dampers '
-          'along e2 and e3 at the chord point (config/reduction.yaml chord_position, default '
-          'mid-span) against the chord between the joints; [] or [0] = none'),
-    Param('chord_gain', 'float', 20000.0, 'chord damping b of each strut and direction',
-          'N s/m', 0.0, MAX_GAIN, read_only=False),
-    Param('axial_struts', 'integer[]', [], 'struts (1..5) with axial dampers between strut and '
-          'BP ring'),
-    Param('axial_gain', 'float', 50000.0, 'axial damping b', 'N s/m', 0.0, MAX_GAIN,
-          read_only=False),
-    Param('tcp_directions', 'string[]', [], 'directions (x, y, z) of dampers from the TCP to '
-          'ground'),
-    Param('tcp_gain', 'float', 20000.0, 'TCP damping b', 'N s/m', 0.0, MAX_GAIN,
-          read_only=False),
-    *DYNAMICS_PARAMS,
-    *SOURCE_PARAMS,
-], summary='viscous velocity feedback u = -b * rate on struts and the TCP, optionally through '
-           'a low-pass and a delay (the same for every damper of the node); the gains may be '
-           'changed while running.')
+@dataclass(frozen=True)
+class DynamicsParams(NodeParams):
+    """The actuator/sensor dynamics of a law (:class:`pentapod_damper.laws.Dynamics`)."""
 
-PMA = ParameterTable('pma', [
-    SAMPLE_RATE,
-    Param('directions', 'string[]', ['x'], 'actuated axes (x, y, z)'),
-    Param('proof_mass', 'float', 5.0, 'proof mass m_a', 'kg', 1e-6, 1e6),
-    Param('gain', 'float', 4000.0, 'velocity gain g; damping b = m_a g [N s/m]', '1/s',
-          0.0, 1e9),
-    Param('highpass_hz', 'float', 0.0, 'corner of a 2nd-order Butterworth high-pass on the '
-          'velocity; 0 = none', 'Hz', 0.0, 1e5),
-    Param('stroke_limit', 'float', 0.0, 'max |stroke| of the proof mass; 0 = unlimited', 'm',
-          0.0, 10.0),
-    Param('force_limit', 'float', 0.0, 'max |force| commanded; 0 = unlimited', 'N', 0.0, 1e9),
-    *SOURCE_PARAMS,
-], summary='ideal proof-mass actuator on the working platform (damping b = m_a g).')
+    filter_order: int = param(0, 'low-pass between velocity sensor and actuator force: 0 = '
+                              'none, 1 = first order, 2 = second order', bounds=(0, 2))
+    bandwidth_hz: float = param(0.0, 'corner frequency of the low-pass (below Nyquist)', 'Hz',
+                                bounds=(0.0, 1.0e6))
+    filter_damping: float = param(0.7071067811865476, 'damping ratio of the second-order '
+                                  'low-pass', bounds=(1.0e-3, 10.0))
+    filter_hold: str = param('foh', "input assumption of the filter's exact discretisation: "
+                             'foh = sensor signal linear between samples, zoh = held over each '
+                             'step (one more sample of lag)', choices=('foh', 'zoh'))
+    delay_steps: int = param(0, 'pure delay of the force in samples: 0 = sampled feedback with '
+                             'zero-order hold (u_k answers y_k), 1 = one-sample computational '
+                             'delay', 'samples', bounds=(0, 1000))
 
-EXAMPLE_CONTROLLER = ParameterTable('example_controller', [
-    Param('gain', 'float', 1000.0, 'damping of the TCP in x', 'N s/m', 0.0, MAX_GAIN),
-    Param('source_name', 'str', 'example', 'answers on /pentapod/forces/<source_name>'),
-], summary='template of a controller: a TCP damper in x, u = -gain * v_x.')
+    def dynamics(self) -> Dynamics:
+        """The law's dynamics (ConfigError for a combination the law refuses)."""
+        return Dynamics(self.filter_order, self.bandwidth_hz, self.filter_damping,
+                        self.delay_steps, self.filter_hold)
 
 
-def _values(table: ParameterTable, params: Mapping[str, Any] | Values, source: str) -> Values:
-    return params if isinstance(params, Values) else table.values(params, source)
+@dataclass(frozen=True)
+class DamperParams(Sampled, DynamicsParams, SourceParams):
+    """
+    Viscous velocity feedback u = -b * rate on struts and the TCP.
+
+    Optionally through a low-pass and a delay (the same for every damper of the node); the
+    gains may be changed while running.
+    """
+
+    bending_struts: tuple[int, ...] = param((), 'struts (1..5) with rotational bending dampers '
+                                            'on both cardan axes (end-rotation difference); [] '
+                                            'or [0] = none')
+    bending_gain: float = param(1000.0, 'bending damping b of each strut and cardan axis',
+                                'N m s/rad', bounds=(0.0, MAX_GAIN), read_only=False)
+    chord_struts: tuple[int, ...] = param((), 'struts (1..5) with translational chord dampers '
+                                          'along e2 and e3 at the chord point '
+                                          '(config/reduction.yaml chord_position, default '
+                                          'mid-span) against the chord between the joints; [] '
+                                          'or [0] = none')
+    chord_gain: float = param(20000.0, 'chord damping b of each strut and direction', 'N s/m',
+                              bounds=(0.0, MAX_GAIN), read_only=False)
+    axial_struts: tuple[int, ...] = param((), 'struts (1..5) with axial dampers between strut '
+                                          'and BP ring')
+    axial_gain: float = param(50000.0, 'axial damping b', 'N s/m', bounds=(0.0, MAX_GAIN),
+                              read_only=False)
+    tcp_directions: tuple[str, ...] = param((), 'directions (x, y, z) of dampers from the TCP '
+                                            'to ground')
+    tcp_gain: float = param(20000.0, 'TCP damping b', 'N s/m', bounds=(0.0, MAX_GAIN),
+                            read_only=False)
+
+    def laws(self, source: str = '', dt: float | None = None) -> dict[str, ViscousDamper]:
+        """
+        The viscous dampers of the node, keyed by the name of their gain parameter.
+
+        ``bending_gain``, ``chord_gain``, ``axial_gain``, ``tcp_gain`` -> law, for the dampers
+        configured, in this order (the order of the node's actuator ports); their dynamics
+        are discretised with ``dt`` [s] (default :attr:`dt`). ConfigError (naming ``source``)
+        for dynamics the laws refuse.
+        """
+        try:
+            dyn = self.dynamics()
+        except ConfigError as err:
+            raise ConfigError(f'{source}: {err}' if source else str(err)) from None
+        step = self.dt if dt is None else dt
+        laws = {}
+        if self.bending_struts:
+            laws['bending_gain'] = strut_bending_damper(list(self.bending_struts),
+                                                        self.bending_gain, dyn, step)
+        if self.chord_struts:
+            laws['chord_gain'] = chord_damper(list(self.chord_struts), self.chord_gain, dyn,
+                                              step)
+        if self.axial_struts:
+            laws['axial_gain'] = strut_axial_damper(list(self.axial_struts), self.axial_gain,
+                                                    dyn, step)
+        if self.tcp_directions:
+            laws['tcp_gain'] = tcp_damper(list(self.tcp_directions), self.tcp_gain, dyn, step)
+        return laws
 
 
-def dynamics(params: Mapping[str, Any] | Values, source: str = '') -> Dynamics:
-    """The actuator/sensor dynamics of a damper node's parameters (:data:`DYNAMICS_PARAMS`)."""
-    v = _values(DAMPER, params, source)
-    try:
-        return Dynamics(v.filter_order, v.bandwidth_hz, v.filter_damping, v.delay_steps,
-                        v.filter_hold)
-    except ConfigError as err:
-        raise ConfigError(f'{source}: {err}' if source else str(err)) from None
+@dataclass(frozen=True)
+class PmaParams(Sampled, SourceParams):
+    """Ideal proof-mass actuator on the working platform (damping b = m_a g)."""
+
+    directions: tuple[str, ...] = param(('x',), 'actuated axes (x, y, z)')
+    proof_mass: float = param(5.0, 'proof mass m_a', 'kg', bounds=(1e-6, 1e6))
+    gain: float = param(4000.0, 'velocity gain g; damping b = m_a g [N s/m]', '1/s',
+                        bounds=(0.0, 1e9))
+    highpass_hz: float = param(0.0, 'corner of a 2nd-order Butterworth high-pass on the '
+                               'velocity; 0 = none', 'Hz', bounds=(0.0, 1e5))
+    stroke_limit: float = param(0.0, 'max |stroke| of the proof mass; 0 = unlimited', 'm',
+                                bounds=(0.0, 10.0))
+    force_limit: float = param(0.0, 'max |force| commanded; 0 = unlimited', 'N',
+                               bounds=(0.0, 1e9))
+
+    def law(self, dt: float | None = None) -> ProofMassActuator:
+        """The proof-mass actuator, integrating its proof mass with ``dt`` (default :attr:`dt`)."""
+        return ProofMassActuator(list(self.directions), self.proof_mass, self.gain,
+                                 self.dt if dt is None else dt,
+                                 highpass_hz=self.highpass_hz, stroke_limit=self.stroke_limit,
+                                 force_limit=self.force_limit)
 
 
-def damper_laws(params: Mapping[str, Any] | Values, source: str = '',
+@dataclass(frozen=True)
+class ExampleControllerParams(NodeParams):
+    """Template of a controller: a TCP damper in x, u = -gain * v_x."""
+
+    gain: float = param(1000.0, 'damping of the TCP in x', 'N s/m', bounds=(0.0, MAX_GAIN))
+    source_name: str = param('example', 'answers on /pentapod/forces/<source_name>')
+
+
+def damper_laws(params: Mapping[str, Any] | DamperParams, source: str = '',
                 dt: float | None = None) -> dict[str, ViscousDamper]:
     """
-    The viscous dampers of one damper node, keyed by the name of their gain parameter.
+    The viscous dampers of one damper node's parameters (:meth:`DamperParams.laws`).
 
-    Parameters
-    ----------
-    params : mapping or Values
-        The node's parameters (missing ones take the table's defaults); a mapping is checked
-        against :data:`DAMPER` (ConfigError naming ``source``).
-    source : str
-        Where a mapping comes from, for error messages.
-    dt : float, optional
-        Sample time [s] of the laws' dynamics; default ``1 / sample_rate``.
-
-    Returns
-    -------
-    dict
-        ``bending_gain``, ``chord_gain``, ``axial_gain``, ``tcp_gain`` -> law, for the dampers
-        configured, in this order (the order of the node's actuator ports).
+    ``params`` may be a section of a scenario file (checked, ConfigError naming ``source``);
+    ``dt`` [s], if given, replaces the one of its ``sample_rate``.
     """
-    v = _values(DAMPER, params, source)
-    dyn = dynamics(v, source)
-    dt = 1.0 / v.sample_rate if dt is None else dt
-    laws = {}
-    if v.bending_struts and v.bending_struts != [0]:
-        laws['bending_gain'] = strut_bending_damper(v.bending_struts, v.bending_gain, dyn, dt)
-    if v.chord_struts and v.chord_struts != [0]:
-        laws['chord_gain'] = chord_damper(v.chord_struts, v.chord_gain, dyn, dt)
-    if v.axial_struts and v.axial_struts != [0]:
-        laws['axial_gain'] = strut_axial_damper(v.axial_struts, v.axial_gain, dyn, dt)
-    if v.tcp_directions:
-        laws['tcp_gain'] = tcp_damper(v.tcp_directions, v.tcp_gain, dyn, dt)
-    return laws
+    return _typed(DamperParams, params, source).laws(source, dt)
 
 
-def pma_law(params: Mapping[str, Any] | Values, dt: float,
+def pma_law(params: Mapping[str, Any] | PmaParams, dt: float | None = None,
             source: str = '') -> ProofMassActuator:
-    """
-    The proof-mass actuator of one PMA node, integrating its proof mass with ``dt`` [s].
+    """The proof-mass actuator of one PMA node's parameters (:meth:`PmaParams.law`)."""
+    return _typed(PmaParams, params, source).law(dt)
 
-    Parameters as in :func:`damper_laws`, checked against :data:`PMA`.
-    """
-    v = _values(PMA, params, source)
-    return ProofMassActuator(v.directions, v.proof_mass, v.gain, dt,
-                             highpass_hz=v.highpass_hz, stroke_limit=v.stroke_limit,
-                             force_limit=v.force_limit)
+
+def _typed(cls: type, params: Any, source: str) -> Any:
+    """Typed parameters from a section of a scenario file (or as given)."""
+    return params if isinstance(params, cls) else cls.build(params, source or 'parameters')

@@ -17,20 +17,21 @@ from __future__ import annotations
 import numpy as np
 from rcl_interfaces.msg import SetParametersResult
 
-from pentapod_damper.node_parameters import DAMPER, damper_laws
+from pentapod_damper.node_parameters import DamperParams
 from pentapod_sim.errors import ConfigError
 from pentapod_sim.nodes.common import run_node
 from pentapod_sim.nodes.lockstep_source import LockstepSource
-from pentapod_sim.nodes.loop_check import parallel
-from pentapod_sim.sim.controllers import controller_of, DiscreteController
+from pentapod_sim.sim.controllers import controller_of, DiscreteController, parallel
 
 
 class DamperNode(LockstepSource):
     """Viscous dampers on selected struts and TCP directions."""
 
+    Params = DamperParams
+
     def __init__(self, **kwargs):
-        super().__init__('damper', DAMPER, **kwargs)
-        self.laws = damper_laws(self.params)
+        super().__init__('damper', **kwargs)
+        self.laws = self.params.laws()
         if not self.laws:
             raise ConfigError('damper node has no damper: set bending_struts, chord_struts, '
                               'axial_struts or tcp_directions')
@@ -72,7 +73,7 @@ class DamperNode(LockstepSource):
 
 def main(argv=None) -> int:
     """Entry point of ``ros2 run pentapod_testbed damper``."""
-    return run_node(DamperNode, argv, table=DAMPER)
+    return run_node(DamperNode, argv)
 
 
 if __name__ == '__main__':

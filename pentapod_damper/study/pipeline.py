@@ -17,7 +17,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from pentapod_damper.node_parameters import PMA
+from pentapod_damper.node_parameters import PmaParams
 from pentapod_damper.scenario_laws import continuous_dampers, scenario_laws
 from pentapod_damper.study.analytic import (
     continuous_frf,
@@ -101,12 +101,10 @@ def welch_freq(cfg: StudyConfig) -> FloatArray:
 
 
 def scenario_pma(scenario: str) -> PmaSpec | None:
-    """The proof-mass actuator of a scenario file (its ``pma*`` node), if any."""
-    for name, params in read_scenario(scenario).sections.items():
-        if name.startswith('pma'):
-            values = PMA.values(params, f'node {name!r}')     # the PMA node's defaults
-            return PmaSpec(float(values.proof_mass), float(values.gain),
-                           tuple(values.directions))
+    """The proof-mass actuator of a scenario file (its PMA node), if any."""
+    for node in read_scenario(scenario).of_kind('pma'):
+        values: PmaParams = node.params           # typed, with the PMA node's defaults
+        return PmaSpec(values.proof_mass, values.gain, values.directions)
     return None
 
 
