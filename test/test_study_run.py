@@ -62,7 +62,7 @@ def test_damping_identified_from_a_recorded_run_matches_the_sampled_loop_poles(t
     plant = demo_model(n_modes=5, f_min=25.0, f_max=180.0, zeta=0.002, input_scale=0.01,
                        seed=3)
     model_file = plant.save(tmp_path / 'plant.npz')
-    dt = 1.0 / cfg.sample_rate
+    dt = cfg.dt
     laws = scenario_laws(read_scenario('tcp_damping').sections, dt)
     rows = damping.scenario_rows(plant, 'demo', 'tcp_damping', dt)
     xx = [r for r in rows if r.direction == 'xx']

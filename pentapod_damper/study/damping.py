@@ -181,7 +181,7 @@ def rows(positions: Sequence[str], scenarios: Sequence[str], cache_dir: Path,
 
     The plants are built once and kept in ``cache_dir``.
     """
-    dt = 1.0 / load_study_config().sample_rate
+    dt = load_study_config().dt
     out = []
     for pos in positions:
         plant, _ = load_or_build_model(position=pos, cache_dir=cache_dir)

@@ -106,7 +106,7 @@ def rows(positions: Sequence[str], scenarios: Sequence[str], cache_dir: Path,
          candidate: Dynamics | None = None) -> list[DamperVariant]:
     """One row per (position, scenario, variant); plants and check models kept in cache_dir."""
     cfg = load_study_config()
-    dt = 1.0 / cfg.sample_rate
+    dt = cfg.dt
     band = (float(cfg.band[0]), float(cfg.f_max))
     d = cfg.direction
     out = []

@@ -96,7 +96,7 @@ def prepare_model(position: str, out_dir: Path, say: Callable[[str], None],
 
 def welch_freq(cfg: StudyConfig) -> FloatArray:
     """Frequency bins [Hz] of the measured FRFs (Welch segments of ``nperseg``), DC left out."""
-    freq = np.fft.rfftfreq(cfg.nperseg, 1.0 / cfg.sample_rate)
+    freq = np.fft.rfftfreq(cfg.nperseg, cfg.dt)
     return np.asarray(freq[(freq > 0) & (freq <= cfg.f_max)], dtype=np.float64)
 
 
@@ -121,7 +121,7 @@ def scenario_analytic(model: PositionModel, scenario: str, cfg: StudyConfig,
     unstable on the plant itself is refused whatever the policy.
     """
     d = cfg.direction
-    dt = 1.0 / cfg.sample_rate
+    dt = cfg.dt
     sections = read_scenario(scenario).sections
     laws = scenario_laws(sections, dt)
     dampers = continuous_dampers(laws)

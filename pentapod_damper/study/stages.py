@@ -44,7 +44,7 @@ def analyse_scenario(cfg: StudyConfig, freq: FloatArray, model: PositionModel, s
     scenario has a ``damping_run``, the modes that set its settling time.
     """
     ana = pipeline.scenario_analytic(model, scenario, cfg, freq)
-    dt = 1.0 / cfg.sample_rate
+    dt = cfg.dt
     poles = damping.loop_poles(model.plant, ana.laws, dt)
     ana.modes = damping.scenario_rows(model.plant, model.position, scenario, dt, laws=ana.laws,
                                       poles=poles)
@@ -80,8 +80,8 @@ def damping_run(cfg: StudyConfig, out_dir: Path, model: PositionModel,
     run = run_on_testbed(scn, pos, model.model_file, model.model_hash, cfg, out_dir,
                          kind='damping', exciter=exciter)
     ident = measured_damping.identify_run(run.bag, d, cfg.damping_band)
-    modes = measured_damping.compare(analytic.modes, ident, model.plant, analytic.laws,
-                                     1.0 / cfg.sample_rate, d, analytic.sampled)
+    modes = measured_damping.compare(analytic.modes, ident, model.plant, analytic.laws, cfg.dt,
+                                     d, analytic.sampled)
     with FIGURE_LOCK:
         paths = measured_damping.figures(ident, out_dir / 'figures', f'{pos}_{scn}')
     return DampingRun(run, int(exciter['settle_periods']), cfg.damping_period,
