@@ -26,7 +26,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rclpy.signals import SignalHandlerOptions
 from rclpy.utilities import remove_ros_args
 
-from pentapod_sim import interface, shutdown
+from pentapod_sim import exits, interface, shutdown
 from pentapod_sim.errors import ConfigError, RunError
 from pentapod_sim.nodes.testbed_node import usage
 from pentapod_sim.scenario import network
@@ -162,7 +162,9 @@ def run_node(factory: Callable[..., object], argv=None, run: Callable | None = N
 
     For a node class ``factory``, ``--help`` prints its usage and parameters and starts
     nothing. Returns 0 on a clean end,
-    1 after printing one ``error: ...`` line on a ConfigError/RunError, and 128 + the signal
+    1 after printing one ``error: ...`` line on a ConfigError/RunError (a RunError subclass
+    gives its own ``exit_code``: 3 a failed recording, 4 a stalled plant;
+    :mod:`pentapod_sim.exits`), and 128 + the signal
     number after a clean stop on SIGINT, SIGTERM or SIGHUP (:mod:`pentapod_sim.shutdown`),
     unless the node's ``stopped_after_run_end()`` says (and logs) that the plant's run had
     ended before the signal: a source stopped after the run it served is a clean end, 0
@@ -203,11 +205,13 @@ def run_node(factory: Callable[..., object], argv=None, run: Callable | None = N
         else:
             while rclpy.ok() and not shutdown.requested():
                 spinner.spin_once(timeout_sec=0.1)
+                if getattr(node, 'failure', None) is not None:     # TestbedNode.fail
+                    raise node.failure
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except (ConfigError, RunError, ValueError, KeyError) as err:
         print(f'error: {err}', file=sys.stderr)
-        code = 1
+        code = getattr(err, 'exit_code', exits.ERROR)     # pentapod_sim.exits
     finally:
         if node is not None:
             after_end = getattr(node, 'stopped_after_run_end', None)

@@ -163,35 +163,47 @@ class WriterCheck:
             A topic that allows one writer has two or more, or its writer changed, or DDS
             matched a second writer that the graph has not shown for :data:`GRAPH_LAG` s.
         """
-        now = time.monotonic()
-        self.next_check = now + self.period
-        present = {}
+        self.next_check = time.monotonic() + self.period
+        return {topic: self._check(topic) for topic in self.topics}
+
+    def check_each(self) -> dict[str, str]:
+        """Like :meth:`check`, but every topic: topic -> the refusal, for those refused."""
+        self.next_check = time.monotonic() + self.period
+        refused = {}
         for topic in self.topics:
-            writers = [Writer.of(i) for i in self.node.get_publishers_info_by_topic(topic)]
-            present[topic] = writers
-            seen = self.seen.setdefault(topic, {})
-            for w in writers:
-                if w.gid not in seen or (w.node and not seen[w.gid].node):
-                    seen[w.gid] = w
-            if topic in self.shared:
-                continue
-            if len(writers) > 1:
-                raise RunError(second_writer(topic, writers))
-            since = self.suspect.get(topic)
-            if since is not None and now - since > GRAPH_LAG:
-                raise RunError(f'{topic}: DDS matched a second writer ({self.refused[topic]} '
-                               'message(s) refused) that has not appeared in the ROS graph '
-                               f'within {GRAPH_LAG:g} s; known writer: '
-                               f'{writers_text(writers) or "none"}')
-            if not writers:
-                self.pinned.pop(topic, None)      # it left: a new writer may take its place
-                continue
-            pinned = self.pinned.setdefault(topic, writers[0])
-            if pinned.gid != writers[0].gid:
-                raise RunError(f'{topic}: its writer changed between two checks, from '
-                               f'{pinned.describe()} to {writers[0].describe()}; one writer '
-                               'per topic')
-        return present
+            try:
+                self._check(topic)
+            except RunError as err:
+                refused[topic] = str(err)
+        return refused
+
+    def _check(self, topic: str) -> list[Writer]:
+        """The writers of one topic in the graph (RunError: see :meth:`check`)."""
+        now = time.monotonic()
+        writers = [Writer.of(i) for i in self.node.get_publishers_info_by_topic(topic)]
+        seen = self.seen.setdefault(topic, {})
+        for w in writers:
+            if w.gid not in seen or (w.node and not seen[w.gid].node):
+                seen[w.gid] = w
+        if topic in self.shared:
+            return writers
+        if len(writers) > 1:
+            raise RunError(second_writer(topic, writers))
+        since = self.suspect.get(topic)
+        if since is not None and now - since > GRAPH_LAG:
+            raise RunError(f'{topic}: DDS matched a second writer ({self.refused[topic]} '
+                           'message(s) refused) that has not appeared in the ROS graph '
+                           f'within {GRAPH_LAG:g} s; known writer: '
+                           f'{writers_text(writers) or "none"}')
+        if not writers:
+            self.pinned.pop(topic, None)      # it left: a new writer may take its place
+            return writers
+        pinned = self.pinned.setdefault(topic, writers[0])
+        if pinned.gid != writers[0].gid:
+            raise RunError(f'{topic}: its writer changed between two checks, from '
+                           f'{pinned.describe()} to {writers[0].describe()}; one writer '
+                           'per topic')
+        return writers
 
     def foreign(self) -> dict[str, list[Writer]]:
         """Topics (allowing one writer) on which more than one writer was seen, with them all."""
