@@ -187,6 +187,7 @@ def run_node(factory: Callable[..., object], argv=None, run: Callable | None = N
     # would invalidate the context at once, so a node could neither finish its step nor
     # publish, write its files or wait for acknowledgements.
     shutdown.install()
+    shutdown.follow_ros2_run()          # SIGTERM to `ros2 run` reaches the node too
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     node = None
     code = 0
