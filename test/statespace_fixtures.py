@@ -80,7 +80,9 @@ def small_model(seed: int = 0, n_extra_nodes: int = 4) -> FEModel:
 def _with_gimbals(k: np.ndarray, m: np.ndarray, points: dict, frames: np.ndarray
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """
-    Five gimbal nodes appended: each hangs on its strut's ``at_bp`` node by a feed-drive link
+    Append five gimbal nodes with feed-drive links.
+
+    Each hangs on its strut's ``at_bp`` node by a feed-drive link
     (axial spring k_a along e1 and stiff lateral/rotational springs, the 'feed_drives' group)
     and on the model's first node by a spring; returns K, M and the feed-drive stiffness.
     """

@@ -15,8 +15,12 @@ from statespace_fixtures import small_model
 from pentapod_sim.fe.assembly import build_model
 from pentapod_sim.fe.machine_data import load_machine
 from pentapod_sim.plant import frf, ports, reduction
-from pentapod_sim.plant.build import from_modal_data, load_reduction_config, plant_from_fe
-from pentapod_sim.plant.build import reduce_plant
+from pentapod_sim.plant.build import (
+    from_modal_data,
+    load_reduction_config,
+    plant_from_fe,
+    reduce_plant,
+)
 
 INPUTS = ('tcp_force_x', 'strut1_drive_force', 'strut2_drive_force')
 OUTPUTS = ('strut1_force', 'strut1_drive_displacement', 'tcp_displacement_x')
@@ -58,7 +62,7 @@ def test_direct_matrix_and_modal_data_feed_through():
 
 def test_model_without_drive_links_names_what_is_missing():
     model = small_model(0)
-    with pytest.raises(KeyError, match="feed_drives"):
+    with pytest.raises(KeyError, match='feed_drives'):
         ports.port(model.points, model.strut_frames, 'strut4_force')
 
 

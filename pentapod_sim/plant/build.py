@@ -35,8 +35,8 @@ from pentapod_sim.plant.model import PlantModel
 from pentapod_sim.plant.ports import (
     check_names,
     direct_matrix,
-    INPUT_NAMES,
     input_matrix,
+    INPUT_NAMES,
     load_points,
     modal_points,
     output_matrices,

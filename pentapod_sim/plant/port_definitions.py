@@ -53,8 +53,10 @@ def drive_link_point(i: int) -> str:
 def _strut_terms(i: int, what: str, k: int, frames: npt.NDArray[np.float64]
                  ) -> tuple[_Term, ...]:
     """
-    Terms of the strut bending (what='bending', axis k=2/3), axial ('axial': strut against its
-    BP ring) or drive ('drive': strut against its gimbal, across the feed-drive link) ports.
+    Terms of strut i's bending, axial or drive ports.
+
+    Bending (what='bending', axis k=2/3), axial ('axial': strut against its BP ring) or
+    drive ('drive': strut against its gimbal, across the feed-drive link) ports.
     """
     if what == 'bending':
         e = frames[i - 1, k - 1]
