@@ -28,15 +28,27 @@ import scipy.sparse as sp
 
 from pentapod_sim.errors import PortError
 from pentapod_sim.plant.port_definitions import (  # noqa: F401 (re-exported)
-    AXES,
-    CHORD_POSITION,
+    AXES as AXES,
+)
+from pentapod_sim.plant.port_definitions import (
+    CHORD_POSITION as CHORD_POSITION,
+)
+from pentapod_sim.plant.port_definitions import (
     COLLOCATED,
     definitions,
     drive_link_point,
-    INPUT_NAMES,
-    KINDS,
-    N_STRUTS,
-    OUTPUT_NAMES,
+)
+from pentapod_sim.plant.port_definitions import (
+    INPUT_NAMES as INPUT_NAMES,
+)
+from pentapod_sim.plant.port_definitions import (
+    KINDS as KINDS,
+)
+from pentapod_sim.plant.port_definitions import (
+    N_STRUTS as N_STRUTS,
+)
+from pentapod_sim.plant.port_definitions import (
+    OUTPUT_NAMES as OUTPUT_NAMES,
 )
 
 _COLLOCATED = COLLOCATED

@@ -29,7 +29,7 @@ frequencies in Hz at the interfaces, rad/s inside.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Sequence
+from typing import Any, Sequence
 
 import numpy as np
 import numpy.typing as npt
@@ -113,6 +113,7 @@ class Dynamics:
     def continuous(self) -> Matrices:
         """Continuous state space (a, b, c, d) of the low-pass of one channel (no delay)."""
         w = 2 * np.pi * self.bandwidth_hz
+        cont: tuple[Any, ...]
         if self.order == 1:
             cont = ([[-w]], [[w]], [[1.0]], [[0.0]])
         elif self.order == 2:
@@ -211,8 +212,9 @@ def per_channel(sensor_ports: Sequence[str], actuator_ports: Sequence[str], siso
     n = len(actuator_ports)
     eye = np.eye(n)
     g = np.diag(np.broadcast_to(np.asarray(gains, float), (n,)))
-    return DiscreteController(sensor_ports, actuator_ports, np.kron(eye, a), np.kron(eye, b),
-                              g @ np.kron(eye, c), g * d[0, 0])
+    return DiscreteController(sensor_ports, actuator_ports, np.asarray(np.kron(eye, a), float),
+                              np.asarray(np.kron(eye, b), float), g @ np.kron(eye, c),
+                              g * d[0, 0])
 
 
 @dataclass(frozen=True)
@@ -267,7 +269,8 @@ def _gains(value: float | Sequence[float], n: int, name: str) -> tuple[float, ..
     return tuple(float(g) for g in gains)
 
 
-def iff(force_ports: Sequence[str], actuator_ports: Sequence[str], gain: float,
+def iff(force_ports: Sequence[str], actuator_ports: Sequence[str],
+        gain: float | Sequence[float],
         omega_i: float = 0.0, dynamics: Dynamics = Dynamics()) -> LinearLaw:
     """
     Integral force feedback ``u = -g / (s + omega_i) F``.
@@ -282,8 +285,8 @@ def iff(force_ports: Sequence[str], actuator_ports: Sequence[str], gain: float,
                      {'gain_per_s': float(np.max(gain)), 'omega_i_rad_s': float(omega_i)})
 
 
-def band_pass(velocity_ports: Sequence[str], actuator_ports: Sequence[str], gain: float,
-              highpass_hz: float, lowpass_hz: float,
+def band_pass(velocity_ports: Sequence[str], actuator_ports: Sequence[str],
+              gain: float | Sequence[float], highpass_hz: float, lowpass_hz: float,
               dynamics: Dynamics = Dynamics()) -> LinearLaw:
     """
     Relative velocity feedback through a first-order band-pass.
@@ -320,8 +323,9 @@ def lag_displacement(displacement_ports: Sequence[str], actuator_ports: Sequence
                      {'stiffness': float(np.max(stiffness)), 'corner_hz': float(corner_hz)})
 
 
-def ppf(displacement_ports: Sequence[str], actuator_ports: Sequence[str], gain: float,
-        frequency_hz: float, damping: float, dynamics: Dynamics = Dynamics()) -> LinearLaw:
+def ppf(displacement_ports: Sequence[str], actuator_ports: Sequence[str],
+        gain: float | Sequence[float], frequency_hz: float, damping: float,
+        dynamics: Dynamics = Dynamics()) -> LinearLaw:
     """
     Positive position feedback ``u = +g w_f^2 / (s^2 + 2 zeta_f w_f s + w_f^2) y`` on one mode.
 

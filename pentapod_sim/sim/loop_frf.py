@@ -15,7 +15,7 @@ Units: as the plant ports; frequencies [Hz].
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Sequence
+from typing import Callable, Protocol, Sequence
 
 import numpy as np
 import numpy.typing as npt
@@ -23,8 +23,27 @@ import scipy.linalg as sla
 
 from pentapod_sim.errors import ConfigError
 from pentapod_sim.plant.frf_peaks import maximise_near_poles, Peak
-from pentapod_sim.plant.model import PlantModel
-from pentapod_sim.sim.controllers import DiscreteController, loop_system
+from pentapod_sim.sim.controllers import DiscreteController, loop_system, LoopSystem
+
+Matrices4 = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+
+
+class LinearPlant(Protocol):
+    """What a loop needs of a plant: port names and its continuous and ZOH matrices."""
+
+    @property
+    def input_names(self) -> list[str]:
+        """Input port names."""
+
+    @property
+    def output_names(self) -> list[str]:
+        """Output port names."""
+
+    def state_matrices(self) -> Matrices4:
+        """Continuous A, B, C, D."""
+
+    def discrete_matrices(self, dt: float) -> Matrices4:
+        """Exact zero-order-hold A_d, B_d, C, D at ``dt`` [s]."""
 
 #: Largest relative error of the pole-residue resolvent at the test points (a closed loop
 #: with clusters of nearly equal poles, e.g. one filter on ten channels, has ill-conditioned
@@ -92,8 +111,8 @@ def band_grid(poles: npt.ArrayLike, f_lo: float, f_hi: float,
     return np.unique(grid)
 
 
-def band_mean_square(frf, poles: npt.ArrayLike, f_lo: float, f_hi: float,
-                     spacing_hz: float = 0.1) -> float:
+def band_mean_square(frf: Callable[[np.ndarray], np.ndarray], poles: npt.ArrayLike,
+                     f_lo: float, f_hi: float, spacing_hz: float = 0.1) -> float:
     """Mean of ``|frf(f)|^2`` over [f_lo, f_hi] Hz on :func:`band_grid` (trapezoids)."""
     grid = band_grid(poles, f_lo, f_hi, spacing_hz)
     mag2 = np.abs(frf(grid)) ** 2
@@ -106,15 +125,16 @@ class SampledLoop:
 
     Parameters
     ----------
-    plant : PlantModel
-        Continuous modal plant, discretised with zero-order hold at ``dt``.
+    plant : LinearPlant
+        A modal plant (:class:`~pentapod_sim.plant.model.PlantModel`) or one with drives
+        (:class:`~pentapod_sim.plant.drives.DrivenPlant`), discretised exactly at ``dt``.
     controllers : sequence of DiscreteController
         The laws at ``dt`` (empty: the open loop).
     dt : float
         Sample time [s].
     """
 
-    def __init__(self, plant: PlantModel, controllers: Sequence[DiscreteController],
+    def __init__(self, plant: LinearPlant, controllers: Sequence[DiscreteController],
                  dt: float) -> None:
         if not np.isfinite(dt) or dt <= 0:
             raise ConfigError(f'sample time dt must be > 0 s, got {dt!r}')
@@ -167,7 +187,8 @@ class SampledLoop:
         return loop_static(self.plant, self.system, self.d, output, input_)
 
 
-def loop_static(plant, system, d: np.ndarray, output: str, input_: str) -> float:
+def loop_static(plant: LinearPlant, system: LoopSystem, d: np.ndarray, output: str,
+                input_: str) -> float:
     """``H(z = 1)`` of a :func:`~pentapod_sim.sim.controllers.loop_system` (one solve)."""
     j = plant.input_names.index(input_)
     o = plant.output_names.index(output)
@@ -178,15 +199,20 @@ def loop_static(plant, system, d: np.ndarray, output: str, input_: str) -> float
     return float(value)
 
 
-def static_gain(plant, controllers: Sequence[DiscreteController], dt: float, output: str,
-                input_: str) -> float:
+def static_gain(plant: LinearPlant, controllers: Sequence[DiscreteController], dt: float,
+                output: str, input_: str) -> float:
     """Static gain of the sampled loop of ``plant`` and ``controllers`` (no decomposition)."""
     a, b, c, d = plant.discrete_matrices(dt)
     system = loop_system(a, b, c, d, plant.input_names, plant.output_names, list(controllers))
     return loop_static(plant, system, d, output, input_)
 
 
-def modal_form(a: np.ndarray, zero_tol: float = 1e-10):
+Resolvent = tuple[np.ndarray, Callable[[np.ndarray], np.ndarray],
+                  Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
+                  Callable[[np.ndarray, np.ndarray], np.ndarray]]
+
+
+def modal_form(a: np.ndarray, zero_tol: float = 1e-10) -> Resolvent:
     """
     Eigenvalues of ``a`` and the maps of its resolvent, robust to the delay lines' Jordan chains.
 
