@@ -26,6 +26,7 @@ from typing import Callable
 import numpy as np
 import scipy.sparse as sp
 
+from pentapod_sim.errors import ConfigError
 from pentapod_sim.fe.assembly import build_model
 from pentapod_sim.fe.beam import rhs_section
 from pentapod_sim.fe.geometry import layout_from_params, solve_pose
@@ -36,7 +37,7 @@ from pentapod_sim.modes.solver import solve_modes
 from pentapod_sim.plant.build import keep_by_relevance, plant_from_fe, reduce_plant
 from pentapod_sim.plant.check_model import check_f_max, load_or_build_check_model
 from pentapod_sim.plant.config import load_reduction_config, ReductionConfig, relevance_rule
-from pentapod_sim.plant.drives import DriveParams, load_drives
+from pentapod_sim.plant.drives import DrivenPlant, DriveParams, load_drives
 from pentapod_sim.plant.model import PlantModel
 from pentapod_sim.plant.ports import collocated_output
 from pentapod_sim.sim.law_families import StrutStiffness
@@ -67,6 +68,19 @@ class DesignModel:
     stiffness: StrutStiffness
     energy: dict[str, np.ndarray] = field(default_factory=dict)
     energy_freq_hz: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    #: The models with the drives' rotors, built once per model (key: '', corner, 'check'):
+    #: the check model's exact discretisation is an eigenvalue problem of thousands of states.
+    driven: dict[str, DrivenPlant] = field(default_factory=dict, repr=False)
+
+    def with_drives(self, key: str) -> DrivenPlant:
+        """The design plant (''), a corner or the check model ('check') with the drives."""
+        if key not in self.driven:
+            modal = (self.check if key == 'check' else self.corners[key] if key
+                     else self.plant)
+            if modal is None:
+                raise ConfigError(f'{self.position}: no check model was built')
+            self.driven[key] = DrivenPlant(modal, self.drives)
+        return self.driven[key]
 
 
 def design_plant(fe: FEModel, cfg: ReductionConfig) -> PlantModel:

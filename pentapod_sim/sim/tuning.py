@@ -33,7 +33,6 @@ import numpy as np
 from scipy.optimize import minimize
 
 from pentapod_sim.errors import ConfigError
-from pentapod_sim.plant.drives import DrivenPlant
 from pentapod_sim.sim.controllers import DiscreteController, loop_system
 from pentapod_sim.sim.design_models import DesignModel
 from pentapod_sim.sim.drives import FeedDrives
@@ -148,12 +147,14 @@ class Judge:
         """The plant a loop runs on: nominal, a corner or the check model, with drives or not."""
         key = 'check' if check else (corner or '')
         if key not in self._machines:
-            modal = (self.model.check if check else
-                     self.model.corners[corner] if corner else self.model.plant)
-            if modal is None:
-                raise ConfigError(f'{self.model.position}: no check model was built')
-            self._machines[key] = (DrivenPlant(modal, self.model.drives)
-                                   if self.settings.machine == 'drives' else modal)
+            if self.settings.machine == 'drives':
+                self._machines[key] = self.model.with_drives(key)
+            else:
+                modal = (self.model.check if check else
+                         self.model.corners[corner] if corner else self.model.plant)
+                if modal is None:
+                    raise ConfigError(f'{self.model.position}: no check model was built')
+                self._machines[key] = modal
         return self._machines[key]
 
     def _context(self, extra: int) -> dict[str, Any]:

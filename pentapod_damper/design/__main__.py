@@ -1,0 +1,112 @@
+"""
+"Which damper to build": every law at P1 and P2, tuned under the machine's limits.
+
+Builds each position's models (:func:`pentapod_sim.sim.design_models.load_design_model`),
+runs :func:`pentapod_damper.design.table.damper_table` and writes ``dampers.csv``,
+``dampers.md`` (tables, the issue's verdict and the strain-energy shares of the dominant
+modes), ``dampers_<position>_<machine>.png`` and ``tables.pkl`` (the records, to redraw) to
+``--out``::
+
+    python -m pentapod_damper.design [--positions P1,P2] [--machine locked|drives|both]
+                                     [--sample-rate 5000] [--quick] [--out out/design]
+
+The full run tunes six families at two positions with the check model (about an hour on two
+busy cores); ``--quick`` uses small grids and no check model (a few minutes).
+"""
+from __future__ import annotations
+
+import argparse
+import logging
+from pathlib import Path
+import pickle
+import sys
+
+from pentapod_damper.design.report import (
+    fill,
+    markdown,
+    markdown_records,
+    plot,
+    verdict,
+    write_csv,
+)
+from pentapod_damper.design.report import records as table_records
+from pentapod_damper.design.table import damper_table
+from pentapod_sim.cli import CommandParser, configure_logging, run_command
+from pentapod_sim.sim.design_models import load_design_model
+from pentapod_sim.sim.law_models import Dynamics
+from pentapod_sim.sim.tuning import TuneSettings
+
+LOG = logging.getLogger('design')
+
+
+def _energy_lines(table) -> list[str]:
+    lines = []
+    for mode, shares in table.energy.items():
+        text = ', '.join(f'{g} {v * 100:.0f} %' for g, v in shares.items() if v >= 0.005)
+        lines.append(f'- {table.position} {mode}: {text}')
+    return lines
+
+
+def run(args: argparse.Namespace) -> int:
+    """Build the tables and write them."""
+    machines = ('locked', 'drives') if args.machine == 'both' else (args.machine,)
+    tables = []
+    for position in [p for p in args.positions.split(',') if p]:
+        model = load_design_model(position, args.sample_rate, check=not args.quick,
+                                  progress=lambda msg: LOG.info('%s', msg))
+        for machine in machines:
+            settings = TuneSettings(sample_rate=args.sample_rate, machine=machine,
+                                    dynamics=Dynamics(delay_steps=args.delay),
+                                    grid_points=2 if args.quick else 3,
+                                    gain_points=4 if args.quick else 8,
+                                    refine_iterations=2 if args.quick else 25)
+            table = damper_table(model, settings, progress=lambda msg: LOG.info('%s', msg))
+            tables.append(table)
+            png = plot(table, args.out / f'dampers_{position}_{machine}.png')
+            print(f'wrote {png}')
+    text = ['# Which damper to build', '']
+    for table in tables:
+        text += [markdown(table), '']
+    records = [r for table in tables for r in table_records(table)]
+    text += ['## Verdict', '', verdict(records), '', '## Strain energy of the modes that '
+             'dominate the TCP (per stiffness group)', '']
+    for table in tables[::len(machines)]:
+        text += _energy_lines(table)
+    (args.out / 'dampers.md').write_text('\n'.join(text) + '\n')
+    with open(args.out / 'tables.pkl', 'wb') as stream:      # to redraw without recomputing
+        pickle.dump(tables, stream)
+    print(f'wrote {write_csv(tables, args.out / "dampers.csv")} and {args.out / "dampers.md"}')
+    print(verdict(records))
+    if args.docs:
+        path = Path(args.docs)
+        doc = fill(path.read_text(), 'dampers-table', markdown_records(records))
+        path.write_text(fill(doc, 'dampers-verdict', verdict(records)))
+        print(f'updated {path}')
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Command line of the damper table."""
+    parser = CommandParser(prog='python -m pentapod_damper.design', description=__doc__,
+                           formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument('--positions', default='P1,P2', help='comma-separated positions')
+    parser.add_argument('--machine', choices=('locked', 'drives', 'both'), default='locked',
+                        help='locked: the FE model as the study (drives infinitely stiff); '
+                             'drives: with the feed drives of config/drives.yaml; both')
+    parser.add_argument('--sample-rate', type=float, default=5000.0, metavar='HZ')
+    parser.add_argument('--delay', type=int, default=1, metavar='SAMPLES',
+                        help="the laws' computational delay (default 1)")
+    parser.add_argument('--quick', action='store_true',
+                        help='small grids and no check model (a smoke run)')
+    parser.add_argument('--out', type=Path, default=Path('out') / 'design')
+    parser.add_argument('--docs', default='', metavar='FILE',
+                        help='also rewrite the dampers-table and dampers-verdict blocks of FILE '
+                             '(docs/dampers.md)')
+    parser.add_argument('-v', '--verbose', action='store_true')
+    args = parser.parse_args(argv)
+    configure_logging(args.verbose)
+    return run_command('design', run, args)
+
+
+if __name__ == '__main__':
+    sys.exit(main())

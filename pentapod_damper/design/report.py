@@ -1,0 +1,185 @@
+"""
+The "which damper to build" tables as CSV, Markdown and figures, and the issue's verdict.
+
+Units: compliance um/N in the figures, ratios [-], forces N/N.
+"""
+from __future__ import annotations
+
+import csv
+import math
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from pentapod_damper.design.table import DamperRow, DamperTable
+from pentapod_sim.figures import save_figure
+
+#: The issue's target: TCP peak reduction of a strut-only law, and the static limit.
+TARGET_REDUCTION, STATIC_LIMIT = 3.0, 1.1
+COLUMNS = ('position', 'machine', 'law', 'sensors', 'actuators', 'gains', 'dynamics_included',
+           'peak_reduction', 'rms_reduction', 'peak_hz', 'static_ratio', 'lowband_ratio',
+           'check_margin', 'check_margin_extra_delay', 'effort_rms_n_per_n',
+           'struts12_share_peak', 'struts12_share_rms', 'feasible', 'strut_law', 'note',
+           'baseline_peak_um_per_n', 'baseline_peak_hz', 'direction', 'band_hz', 'sample_rate_hz',
+           'delay_steps', 'check_modes', 'check_f_max_hz')
+Record = dict[str, str]
+
+
+def _gains(row: DamperRow) -> str:
+    return '; '.join(f'{k} {v:.6g}' for k, v in row.gains.items()) or '-'
+
+
+def records(table: DamperTable) -> list[Record]:
+    """The table's rows as the text records of the CSV file (:data:`COLUMNS`)."""
+    s = table.settings
+    out = []
+    for r in table.rows:
+        values = [table.position, table.machine, r.law, r.sensors, r.actuators, _gains(r),
+                  r.dynamics_included, r.peak_reduction, r.rms_reduction, r.peak_hz,
+                  r.static_ratio, r.lowband_ratio, r.check_margin, r.check_margin_extra,
+                  r.effort_rms_per_n, r.share12_peak, r.share12_rms,
+                  r.feasible and r.stable_on_check, r.strut_law, r.note,
+                  table.baseline_peak * 1e6,
+                  table.baseline_peak_hz, s.direction, f'{s.band[0]:g}-{s.band[1]:g}',
+                  s.sample_rate, s.dynamics.delay_steps, table.check_modes,
+                  table.check_f_max_hz]
+        out.append({k: str(v) for k, v in zip(COLUMNS, values)})
+    return out
+
+
+def write_csv(tables: Sequence[DamperTable], path: str | Path) -> Path:
+    """One line per position, machine and law (:data:`COLUMNS`)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, 'w', newline='') as stream:
+        writer = csv.DictWriter(stream, COLUMNS)
+        writer.writeheader()
+        for t in tables:
+            writer.writerows(records(t))
+    return path
+
+
+def read_csv(path: str | Path) -> list[Record]:
+    """The records of a file :func:`write_csv` wrote."""
+    with open(path, newline='') as stream:
+        return list(csv.DictReader(stream))
+
+
+def _num(text: str, fmt: str = '.2f', scale: float = 1.0) -> str:
+    value = float(text)
+    return '-' if not math.isfinite(value) else format(value * scale, fmt)
+
+
+def markdown_records(rows: Sequence[Record]) -> str:
+    """Markdown tables of records (one per position and machine), with what they rest on."""
+    blocks: dict[tuple[str, str], list[Record]] = {}
+    for row in rows:
+        blocks.setdefault((row['position'], row['machine']), []).append(row)
+    text = []
+    for (position, machine), block in blocks.items():
+        h = block[0]
+        d = h['direction']
+        text += [f'**{position}, machine {machine}** (TCP {d}{d} in {h["band_hz"]} Hz: '
+                 f'baseline peak {_num(h["baseline_peak_um_per_n"], ".3g")} um/N at '
+                 f'{_num(h["baseline_peak_hz"], ".1f")} Hz; laws sampled at '
+                 f'{_num(h["sample_rate_hz"], "g")} Hz with {h["delay_steps"]} sample(s) of '
+                 f'delay; check model: {h["check_modes"]} modes below '
+                 f'{_num(h["check_f_max_hz"], "g")} Hz)', '',
+                 '| law | sensors / actuators | gains | own dynamics in the numbers | peak / '
+                 'RMS reduction | static (below f1/2) compliance | check margin (+1 sample) | '
+                 'force RMS [N/N] | struts 1+2 share peak / RMS | meets limits |',
+                 '|---|---|---|---|---|---|---|---|---|---|']
+        for r in block:
+            own = 'yes' if r['dynamics_included'] == 'True' else 'no (continuous, ideal)'
+            text.append(
+                f'| {r["law"]} | {r["sensors"]} / {r["actuators"]} | {r["gains"]} | {own} | '
+                f'{_num(r["peak_reduction"])} / {_num(r["rms_reduction"])} | '
+                f'x{_num(r["static_ratio"], ".3f")} (x{_num(r["lowband_ratio"])}) | '
+                f'{_num(r["check_margin"], ".1e")} ({_num(r["check_margin_extra_delay"], ".1e")})'
+                f' | {_num(r["effort_rms_n_per_n"], ".3g")} | '
+                f'{_num(r["struts12_share_peak"], ".0f", 100)} / '
+                f'{_num(r["struts12_share_rms"], ".0f", 100)} % | '
+                f'{"yes" if r["feasible"] == "True" else "no"} |')
+        text.append('')
+    return '\n'.join(text).rstrip() + '\n'
+
+
+def markdown(table: DamperTable) -> str:
+    """One position's table in Markdown (:func:`markdown_records` of its records)."""
+    return markdown_records(records(table))
+
+
+def best_strut_law(rows: Sequence[Record]) -> Record | None:
+    """The strut-only record with the largest peak reduction that meets every limit."""
+    ok = [r for r in rows if r['strut_law'] == 'True' and r['feasible'] == 'True'
+          and r['dynamics_included'] == 'True'
+          and float(r['static_ratio']) <= STATIC_LIMIT * (1 + 1e-9)]
+    return max(ok, key=lambda r: float(r['peak_reduction']), default=None)
+
+
+def verdict(rows: Sequence[Record]) -> str:
+    """The issue's done-when, position by position, in sentences (from the records)."""
+    out = []
+    blocks: dict[tuple[str, str], list[Record]] = {}
+    for row in rows:
+        blocks.setdefault((row['position'], row['machine']), []).append(row)
+    for (position, machine), block in blocks.items():
+        best = best_strut_law(block)
+        if best is None:
+            out.append(f'* {position} (machine {machine}): no strut-only law meets the limits.')
+            continue
+        reduction = float(best['peak_reduction'])
+        hit = 'reaches' if reduction >= TARGET_REDUCTION else 'misses'
+        out.append(
+            f'* {position} (machine {machine}): the best strut-only law, {best["law"]} '
+            f'({best["gains"]}), {hit} the {TARGET_REDUCTION:g}x target with {reduction:.2f}x '
+            f'(RMS {_num(best["rms_reduction"])}x) at static compliance '
+            f'x{_num(best["static_ratio"], ".3f")}, check-model margin '
+            f'{_num(best["check_margin"], ".1e")} and '
+            f'{_num(best["check_margin_extra_delay"], ".1e")} with one more sample of delay; '
+            f'struts 1+2 alone give '
+            f'{_num(best["struts12_share_peak"], ".0f", 100)} % of its peak and '
+            f'{_num(best["struts12_share_rms"], ".0f", 100)} % of its RMS improvement.')
+    return '\n'.join(out)
+
+
+def fill(text: str, name: str, block: str) -> str:
+    """``text`` with the lines between ``<!-- name:begin -->`` and its end set to ``block``."""
+    begin, end = f'<!-- {name}:begin -->\n', f'<!-- {name}:end -->'
+    head, found, rest = text.partition(begin)
+    if not found or end not in rest:
+        raise ValueError(f'no {begin.strip()} ... {end} block')
+    return head + begin + block.rstrip('\n') + '\n' + end + rest.split(end, 1)[1]
+
+
+def plot(table: DamperTable, path: str | Path) -> Path:
+    """|TCP FRF| of the baseline and every row, and the families' trade-off curves."""
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+    fig, (ax, bx) = plt.subplots(1, 2, figsize=(13, 5), gridspec_kw={'width_ratios': [3, 2]})
+    freq = table.frequencies_hz
+    for name, mag in table.magnitudes.items():
+        style = {'color': 'k', 'lw': 1.6} if name == 'baseline' else {'lw': 0.9}
+        ax.loglog(freq, np.asarray(mag) * 1e6, label=name, **style)
+    s = table.settings
+    ax.set_xlabel('frequency [Hz]')
+    ax.set_ylabel(f'|TCP {s.direction}{s.direction} compliance| [um/N]')
+    ax.set_title(f'{table.position}, machine {table.machine}: laws as tuned '
+                 f'({s.sample_rate:g} Hz, {s.dynamics.delay_steps} sample delay)')
+    ax.grid(True, which='both', alpha=0.3)
+    ax.legend(fontsize=7, ncol=2)
+    for name, points in table.trade_offs.items():
+        if points:
+            ratio, reduction = zip(*points)
+            bx.step(ratio, reduction, where='post', marker='o', ms=3, label=name)
+    bx.axvline(STATIC_LIMIT, color='k', ls='--', lw=0.8)
+    bx.axhline(TARGET_REDUCTION, color='grey', ls=':', lw=0.8)
+    bx.set_xscale('log')
+    bx.set_xlabel('static TCP compliance / machine without the law')
+    bx.set_ylabel('TCP peak reduction [x]')
+    bx.set_title('trade-off (robustly stable designs)')
+    bx.grid(True, which='both', alpha=0.3)
+    bx.legend(fontsize=7)
+    return save_figure(fig, path)

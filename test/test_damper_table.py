@@ -1,0 +1,107 @@
+"""
+The "which damper to build" table on a small FE model: every row measured like the others.
+
+A row's peak reduction is checked against the study's own sampled-loop FRF code, its check-
+model margins against the truncation check of :mod:`pentapod_sim.sim.stability`, and the
+table's files (CSV, Markdown, figure) against its rows.
+"""
+import numpy as np
+import pytest
+from statespace_fixtures import all_modes, small_model
+
+from pentapod_damper.design.report import (
+    markdown,
+    markdown_records,
+    plot,
+    read_csv,
+    verdict,
+    write_csv,
+)
+from pentapod_damper.design.rows import default_rows
+from pentapod_damper.design.table import damper_table
+from pentapod_damper.scenario_laws import scenario_laws
+from pentapod_damper.study.analytic import SampledPairFrf
+from pentapod_sim.plant import ports
+from pentapod_sim.plant.build import from_modal_data
+from pentapod_sim.plant.drives import DriveParams
+from pentapod_sim.plant.frf_peaks import maximise_near_poles
+from pentapod_sim.plant.ports import INPUT_NAMES, OUTPUT_NAMES
+from pentapod_sim.scenario.files import read_scenario
+from pentapod_sim.sim.controllers import controller_of
+from pentapod_sim.sim.design_models import collocated_statics, DesignModel
+from pentapod_sim.sim.law_families import StrutStiffness
+from pentapod_sim.sim.law_models import Dynamics
+from pentapod_sim.sim.stability import check_loop
+from pentapod_sim.sim.tuning import TuneSettings
+
+RATE = 5000.0
+
+
+@pytest.fixture(scope='module')
+def table():
+    fe = small_model(5)
+    omega, phi = all_modes(fe)
+    points = {**fe.points, **ports.load_points(fe.points, fe.stiffness_groups)}
+    everything = from_modal_data(omega / (2 * np.pi), ports.modal_points(points, phi),
+                                 fe.strut_frames, INPUT_NAMES, OUTPUT_NAMES, 0.001)
+    plant = from_modal_data(omega[:40] / (2 * np.pi), ports.modal_points(points, phi[:, :40]),
+                            fe.strut_frames, INPUT_NAMES, OUTPUT_NAMES, 0.001)
+    plant.meta['kept_modes'] = list(range(1, 41))
+    everything.meta['check_f_max_hz'] = float(omega.max() / (2 * np.pi))
+    stiffness = StrutStiffness(np.full((5, 2), 2e4), np.full((5, 2), 3e6),
+                               collocated_statics(plant))
+    model = DesignModel('small', plant, everything, {}, DriveParams(
+        20.0, 30.0, 0.02, 20.0, 1000.0, 1), stiffness,
+        energy={'frame': np.full(omega.size, 0.7), 'struts': np.full(omega.size, 0.3)},
+        energy_freq_hz=omega / (2 * np.pi))
+    settings = TuneSettings(sample_rate=RATE, grid_points=2, gain_points=3,
+                            refine_iterations=0, band=(1.0, 400.0))
+    return model, damper_table(model, settings)
+
+
+def test_every_row_and_what_it_includes(table):
+    _, tab = table
+    assert [r.law for r in tab.rows] == [s.name for s in default_rows()]
+    for row in tab.rows:
+        assert row.dynamics_included == (row.law != 'ideal viscous bending (paper)')
+        shares = np.array([row.share12_peak, row.share12_rms])
+        assert np.all(np.isnan(shares)) != row.strut_law
+
+
+def test_tcp_damper_row_against_the_studys_sampled_frf(table):
+    model, tab = table
+    laws = scenario_laws(read_scenario('tcp_damping').sections, 1 / RATE)
+    frf = SampledPairFrf(model.plant, laws, 1 / RATE, 'tcp_displacement_x', 'tcp_force_x')
+    peak = maximise_near_poles(lambda f: np.abs(frf(f)), frf.poles, 1.0, 400.0)
+    row = tab.row('TCP damper')
+    assert row.peak_reduction == pytest.approx(tab.baseline_peak / peak.value, rel=1e-6)
+
+
+def test_check_margins_are_the_truncation_checks(table):
+    model, tab = table
+    dt = 1 / RATE
+    laws = scenario_laws(read_scenario('strut_damping_all').sections, dt)
+    for extra, margin in ((0, 'check_margin'), (1, 'check_margin_extra')):
+        delayed = [type(law)(law.actuator_ports, law.gains,
+                             Dynamics(law.dynamics.order, law.dynamics.bandwidth_hz,
+                                      law.dynamics.damping, law.dynamics.delay_steps + extra,
+                                      law.dynamics.hold), dt) for law in laws]
+        check = check_loop(model.plant, model.check, [controller_of(law) for law in delayed],
+                           dt, 'warn')
+        row = tab.row('velocity feedback (buildable today)')
+        assert getattr(row, margin) == pytest.approx(check.check_margin, abs=1e-9)
+
+
+def test_files_say_what_the_rows_say(table, tmp_path):
+    _, tab = table
+    path = write_csv([tab], tmp_path / 'dampers.csv')
+    lines = read_csv(path)
+    assert [line['law'] for line in lines] == [r.law for r in tab.rows]
+    for line, row in zip(lines, tab.rows):
+        assert float(line['peak_reduction']) == pytest.approx(row.peak_reduction)
+    text = markdown(tab)
+    assert markdown_records(lines) == text
+    for row in tab.rows:
+        assert f'| {row.law} |' in text
+    assert 'small' in verdict(lines)
+    assert plot(tab, tmp_path / 'dampers.png').stat().st_size > 10_000
