@@ -11,6 +11,7 @@ import control
 import numpy as np
 import pytest
 
+from fixtures.demo_model import demo_model
 from pentapod_damper.laws import (
     band_pass_velocity,
     integral_force_feedback,
@@ -18,10 +19,14 @@ from pentapod_damper.laws import (
     positive_position_feedback,
     ProofMassActuator,
 )
+from pentapod_damper.node_parameters import damper_laws
+from pentapod_sim.errors import ConfigError
 from pentapod_sim.plant.model import PlantModel
 from pentapod_sim.sim import law_models as lm
+from pentapod_sim.sim.closed_loop import closed_loop_system, excitation_matrix, simulate
 from pentapod_sim.sim.loop_frf import SampledLoop
 from pentapod_sim.sim.loop_poles import continuous_loop_system
+from pentapod_sim.sim.stepping import DiscretePlant
 
 M, K_S, K_A = 50.0, 2.0e6, 6.0e6        # kg, N/m: structure spring, active strut's spring
 
@@ -127,7 +132,6 @@ def test_delay_output_is_z_to_the_minus_n():
 ], ids=['iff', 'lag', 'band-pass', 'ppf'])
 def test_sampled_loop_equals_the_loop_equation(make):
     """Closed loop of a random collocated plant: SampledLoop against the loop equation."""
-    from fixtures.demo_model import demo_model
     dt = 1 / 5000
     law = make(dt)
     plant = _with_force_ports(demo_model(8, inputs=['tcp_force_x'] + law.actuator_ports,
@@ -194,3 +198,36 @@ def test_pma_linear_model_is_what_it_steps():
     expected = control.forced_response(ctrl, U=v.T).outputs.T
     np.testing.assert_allclose([law.step(x) for x in v], expected, rtol=1e-10, atol=1e-12)
     assert ProofMassActuator(['x'], 5.0, 4000.0, dt, stroke_limit=1e-3).discrete_model() is None
+
+
+def test_damper_node_options_build_the_laws_and_run_them_offline_as_the_loop_says():
+    """A damper node's lag and band-pass options: the lockstep run equals the sampled loop."""
+    dt = 1 / 5000
+    laws = damper_laws({'lag_struts': [1], 'lag_stiffness': [2e4, 3e4], 'lag_corner_hz': 40.0,
+                        'lag_gain': 0.5, 'bandpass_struts': [2], 'bandpass_gain': 20.0,
+                        'delay_steps': 1, 'sample_rate': 5000.0}, 'node damper')
+    assert list(laws) == ['lag_gain', 'bandpass_gain']
+    inputs = ['tcp_force_x'] + [p for law in laws.values() for p in law.actuator_ports]
+    plant = DiscretePlant(demo_model(8, inputs=inputs, seed=7).discretize(dt))
+    force = np.zeros((400, 1))
+    force[0] = 100.0
+    run = simulate(plant, list(laws.values()), excitation_matrix(plant, ['tcp_force_x'], force,
+                                                                 400))
+    loop = closed_loop_system(plant, list(laws.values()))
+    z, expected = np.zeros(loop.a.shape[0]), []
+    e = excitation_matrix(plant, ['tcp_force_x'], force, 400)
+    for k in range(400):
+        expected.append(loop.c_y @ z)
+        z = loop.a @ z + loop.b @ e[k]
+    np.testing.assert_allclose(run.y, expected, rtol=1e-9, atol=1e-18)
+
+
+def test_damper_node_option_mistakes_are_named():
+    with pytest.raises(ConfigError, match='node d: lag_stiffness has 3 values'):
+        damper_laws({'lag_struts': [1, 2], 'lag_stiffness': [1.0, 2.0, 3.0]}, 'node d')
+    with pytest.raises(ConfigError, match='band-pass: high-pass corner 200.0 Hz must be below'):
+        damper_laws({'bandpass_struts': [1], 'bandpass_highpass_hz': 200.0}, 'node d')
+    laws = damper_laws({'iff_struts': [3], 'iff_gain': 0.0}, 'node d')
+    laws['iff_gain'].gains = np.full(1, 250.0)        # what the node does on `ros2 param set`
+    assert laws['iff_gain'].discrete_model().d == pytest.approx(
+        250.0 * integral_force_feedback([3], 1.0, 10.0, 1 / 5000.0).discrete_model().d)

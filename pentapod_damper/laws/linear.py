@@ -41,6 +41,10 @@ class SteppedLaw:
     """
     A :class:`~pentapod_sim.sim.law_models.LinearLaw` stepped at the sample time ``dt`` [s].
 
+    The law's efforts are scaled by one factor (:meth:`set_gain`, or the damper node setting
+    ``gains``): the IFF and band-pass laws are built per unit gain and scaled by theirs, the
+    lag and PPF laws carry their stiffness per port and a scale of 1.
+
     Attributes
     ----------
     law : LinearLaw
@@ -57,6 +61,16 @@ class SteppedLaw:
         self._model = law.discrete(self.dt)
         self._scale = 1.0
         self.reset()
+
+    @property
+    def gains(self) -> npt.NDArray[np.float64]:
+        """The scale of every channel (the damper node's gain parameter of the law)."""
+        return np.full(len(self.actuator_ports), self._scale)
+
+    @gains.setter
+    def gains(self, value: npt.ArrayLike) -> None:
+        """A new gain parameter (one value for every channel) scales the law from now on."""
+        self.set_gain(float(np.mean(np.asarray(value, dtype=float))))
 
     def reset(self) -> None:
         """Controller states to zero."""
@@ -107,9 +121,11 @@ def integral_force_feedback(struts: Sequence[int], gain: float, omega_i: float, 
     [rad/s].
     """
     struts = _struts(struts)
-    return SteppedLaw(iff([f'strut{i}_force' for i in struts],
-                          [f'strut{i}_drive_force' for i in struts], gain, omega_i,
-                          dynamics or Dynamics()), dt)
+    law = SteppedLaw(iff([f'strut{i}_force' for i in struts],
+                         [f'strut{i}_drive_force' for i in struts], 1.0, omega_i,
+                         dynamics or Dynamics()), dt)
+    law.set_gain(gain)          # the law per unit gain, scaled: the gain may change from 0
+    return law
 
 
 def band_pass_velocity(kind: str, struts: Sequence[int], gain: float, highpass_hz: float,
@@ -117,8 +133,10 @@ def band_pass_velocity(kind: str, struts: Sequence[int], gain: float, highpass_h
                        dynamics: Dynamics | None = None) -> SteppedLaw:
     """Relative velocity feedback through a band-pass on the strut ports of ``kind``."""
     ports = _strut_pairs(kind, struts)
-    return SteppedLaw(band_pass([collocated_output(p) for p in ports], ports, gain,
-                                highpass_hz, lowpass_hz, dynamics or Dynamics()), dt)
+    law = SteppedLaw(band_pass([collocated_output(p) for p in ports], ports, 1.0, highpass_hz,
+                               lowpass_hz, dynamics or Dynamics()), dt)
+    law.set_gain(gain)
+    return law
 
 
 def lag_displacement_feedback(kind: str, struts: Sequence[int],
