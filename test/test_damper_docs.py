@@ -11,18 +11,21 @@ import pytest
 
 from pentapod_damper.design.report import (
     best_strut_law,
+    energy_lines,
     fill,
     markdown_records,
     read_csv,
     verdict,
 )
 from pentapod_damper.design.rows import default_rows
+from pentapod_damper.design.scenarios import node_params, scenario_text, SCENARIOS
 from pentapod_sim.sim.design_models import load_design_model
 from pentapod_sim.sim.tuning import Judge, TuneSettings
 
 ROOT = Path(__file__).resolve().parents[1]
 DOC = ROOT / 'docs' / 'dampers.md'
 CSV = ROOT / 'docs' / 'results' / 'dampers.csv'
+ENERGY = ROOT / 'docs' / 'results' / 'dampers_energy.csv'
 
 
 def test_docs_table_and_verdict_are_the_csv():
@@ -30,7 +33,7 @@ def test_docs_table_and_verdict_are_the_csv():
     text = DOC.read_text()
     expected = fill(fill(text, 'dampers-table', markdown_records(records)), 'dampers-verdict',
                     verdict(records))
-    assert text == expected
+    assert text == fill(expected, 'dampers-energy', energy_lines(ENERGY))
 
 
 def _values(gains: str) -> dict[str, float]:
@@ -55,3 +58,19 @@ def test_best_strut_law_at_p1_is_what_the_code_computes(tmp_path):
     radii = judge.check(_values(best['gains']))
     assert 1 - radii[0] == pytest.approx(float(best['check_margin']), rel=1e-3)
     assert 1 - radii[1] == pytest.approx(float(best['check_margin_extra_delay']), rel=1e-3)
+
+
+def test_shipped_scenarios_are_the_tuned_records():
+    """config/scenarios/<law>_struts.yaml hold the gains the table tuned (at P1)."""
+    records = read_csv(CSV)
+    position = next(r['position'] for r in records)
+    model = load_design_model(position, check=False, corners=False)
+    written = 0
+    for record in records:
+        if record['law'] in SCENARIOS and (record['position'], record['machine']) == (
+                position, 'locked'):
+            name = SCENARIOS[record['law']][0]
+            shipped = (ROOT / 'config' / 'scenarios' / f'{name}.yaml').read_text()
+            assert shipped == scenario_text(record, node_params(record, model.stiffness)), name
+            written += 1
+    assert written == len(SCENARIOS)

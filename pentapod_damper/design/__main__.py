@@ -22,14 +22,17 @@ import pickle
 import sys
 
 from pentapod_damper.design.report import (
+    energy_lines,
     fill,
     markdown,
     markdown_records,
     plot,
     verdict,
     write_csv,
+    write_energy_csv,
 )
 from pentapod_damper.design.report import records as table_records
+from pentapod_damper.design.scenarios import write_scenarios
 from pentapod_damper.design.table import damper_table
 from pentapod_sim.cli import CommandParser, configure_logging, run_command
 from pentapod_sim.sim.design_models import load_design_model
@@ -39,16 +42,11 @@ from pentapod_sim.sim.tuning import TuneSettings
 LOG = logging.getLogger('design')
 
 
-def _energy_lines(table) -> list[str]:
-    lines = []
-    for mode, shares in table.energy.items():
-        text = ', '.join(f'{g} {v * 100:.0f} %' for g, v in shares.items() if v >= 0.005)
-        lines.append(f'- {table.position} {mode}: {text}')
-    return lines
-
-
-def run(args: argparse.Namespace) -> int:
-    """Build the tables and write them."""
+def _tables(args: argparse.Namespace) -> list:
+    """The tables: computed, or read from a ``tables.pkl`` of an earlier run."""
+    if args.from_tables:
+        with open(args.from_tables, 'rb') as stream:
+            return list(pickle.load(stream))
     machines = ('locked', 'drives') if args.machine == 'both' else (args.machine,)
     tables = []
     for position in [p for p in args.positions.split(',') if p]:
@@ -60,26 +58,40 @@ def run(args: argparse.Namespace) -> int:
                                     grid_points=2 if args.quick else 3,
                                     gain_points=4 if args.quick else 8,
                                     refine_iterations=2 if args.quick else 25)
-            table = damper_table(model, settings, progress=lambda msg: LOG.info('%s', msg))
-            tables.append(table)
-            png = plot(table, args.out / f'dampers_{position}_{machine}.png')
-            print(f'wrote {png}')
+            tables.append(damper_table(model, settings,
+                                       progress=lambda msg: LOG.info('%s', msg)))
+    return tables
+
+
+def run(args: argparse.Namespace) -> int:
+    """Build the tables (or read them) and write them."""
+    tables = _tables(args)
+    args.out.mkdir(parents=True, exist_ok=True)
+    for table in tables:
+        png = plot(table, args.out / f'dampers_{table.position}_{table.machine}.png')
+        print(f'wrote {png}')
     text = ['# Which damper to build', '']
     for table in tables:
         text += [markdown(table), '']
     records = [r for table in tables for r in table_records(table)]
+    energy = write_energy_csv(tables, args.out / 'dampers_energy.csv')
     text += ['## Verdict', '', verdict(records), '', '## Strain energy of the modes that '
-             'dominate the TCP (per stiffness group)', '']
-    for table in tables[::len(machines)]:
-        text += _energy_lines(table)
+             'dominate the TCP (per stiffness group)', '', energy_lines(energy)]
     (args.out / 'dampers.md').write_text('\n'.join(text) + '\n')
     with open(args.out / 'tables.pkl', 'wb') as stream:      # to redraw without recomputing
         pickle.dump(tables, stream)
     print(f'wrote {write_csv(tables, args.out / "dampers.csv")} and {args.out / "dampers.md"}')
     print(verdict(records))
+    if args.scenarios:
+        position = tables[0].position
+        model = load_design_model(position, tables[0].settings.sample_rate, check=False,
+                                  corners=False)
+        for path in write_scenarios(records, model.stiffness, position, args.scenarios):
+            print(f'wrote {path}')
     if args.docs:
         path = Path(args.docs)
         doc = fill(path.read_text(), 'dampers-table', markdown_records(records))
+        doc = fill(doc, 'dampers-energy', energy_lines(energy))
         path.write_text(fill(doc, 'dampers-verdict', verdict(records)))
         print(f'updated {path}')
     return 0
@@ -99,6 +111,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--quick', action='store_true',
                         help='small grids and no check model (a smoke run)')
     parser.add_argument('--out', type=Path, default=Path('out') / 'design')
+    parser.add_argument('--from-tables', default='', metavar='PKL',
+                        help='draw and write the tables of an earlier run (its tables.pkl) '
+                             'instead of computing them')
+    parser.add_argument('--scenarios', default='', metavar='FOLDER',
+                        help='also write the scenario files of the tuned laws of the first '
+                             'position (config/scenarios)')
     parser.add_argument('--docs', default='', metavar='FILE',
                         help='also rewrite the dampers-table and dampers-verdict blocks of FILE '
                              '(docs/dampers.md)')

@@ -183,3 +183,31 @@ def plot(table: DamperTable, path: str | Path) -> Path:
     bx.grid(True, which='both', alpha=0.3)
     bx.legend(fontsize=7)
     return save_figure(fig, path)
+
+
+def write_energy_csv(tables: Sequence[DamperTable], path: str | Path) -> Path:
+    """Strain-energy shares of the modes that dominate the TCP, per position and group."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    seen = set()
+    with open(path, 'w', newline='') as stream:
+        writer = csv.writer(stream)
+        writer.writerow(['position', 'mode', 'group', 'share'])
+        for t in tables:
+            if t.position in seen:
+                continue
+            seen.add(t.position)
+            for mode, shares in t.energy.items():
+                writer.writerows([t.position, mode, g, v] for g, v in shares.items())
+    return path
+
+
+def energy_lines(path: str | Path) -> str:
+    """Markdown list of :func:`write_energy_csv`'s file (groups with at least 0.5 %)."""
+    modes: dict[tuple[str, str], list[str]] = {}
+    for row in read_csv(path):
+        if float(row['share']) >= 0.005:
+            modes.setdefault((row['position'], row['mode']), []).append(
+                f'{row["group"]} {float(row["share"]) * 100:.0f} %')
+    return '\n'.join(f'* {position} {mode}: {", ".join(parts)}'
+                     for (position, mode), parts in modes.items()) + '\n'

@@ -109,7 +109,7 @@ def _continuous_frf(judge: Judge, values: dict, struts: Sequence[int]) -> PoleRe
     out, inp = s.pair
     plant = judge.machine()
     ctrls = []
-    for law in judge.family.laws(values, struts, judge._context(0)):
+    for law in judge.family.laws(values, struts, judge.context(0)):
         model = law.continuous()
         ctrls += model if isinstance(model, list) else [model]
     if s.machine == 'drives':
@@ -153,8 +153,10 @@ def _row(spec: RowSpec, judge: Judge, values: dict, best: Evaluation, base: Eval
     """Measure one row (its check-model margins and the struts 1+2 share)."""
     ideal = spec.kind == 'ideal'
     table_peak, table_rms = base.peak, base.rms
-    if radii is None or not np.all(np.isfinite(radii)):
-        radii = judge.check(values) if judge.model.check is not None else (np.nan, np.nan)
+    if judge.model.check is None:
+        radii = (np.nan, np.nan)
+    elif radii is None or not np.all(np.isfinite(radii)):
+        radii = judge.check(values)
     peak, peak_hz, rms = best.peak, best.peak_hz, best.rms
     share_peak = share_rms = float('nan')
     if ideal:
