@@ -12,19 +12,18 @@ import dataclasses
 import numpy as np
 import pytest
 from scipy.signal import cont2discrete
-from statespace_fixtures import small_model
+from statespace_fixtures import all_modes, small_model
 
 from pentapod_sim.errors import ConfigError, PortError
 from pentapod_sim.plant import drives as plant_drives
 from pentapod_sim.plant import ports, reduction
 from pentapod_sim.plant.build import from_modal_data
-from pentapod_sim.plant.drives import DriveParams, DrivenPlant, link_stiffness, load_drives
+from pentapod_sim.plant.drives import DrivenPlant, DriveParams, link_stiffness, load_drives
 from pentapod_sim.plant.model import PlantModel
 from pentapod_sim.sim.drives import FeedDrives, servo_impedance
 from pentapod_sim.sim.law_models import iff
 from pentapod_sim.sim.loop_frf import SampledLoop
 from pentapod_sim.sim.loop_poles import continuous_loop_system
-from statespace_fixtures import all_modes
 
 PARAMS = DriveParams(rotor_mass=300.0, velocity_bandwidth_hz=80.0, velocity_reset_time=0.01,
                      position_gain=50.0, current_bandwidth_hz=1000.0, delay_steps=1)
@@ -46,7 +45,7 @@ def test_config_file_loads_and_the_link_is_read_from_the_ports():
     assert params.velocity_gain == pytest.approx(params.rotor_mass * 2 * np.pi
                                                  * params.velocity_bandwidth_hz)
     assert link_stiffness(strut_on_link(), 1) == pytest.approx(K_A, rel=1e-12)
-    with pytest.raises(PortError, match="strut2_force"):
+    with pytest.raises(PortError, match='strut2_force'):
         link_stiffness(strut_on_link(), 2)
 
 

@@ -6,8 +6,8 @@ blocks; the Schur split must still give the FRF a dense solve of ``(zI - A) x = 
 """
 import numpy as np
 import pytest
-from fixtures.demo_model import demo_model
 
+from fixtures.demo_model import demo_model
 from pentapod_damper.laws import Dynamics, strut_bending_damper, tcp_damper
 from pentapod_damper.study.analytic import discrete_frf
 from pentapod_sim.sim.controllers import controller_of
