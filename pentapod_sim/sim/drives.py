@@ -69,12 +69,11 @@ def _cascade(params: DriveParams, dt: float | None, iff: Matrices) -> Matrices:
 
 
 def _iff(gain: float, omega_i: float, dynamics: Dynamics, dt: float | None) -> Matrices:
+    """The IFF filter; its ``delay_steps`` delay the IFF command before the drive's own."""
     if not gain:
         return _NONE
     tf = ((-float(gain),), (1.0, float(omega_i)))
-    no_delay = dynamics.with_delay(0)         # the drive's own delay follows the command
-    return channel_continuous(tf, no_delay) if dt is None else channel_discrete(tf, no_delay,
-                                                                                dt)
+    return channel_continuous(tf, dynamics) if dt is None else channel_discrete(tf, dynamics, dt)
 
 
 @dataclass(frozen=True)
@@ -93,7 +92,8 @@ class FeedDrives:
     iff_omega : float
         omega_i [rad/s] of the IFF (>= 0).
     iff_dynamics : Dynamics
-        Low-pass of the load cell's signal (the delay is the drive's own).
+        Low-pass of the load cell's signal, and a delay of the IFF command besides the
+        drive's own (0: the IFF runs in the drive's cycle).
     """
 
     params: DriveParams

@@ -118,11 +118,17 @@ def _iff(values: Values, struts: Sequence[int], context: Context) -> list[Any]:
 
 
 def _hac_lac(values: Values, struts: Sequence[int], context: Context) -> list[Any]:
+    """The drives of every strut, IFF inside the loops of ``struts``.
+
+    The IFF command is computed in the drive's own cycle (it then shares the drive's delay);
+    the tuner's extra delay delays it once more.
+    """
     g = values['gain']
     params: DriveParams = context['drives']
+    extra = Dynamics(delay_steps=int(context.get('extra', 0)))
     return [FeedDrives(params, tuple(range(1, 6)), 0.0)] if not g else [
         _DrivesWithIff(params, tuple(struts), g, values['omega_ratio'] * g,
-                       _low_passed(values, context['dynamics']))]
+                       _low_passed(values, extra))]
 
 
 @dataclass(frozen=True)
@@ -137,8 +143,7 @@ class _DrivesWithIff:
 
     def _parts(self) -> list[FeedDrives]:
         rest = tuple(i for i in range(1, 6) if i not in self.struts)
-        parts = [FeedDrives(self.params, self.struts, self.gain, self.omega,
-                            self.dynamics.with_delay(0))]
+        parts = [FeedDrives(self.params, self.struts, self.gain, self.omega, self.dynamics)]
         return parts + ([FeedDrives(self.params, rest)] if rest else [])
 
     def discrete(self, dt: float) -> list[DiscreteController]:

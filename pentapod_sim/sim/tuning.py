@@ -9,7 +9,7 @@ sampled loop of its machine (locked drives or with the feed drives) at the law's
   maximised: a pole whose static contribution ``|r| / |1 - l|``, about its mode's dc gain
   whatever its damping, reaches :data:`DOMINANT_SHARE` of the baseline's largest);
 * **constraints**: stable on the design plant with the law's delay and with one more sample
-  (every law's delay, the drives' included); the static TCP compliance at most
+  (the law's: the drives' own delay is the machine's and stays); the static TCP compliance at most
   ``static_ratio_limit`` times the machine's without the law; the RMS of every actuator force
   per newton of TCP force (over the band) at most ``effort_limit``; the same stability and
   static limit on every stiffness corner of the :class:`~pentapod_sim.sim.design_models.
@@ -159,9 +159,8 @@ class Judge:
 
     def context(self, extra: int) -> dict[str, Any]:
         dyn = self.settings.dynamics
-        return {'dynamics': dyn.with_delay(dyn.delay_steps + extra),
-                'drives': replace(self.model.drives,
-                                  delay_steps=self.model.drives.delay_steps + extra),
+        # the extra delay is the law's: the drives are the machine and keep theirs
+        return {'dynamics': dyn.with_delay(dyn.delay_steps + extra), 'drives': self.model.drives,
                 'stiffness': self.model.stiffness, 'target_hz': getattr(self, 'target_hz', 0),
                 'dt': self.settings.dt, 'extra': extra}
 
