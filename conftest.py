@@ -7,6 +7,9 @@ pytest process until it exits, are put into the environment before any test star
 concurrent test runs, studies and users on this host never share a domain.
 """
 import os
+import signal
+
+import pytest
 
 _LEASES = []
 
@@ -31,3 +34,20 @@ def pytest_report_header(config):
     held = ' (reserved for this session)' if _LEASES and _LEASES[0].held else ''
     return (f"ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID')}{held}, "
             f"ROS_AUTOMATIC_DISCOVERY_RANGE={os.environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE')}")
+
+
+@pytest.fixture(autouse=True)
+def _stop_signal_handlers():
+    """
+    Give every test the stop-signal handlers the session started with.
+
+    A command or node run in-process (``runner.main``, ``run_node``) installs
+    :mod:`pentapod_sim.shutdown`'s handlers, which only record SIGTERM; a process forked
+    later by another test (a multiprocessing pool's worker) inherited them, ignored the
+    pool's SIGTERM at exit, and that test hung in ``Pool.terminate``.
+    """
+    from pentapod_sim.shutdown import STOP_SIGNALS
+    saved = {sig: signal.getsignal(sig) for sig in STOP_SIGNALS}
+    yield
+    for sig, handler in saved.items():
+        signal.signal(sig, handler)
