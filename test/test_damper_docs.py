@@ -18,8 +18,14 @@ from pentapod_damper.design.report import (
     verdict,
 )
 from pentapod_damper.design.rows import default_rows
-from pentapod_damper.design.scenarios import node_params, scenario_text, SCENARIOS
+from pentapod_damper.design.scenarios import (
+    node_params,
+    scenario_text,
+    SCENARIOS,
+    shipped_records,
+)
 from pentapod_sim.sim.design_models import load_design_model
+from pentapod_sim.sim.law_models import Dynamics
 from pentapod_sim.sim.tuning import Judge, TuneSettings
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -43,12 +49,14 @@ def _values(gains: str) -> dict[str, float]:
 
 @pytest.mark.slow
 def test_best_strut_law_at_p1_is_what_the_code_computes(tmp_path):
-    records = [r for r in read_csv(CSV) if r['position'] == 'P1' and r['machine'] == 'locked']
+    records = [r for r in read_csv(CSV) if (r['position'], r['machine'], r['delay_steps'])
+               == ('P1', 'locked', '0')]
     best = best_strut_law(records)
     assert best is not None
     spec = next(s for s in default_rows() if s.name == best['law'])
     model = load_design_model('P1', float(best['sample_rate_hz']), cache_dir=tmp_path)
-    settings = TuneSettings(sample_rate=float(best['sample_rate_hz']))
+    settings = TuneSettings(sample_rate=float(best['sample_rate_hz']),
+                            dynamics=Dynamics(delay_steps=int(best['delay_steps'])))
     judge = Judge(model, spec.family, settings)
     ev = judge.evaluate(_values(best['gains']))
     assert ev.feasible
@@ -61,14 +69,13 @@ def test_best_strut_law_at_p1_is_what_the_code_computes(tmp_path):
 
 
 def test_shipped_scenarios_are_the_tuned_records():
-    """config/scenarios/<law>_struts.yaml hold the gains the table tuned (at P1)."""
+    """config/scenarios/<law>_struts.yaml hold the gains the table tuned (first position)."""
     records = read_csv(CSV)
     position = next(r['position'] for r in records)
     model = load_design_model(position, check=False, corners=False)
     written = 0
-    for record in records:
-        if record['law'] in SCENARIOS and (record['position'], record['machine']) == (
-                position, 'locked'):
+    for record in shipped_records(records, position):
+        if record['law'] in SCENARIOS:
             name = SCENARIOS[record['law']][0]
             shipped = (ROOT / 'config' / 'scenarios' / f'{name}.yaml').read_text()
             assert shipped == scenario_text(record, node_params(record, model.stiffness)), name

@@ -4,8 +4,8 @@
 Builds each position's models (:func:`pentapod_sim.sim.design_models.load_design_model`),
 runs :func:`pentapod_damper.design.table.damper_table` and writes ``dampers.csv``,
 ``dampers.md`` (tables, the issue's verdict and the strain-energy shares of the dominant
-modes), ``dampers_<position>_<machine>.png`` and ``tables.pkl`` (the records, to redraw) to
-``--out``::
+modes), ``dampers_<position>_<machine>_d<delay>.png`` and ``tables.pkl`` (the records, to
+redraw) to ``--out``::
 
     python -m pentapod_damper.design [--positions P1,P2] [--machine locked|drives|both]
                                      [--sample-rate 5000] [--quick] [--out out/design]
@@ -45,8 +45,11 @@ LOG = logging.getLogger('design')
 def _tables(args: argparse.Namespace) -> list:
     """The tables: computed, or read from a ``tables.pkl`` of an earlier run."""
     if args.from_tables:
-        with open(args.from_tables, 'rb') as stream:
-            return list(pickle.load(stream))
+        tables = []
+        for path in args.from_tables.split(','):
+            with open(path, 'rb') as stream:
+                tables += list(pickle.load(stream))
+        return tables
     machines = ('locked', 'drives') if args.machine == 'both' else (args.machine,)
     tables = []
     for position in [p for p in args.positions.split(',') if p]:
@@ -68,7 +71,8 @@ def run(args: argparse.Namespace) -> int:
     tables = _tables(args)
     args.out.mkdir(parents=True, exist_ok=True)
     for table in tables:
-        png = plot(table, args.out / f'dampers_{table.position}_{table.machine}.png')
+        png = plot(table, args.out / f'dampers_{table.position}_{table.machine}_'
+                               f'd{table.settings.dynamics.delay_steps}.png')
         print(f'wrote {png}')
     text = ['# Which damper to build', '']
     for table in tables:
@@ -111,9 +115,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--quick', action='store_true',
                         help='small grids and no check model (a smoke run)')
     parser.add_argument('--out', type=Path, default=Path('out') / 'design')
-    parser.add_argument('--from-tables', default='', metavar='PKL',
-                        help='draw and write the tables of an earlier run (its tables.pkl) '
-                             'instead of computing them')
+    parser.add_argument('--from-tables', default='', metavar='PKL[,PKL]',
+                        help='draw and write the tables of earlier runs (their tables.pkl, '
+                             'comma-separated) instead of computing them')
     parser.add_argument('--scenarios', default='', metavar='FOLDER',
                         help='also write the scenario files of the tuned laws of the first '
                              'position (config/scenarios)')

@@ -71,16 +71,22 @@ def _num(text: str, fmt: str = '.2f', scale: float = 1.0) -> str:
     return '-' if not math.isfinite(value) else format(value * scale, fmt)
 
 
+def _blocks(rows: Sequence[Record]) -> dict[tuple[str, str, str], list[Record]]:
+    """Records grouped by position, machine and the laws' delay, in file order."""
+    blocks: dict[tuple[str, str, str], list[Record]] = {}
+    for row in rows:
+        blocks.setdefault((row['position'], row['machine'], row['delay_steps']), []).append(row)
+    return blocks
+
+
 def markdown_records(rows: Sequence[Record]) -> str:
     """Markdown tables of records (one per position and machine), with what they rest on."""
-    blocks: dict[tuple[str, str], list[Record]] = {}
-    for row in rows:
-        blocks.setdefault((row['position'], row['machine']), []).append(row)
     text = []
-    for (position, machine), block in blocks.items():
+    for (position, machine, delay), block in _blocks(rows).items():
         h = block[0]
         d = h['direction']
-        text += [f'**{position}, machine {machine}** (TCP {d}{d} in {h["band_hz"]} Hz: '
+        text += [f'**{position}, machine {machine}, laws with {delay} sample(s) of delay** '
+                 f'(TCP {d}{d} in {h["band_hz"]} Hz: '
                  f'baseline peak {_num(h["baseline_peak_um_per_n"], ".3g")} um/N at '
                  f'{_num(h["baseline_peak_hz"], ".1f")} Hz; laws sampled at '
                  f'{_num(h["sample_rate_hz"], "g")} Hz with {h["delay_steps"]} sample(s) of '
@@ -121,18 +127,16 @@ def best_strut_law(rows: Sequence[Record]) -> Record | None:
 def verdict(rows: Sequence[Record]) -> str:
     """The issue's done-when, position by position, in sentences (from the records)."""
     out = []
-    blocks: dict[tuple[str, str], list[Record]] = {}
-    for row in rows:
-        blocks.setdefault((row['position'], row['machine']), []).append(row)
-    for (position, machine), block in blocks.items():
+    for (position, machine, delay), block in _blocks(rows).items():
+        where = f'{position} (machine {machine}, laws with {delay} sample(s) of delay)'
         best = best_strut_law(block)
         if best is None:
-            out.append(f'* {position} (machine {machine}): no strut-only law meets the limits.')
+            out.append(f'* {where}: no strut-only law meets the limits.')
             continue
         reduction = float(best['peak_reduction'])
         hit = 'reaches' if reduction >= TARGET_REDUCTION else 'misses'
         out.append(
-            f'* {position} (machine {machine}): the best strut-only law, {best["law"]} '
+            f'* {where}: the best strut-only law, {best["law"]} '
             f'({best["gains"]}), {hit} the {TARGET_REDUCTION:g}x target with {reduction:.2f}x '
             f'(RMS {_num(best["rms_reduction"])}x) at static compliance '
             f'x{_num(best["static_ratio"], ".3f")}, check-model margin '

@@ -123,14 +123,26 @@ def scenario_text(record: Record, params: Mapping[str, Any]) -> str:
     return '\n'.join(lines) + '\n'
 
 
+def shipped_records(records: list[Record], position: str) -> list[Record]:
+    """
+    The records the scenario files hold: ``position``, locked machine, the largest delay.
+
+    With a sample of computational delay the laws are what a digital controller runs (and
+    they were kept stable with one more); the table's delay-0 rows are the testbed's plain
+    sampled feedback.
+    """
+    mine = [r for r in records if (r['position'], r['machine']) == (position, 'locked')
+            and r['law'] in SCENARIOS]
+    delay = max((int(r['delay_steps']) for r in mine), default=0)
+    return [r for r in mine if int(r['delay_steps']) == delay]
+
+
 def write_scenarios(records: list[Record], stiff: StrutStiffness, position: str,
                     folder: str | Path) -> list[Path]:
-    """Write the scenario files of the tuned records of ``position`` (locked machine)."""
+    """Write the scenario files of :func:`shipped_records`."""
     folder = Path(folder)
     out = []
-    for record in records:
-        if (record['position'], record['machine']) != (position, 'locked'):
-            continue
+    for record in shipped_records(records, position):
         if record['law'] in SCENARIOS:
             path = folder / f'{SCENARIOS[record["law"]][0]}.yaml'
             path.write_text(scenario_text(record, node_params(record, stiff)))
