@@ -20,7 +20,8 @@ TARGET_REDUCTION, STATIC_LIMIT = 3.0, 1.1
 COLUMNS = ('position', 'machine', 'law', 'sensors', 'actuators', 'gains', 'dynamics_included',
            'peak_reduction', 'rms_reduction', 'peak_hz', 'static_ratio', 'lowband_ratio',
            'check_margin', 'check_margin_extra_delay', 'effort_rms_n_per_n',
-           'struts12_share_peak', 'struts12_share_rms', 'feasible', 'strut_law', 'note',
+           'struts12_share_peak', 'struts12_share_rms', 'feasible', 'strut_law', 'uses_drives',
+           'note',
            'baseline_peak_um_per_n', 'baseline_peak_hz', 'direction', 'band_hz', 'sample_rate_hz',
            'delay_steps', 'check_modes', 'check_f_max_hz')
 Record = dict[str, str]
@@ -39,7 +40,8 @@ def records(table: DamperTable) -> list[Record]:
                   r.dynamics_included, r.peak_reduction, r.rms_reduction, r.peak_hz,
                   r.static_ratio, r.lowband_ratio, r.check_margin, r.check_margin_extra,
                   r.effort_rms_per_n, r.share12_peak, r.share12_rms,
-                  r.feasible and r.stable_on_check, r.strut_law, r.note,
+                  r.feasible and r.stable_on_check, r.strut_law, getattr(r, 'uses_drives', False),
+                  r.note,
                   table.baseline_peak * 1e6,
                   table.baseline_peak_hz, s.direction, f'{s.band[0]:g}-{s.band[1]:g}',
                   s.sample_rate, s.dynamics.delay_steps, table.check_modes,
@@ -116,12 +118,30 @@ def markdown(table: DamperTable) -> str:
     return markdown_records(records(table))
 
 
-def best_strut_law(rows: Sequence[Record]) -> Record | None:
-    """The strut-only record with the largest peak reduction that meets every limit."""
+def best_strut_law(rows: Sequence[Record], drives: bool = True) -> Record | None:
+    """
+    The strut-only record with the largest peak reduction that meets every limit.
+
+    ``drives`` False leaves out the laws that need the feed drives' loops (their damping rests
+    on the drives' estimated parameters).
+    """
     ok = [r for r in rows if r['strut_law'] == 'True' and r['feasible'] == 'True'
           and r['dynamics_included'] == 'True'
-          and float(r['static_ratio']) <= STATIC_LIMIT * (1 + 1e-9)]
+          and float(r['static_ratio']) <= STATIC_LIMIT * (1 + 1e-9)
+          and (drives or r['uses_drives'] != 'True')]
     return max(ok, key=lambda r: float(r['peak_reduction']), default=None)
+
+
+def _sentence(best: Record) -> str:
+    reduction = float(best['peak_reduction'])
+    hit = 'reaches' if reduction >= TARGET_REDUCTION else 'misses'
+    return (f'{best["law"]} ({best["gains"]}) {hit} the {TARGET_REDUCTION:g}x target with '
+            f'{reduction:.2f}x (RMS {_num(best["rms_reduction"])}x) at static compliance '
+            f'x{_num(best["static_ratio"], ".3f")} (x{_num(best["lowband_ratio"])} below f1/2), '
+            f'check-model margin {_num(best["check_margin"], ".1e")} and '
+            f'{_num(best["check_margin_extra_delay"], ".1e")} with one more sample of delay; '
+            f'struts 1+2 alone give {_num(best["struts12_share_peak"], ".0f", 100)} % of its '
+            f'peak and {_num(best["struts12_share_rms"], ".0f", 100)} % of its RMS improvement')
 
 
 def verdict(rows: Sequence[Record]) -> str:
@@ -129,22 +149,16 @@ def verdict(rows: Sequence[Record]) -> str:
     out = []
     for (position, machine, delay), block in _blocks(rows).items():
         where = f'{position} (machine {machine}, laws with {delay} sample(s) of delay)'
-        best = best_strut_law(block)
+        best, own = best_strut_law(block), best_strut_law(block, drives=False)
         if best is None:
             out.append(f'* {where}: no strut-only law meets the limits.')
             continue
-        reduction = float(best['peak_reduction'])
-        hit = 'reaches' if reduction >= TARGET_REDUCTION else 'misses'
-        out.append(
-            f'* {where}: the best strut-only law, {best["law"]} '
-            f'({best["gains"]}), {hit} the {TARGET_REDUCTION:g}x target with {reduction:.2f}x '
-            f'(RMS {_num(best["rms_reduction"])}x) at static compliance '
-            f'x{_num(best["static_ratio"], ".3f")}, check-model margin '
-            f'{_num(best["check_margin"], ".1e")} and '
-            f'{_num(best["check_margin_extra_delay"], ".1e")} with one more sample of delay; '
-            f'struts 1+2 alone give '
-            f'{_num(best["struts12_share_peak"], ".0f", 100)} % of its peak and '
-            f'{_num(best["struts12_share_rms"], ".0f", 100)} % of its RMS improvement.')
+        text = f'* {where}: the best strut-only law, {_sentence(best)}.'
+        if own is not None and own is not best:
+            text += f" Without the feed drives' loops: {_sentence(own)}."
+        elif own is None:
+            text += " No law without the feed drives' loops meets the limits."
+        out.append(text)
     return '\n'.join(out)
 
 

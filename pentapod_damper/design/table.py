@@ -60,6 +60,7 @@ class DamperRow:
     feasible: bool
     note: str = ''
     lowband_ratio: float = float('nan')
+    uses_drives: bool = False
 
     @property
     def stable_on_check(self) -> bool:
@@ -224,7 +225,8 @@ def damper_table(model: DesignModel, settings: TuneSettings = TuneSettings(),
         magnitudes[spec.name] = _magnitude(judge, values, spec.kind == 'ideal')
         row = _row(spec, judge, values, best, base_eval, radii, say)
         out_rows.append(replace(row, lowband_ratio=_lowband(magnitudes, spec.name,
-                                                           base.peak_hz, settings)))
+                                                           base.peak_hz, settings),
+                                uses_drives=spec.family.machine == 'drives'))
         radii = None
     check = model.check
     return DamperTable(model.position, reference.settings.machine, settings, base.peak,
