@@ -2,9 +2,11 @@
 Pytest root configuration: tests import the package from this checkout.
 
 The session runs isolated (pentapod_sim/scenario/domain.py): unless the caller set them,
-``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` and a free ``ROS_DOMAIN_ID``, reserved by this
-pytest process until it exits, are put into the environment before any test starts a node, so
-concurrent test runs, studies and users on this host never share a domain.
+DDS on the loopback interface only (the package's Fast DDS profile with
+``ROS_AUTOMATIC_DISCOVERY_RANGE=SYSTEM_DEFAULT``, pentapod_sim/scenario/network.py) and a free
+``ROS_DOMAIN_ID``, reserved by this pytest process until it exits, are put into the environment
+before any test starts a node, so concurrent test runs, studies and users on this host never
+share a domain, and nothing of a test listens on the network.
 """
 import os
 import signal
@@ -33,7 +35,8 @@ def pytest_report_header(config):
     """Show the session's ROS domain."""
     held = ' (reserved for this session)' if _LEASES and _LEASES[0].held else ''
     return (f"ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID')}{held}, "
-            f"ROS_AUTOMATIC_DISCOVERY_RANGE={os.environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE')}")
+            f"ROS_AUTOMATIC_DISCOVERY_RANGE={os.environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE')}, "
+            f"FASTRTPS_DEFAULT_PROFILES_FILE={os.environ.get('FASTRTPS_DEFAULT_PROFILES_FILE')}")
 
 
 @pytest.fixture(autouse=True)

@@ -8,10 +8,10 @@ from setuptools import find_packages, setup
 PACKAGE = 'pentapod_testbed'
 HERE = os.path.dirname(os.path.abspath(__file__))
 
-# The executables are listed once, in pentapod_sim/executables.py (read here without importing
-# the package). Each also gets a launcher in lib/<package>/ made at build time: `ros2 run` looks
-# only there, and pip ignores setup.cfg's script_dir (colcon honours it).
-EXECUTABLES = runpy.run_path(os.path.join(HERE, 'pentapod_sim', 'executables.py'))['EXECUTABLES']
+# The nodes and commands are listed once, in pentapod_sim/registry.py (read here without
+# importing the package). Each also gets a launcher in lib/<package>/ made at build time:
+# `ros2 run` looks only there, and pip ignores setup.cfg's script_dir (colcon honours it).
+EXECUTABLES = runpy.run_path(os.path.join(HERE, 'pentapod_sim', 'registry.py'))['executables']()
 LAUNCHER = """#!/usr/bin/env python3
 \"\"\"Launcher of `ros2 run {package} {name}`.\"\"\"
 import sys
@@ -52,6 +52,7 @@ setup(
         ('share/' + PACKAGE + '/config', _files('config/*.yaml')),
         ('share/' + PACKAGE + '/config/scenarios', _files('config/scenarios/*.yaml')),
         ('share/' + PACKAGE + '/config/foxglove', _files('config/foxglove/*.json')),
+        ('share/' + PACKAGE + '/config/dds', _files('config/dds/*.xml')),
         ('share/' + PACKAGE + '/launch', _files('launch/*.launch.py')),
         ('lib/' + PACKAGE, _launchers()),
     ],

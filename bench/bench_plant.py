@@ -428,7 +428,7 @@ def multirate_realtime_rows(folder: Path, model_file: Path, seconds: float,
     exchanges with a missed deadline (target < 0.1 %), the share of overruns and the lateness
     of the period starts p50 / p99 against the exchange period. A missed deadline is a
     source's answer not in by the period's end, or by half a period after the step began if
-    the plant was late (:data:`pentapod_sim.nodes.realtime_loop.ANSWER_WINDOW`); it leaves
+    the plant was late (:data:`pentapod_sim.sim.realtime.ANSWER_WINDOW`); it leaves
     out the plant's own lateness, which the overruns count (a period started more than one
     period late). The node processes run at SCHED_FIFO priority
     ``FIFO_PRIORITY`` where allowed (a real-time setup; on this shared 2-core machine the

@@ -1,11 +1,12 @@
 """
 Launch a testbed scenario: ``ros2 launch pentapod_testbed testbed.launch.py scenario:=<name>``.
 
-The scenario is a ROS parameter file of config/scenarios (or a path). Every node section of
-it becomes one Node of package pentapod_testbed; the executable follows from the node name's
-prefix exactly as in :mod:`pentapod_sim.scenario.runner` (same parser and table), and every
-node gets the whole file as its parameter file (so ``/**`` entries reach all nodes). The
-launch ends when the plant ends.
+The scenario is a ROS parameter file of config/scenarios (or a path), read and checked by the
+runner's parser (:func:`pentapod_sim.scenario.files.read_scenario`). Every node of it becomes
+one Node of package pentapod_testbed: its node kind's executable, or the ``component``
+executable for a class its section names (``node_class: module:Class``), with its checked
+parameters (its own section and the ``/**`` entries it declares). The launch ends when the
+plant and every recorder have ended.
 
 Recording (docs/recording.md): a shipped scenario's recorder writes the run to
 ``out/bags/<scenario>-<UTC time>/`` and stops by itself once it holds every step; the launch
@@ -17,10 +18,8 @@ Like the runner, the launch isolates its nodes (:mod:`pentapod_sim.scenario.doma
 set in the environment (or by ``domain_id:=``), ``ROS_AUTOMATIC_DISCOVERY_RANGE`` is
 LOCALHOST and ``ROS_DOMAIN_ID`` a free domain, reserved while ``ros2 launch`` runs.
 """
-import atexit
 import os
 from pathlib import Path
-import tempfile
 
 from launch.actions import (
     DeclareLaunchArgument,
@@ -34,10 +33,10 @@ from launch.event_handlers import OnProcessExit
 from launch.events import Shutdown
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
-import yaml
 
 from launch import LaunchDescription
 from pentapod_sim.errors import ConfigError
+from pentapod_sim.registry import PLANT, RECORDER
 from pentapod_sim.scenario.domain import DOMAIN_VAR, isolation, RANGE_VAR
 from pentapod_sim.scenario.files import read_scenario, resolve
 
@@ -65,53 +64,47 @@ def _flag(context, name: str) -> bool:
     return value == 'true'
 
 
-def _without_recorders(scenario) -> Path:
-    """A parameter file of the scenario's other nodes, their waits for recorders removed."""
-    recorders = {n.name for n in scenario.of_kind('recorder')}
-    doc = {}
+def _without_recorders(scenario):
+    """The scenario without its recorders, their names taken from the others' waits."""
+    recorders = {n.name for n in scenario.of_role(RECORDER)}
+    scenario = scenario.without(recorders)
     for node in scenario.nodes:
-        if node.name in recorders:
-            continue
-        params = dict(scenario.sections[node.name])
-        wait = [n for n in params.pop('wait_for_subscribers', []) if n not in recorders]
-        if wait:            # an empty list would reach rcl as an untyped parameter
-            params['wait_for_subscribers'] = wait
-        doc[node.name] = {'ros__parameters': params}
-    fd, name = tempfile.mkstemp(prefix='pentapod_launch_', suffix='.yaml')
-    with os.fdopen(fd, 'w') as stream:
-        yaml.safe_dump(doc, stream)
-    atexit.register(os.unlink, name)
-    return Path(name)
+        wait = getattr(node.params, 'wait_for_subscribers', ())
+        if set(wait) & recorders:
+            scenario = scenario.with_params(node.name, wait_for_subscribers=[
+                n for n in wait if n not in recorders])
+    return scenario
 
 
 def _nodes(context):
     """Nodes of the chosen scenario; shut the launch down when the plant and recorders end."""
     path = resolve(LaunchConfiguration('scenario').perform(context))
+    scenario = read_scenario(path)
     overrides = {}
     for key in ('steps', 'duration'):
         value = LaunchConfiguration(key).perform(context)
         if value:
             overrides[key] = int(value) if key == 'steps' else float(value)
+    if overrides:
+        scenario = scenario.with_params(scenario.plant.name, **overrides)
     record, bag = _flag(context, 'record'), LaunchConfiguration('bag').perform(context)
-    scenario = read_scenario(path)
-    nodes = [(n.name, n.executable) for n in scenario.nodes]
-    if not record:
-        path = _without_recorders(scenario)
-        nodes = [(name, kind) for name, kind in nodes if kind != 'recorder']
-    elif not scenario.of_kind('recorder'):
-        nodes.insert(0, ('recorder', 'recorder'))
-    recorder = {'bag_name': f'{Path(scenario.path).stem}-{{utc}}'}
+    recorder = {'bag_name': f'{Path(path).stem}-{{utc}}'}
     if bag:
         recorder = {'output_dir': str(Path(bag).parent), 'bag_name': Path(bag).name}
+    if not record:
+        scenario = _without_recorders(scenario)
+    elif not scenario.of_role(RECORDER):
+        scenario = scenario.with_node('recorder', recorder)
+    elif bag:
+        for node in scenario.of_role(RECORDER):
+            scenario = scenario.with_params(node.name, **recorder)
     actions, awaited = [], []
-    for name, kind in nodes:
-        extra = overrides if kind == 'plant' else {}
-        if kind == 'recorder' and (bag or not scenario.of_kind('recorder')):
-            extra = recorder
-        action = Node(package='pentapod_testbed', executable=kind, name=name,
-                      parameters=[str(path)] + ([extra] if extra else []), output='screen')
+    for node in scenario.nodes:
+        action = Node(package='pentapod_testbed', executable=node.executable, name=node.name,
+                      arguments=[] if node.kind else [node.node_class],
+                      parameters=[node.ros_values()], output='screen')
         actions.append(action)
-        if kind in ('plant', 'recorder'):
+        if node.role in (PLANT, RECORDER):
             awaited.append(action)
     if _flag(context, 'live') and not scenario.of_kind('live_view'):
         port = LaunchConfiguration('live_port').perform(context)

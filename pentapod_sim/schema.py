@@ -9,7 +9,9 @@ A schema is a frozen dataclass. Each field is declared with :func:`spec`, whose 
   list or mapping), ``broadcast`` (one number may stand for a list of ``length`` equal ones),
 - ``description``: what the value means,
 - ``pre``: a function applied to the YAML value before it is checked (e.g. ``'all'`` -> every
-  port name).
+  port name),
+- ``read_only`` and ``keys``: facts of node parameters (:mod:`pentapod_sim.parameters`): whether
+  a running node may be given a new value, and which list parameter names the keys of a mapping.
 
 Field types: ``bool``, ``int``, ``float``, ``str``, a nested schema, ``tuple[T, ...]`` (a YAML
 list), ``dict[str, T]`` (a YAML mapping with free keys), ``T | None`` (with default ``None``) and
@@ -37,12 +39,16 @@ import yaml
 
 from pentapod_sim.errors import ConfigError
 
+#: A field's metadata (:func:`spec`).
+Meta = typing.Mapping[str, typing.Any]
+
 POSITIVE = 'positive'
 NON_NEGATIVE = 'non-negative'
 ANY = 'any'
-_RULES = {POSITIVE: (lambda v: v > 0.0, 'must be > 0'),
-          NON_NEGATIVE: (lambda v: v >= 0.0, 'must be >= 0'),
-          ANY: (lambda v: True, '')}
+_RULES: dict[str, tuple[typing.Callable[[float], bool], str]] = {
+    POSITIVE: (lambda v: v > 0.0, 'must be > 0'),
+    NON_NEGATIVE: (lambda v: v >= 0.0, 'must be >= 0'),
+    ANY: (lambda v: True, '')}
 #: Up to this many choices are listed in full in an error message.
 _LIST_CHOICES = 8
 
@@ -53,7 +59,8 @@ def spec(unit: str = '-', rule: str = ANY, *, description: str = '',
          min_length: int | None = None, broadcast: bool = False,
          bounds: tuple[float, float] | None = None, closed: tuple[bool, bool] = (True, True),
          choices: typing.Sequence[str] | None = None,
-         pre: typing.Callable[[typing.Any], typing.Any] | None = None) -> typing.Any:
+         pre: typing.Callable[[typing.Any], typing.Any] | None = None,
+         read_only: bool = True, keys: str | None = None) -> typing.Any:
     """
     Declare a schema field with its unit, rule and description.
 
@@ -77,13 +84,17 @@ def spec(unit: str = '-', rule: str = ANY, *, description: str = '',
         Admissible texts (of the value, or of each item of a list).
     pre : callable, optional
         Applied to the YAML value before it is checked.
+    read_only : bool
+        A node parameter a running node reads once (False: settable while it runs).
+    keys : str, optional
+        A node parameter mapping whose keys are the entries of the list parameter ``keys``.
     """
     if rule not in _RULES:
         raise ValueError(f'unknown rule {rule!r}')
     meta = {'unit': unit, 'rule': rule, 'description': description, 'length': length,
             'min_length': min_length, 'broadcast': broadcast, 'bounds': bounds,
             'closed': closed, 'choices': tuple(choices) if choices is not None else None,
-            'pre': pre}
+            'pre': pre, 'read_only': read_only, 'keys': keys}
     return field(default=default, default_factory=default_factory, metadata=meta)
 
 
@@ -131,7 +142,28 @@ def check_choice(value: typing.Any, choices: typing.Sequence[str], path: str,
     _fail(path, value, '-', f'not a known {what}{hint}')
 
 
-def _number(value: typing.Any, meta: dict, path: str, integer: bool) -> float | int:
+def _num(value: float) -> str:
+    return str(value) if isinstance(value, int) else f'{value:g}'
+
+
+def range_text(meta: typing.Mapping[str, typing.Any]) -> str:
+    """The admissible values of a field as text: choices, interval or sign, item count."""
+    parts = []
+    if meta.get('choices'):
+        parts.append('one of ' + ', '.join(meta['choices']))
+    if meta.get('bounds') is not None:
+        (lo, hi), (lo_in, hi_in) = meta['bounds'], meta.get('closed', (True, True))
+        parts.append(f'{"[" if lo_in else "("}{_num(lo)}, {_num(hi)}{"]" if hi_in else ")"}')
+    elif meta.get('rule', ANY) != ANY:
+        parts.append({POSITIVE: '> 0', NON_NEGATIVE: '>= 0'}[meta['rule']])
+    if meta.get('length') is not None:
+        parts.append(f'{meta["length"]} items')
+    elif meta.get('min_length'):
+        parts.append(f'at least {meta["min_length"]} item{"s" if meta["min_length"] > 1 else ""}')
+    return '; '.join(parts)
+
+
+def _number(value: typing.Any, meta: Meta, path: str, integer: bool) -> float | int:
     """Check a number against its type, sign rule and bounds."""
     unit = meta.get('unit', '-')
     if isinstance(value, str) and not integer:
@@ -159,7 +191,7 @@ def _number(value: typing.Any, meta: dict, path: str, integer: bool) -> float | 
     return value
 
 
-def _count(value: typing.Sized, meta: dict, path: str, kind: str) -> None:
+def _count(value: typing.Sized, meta: Meta, path: str, kind: str) -> None:
     length, least = meta.get('length'), meta.get('min_length')
     if length is not None and len(value) != length:
         _fail(path, value, '-', f'expected a {kind} of {length} items')
@@ -168,31 +200,35 @@ def _count(value: typing.Sized, meta: dict, path: str, kind: str) -> None:
                                 f'{"s" if least > 1 else ""}')
 
 
-def _union(value: typing.Any, args: tuple, meta: dict, path: str) -> typing.Any:
+def _union(value: typing.Any, args: tuple[typing.Any, ...], meta: Meta, path: str
+           ) -> typing.Any:
     if value is None and type(None) in args:
         return None
     options = [a for a in args if a is not type(None)]
-    for want, test in ((tuple, lambda a: typing.get_origin(a) is tuple or a is tuple),
-                       (dict, lambda a: is_dataclass(a) or typing.get_origin(a) is dict)):
-        if isinstance(value, (list, tuple) if want is tuple else dict):
-            chosen = next((a for a in options if test(a)), None)
-            if chosen is not None:
-                return _convert(value, chosen, meta, path)
+    if isinstance(value, (list, tuple)):
+        chosen = next((a for a in options if typing.get_origin(a) is tuple or a is tuple), None)
+    elif isinstance(value, dict):
+        chosen = next((a for a in options if is_dataclass(a) or typing.get_origin(a) is dict),
+                      None)
+    else:
+        chosen = None
+    if chosen is not None:
+        return _convert(value, chosen, meta, path)
     scalar = next((a for a in options if a in (bool, int, float, str)), options[0])
     return _convert(value, scalar, meta, path)
 
 
-def _convert(value: typing.Any, hint: typing.Any, meta: dict, path: str) -> typing.Any:
+def _convert(value: typing.Any, hint: typing.Any, meta: Meta, path: str) -> typing.Any:
     """Check ``value`` against the type ``hint`` and the field's metadata; return it typed."""
     origin = typing.get_origin(hint)
     if origin in (typing.Union, types.UnionType):
         return _union(value, typing.get_args(hint), meta, path)
-    if is_dataclass(hint):
+    if isinstance(hint, type) and is_dataclass(hint):
         return _build(hint, value, path)
     if hint is tuple or origin is tuple:
         item = typing.get_args(hint)[0] if typing.get_args(hint) else float
         if meta.get('broadcast') and not isinstance(value, (list, tuple)):
-            value = [value] * meta['length']
+            value = [value] * int(meta['length'])
         if not isinstance(value, (list, tuple)):
             _fail(path, value, meta.get('unit', '-'), 'expected a list')
         _count(value, meta, path, 'list')
@@ -208,6 +244,9 @@ def _convert(value: typing.Any, hint: typing.Any, meta: dict, path: str) -> typi
             _fail(path, value, '-', 'expected true or false')
         return value
     if hint is str:
+        if isinstance(value, bool):
+            _fail(path, value, '-', 'expected a text (YAML reads a bare y, n, yes, no, on, off '
+                                    'as true or false: quote it)')
         if not isinstance(value, str):
             _fail(path, value, '-', 'expected a text')
         return check_choice(value, meta['choices'], path) if meta.get('choices') else value
@@ -270,7 +309,7 @@ def build(cls: type, data: typing.Any, source: str) -> typing.Any:
     data : object
         The parsed YAML.
     source : str
-        The file the data came from (the first word of every error).
+        The file the data came from (the first word of every error; '' for none).
 
     Raises
     ------
@@ -280,10 +319,10 @@ def build(cls: type, data: typing.Any, source: str) -> typing.Any:
     try:
         return _build(cls, data, '')
     except ConfigError as err:
-        raise ConfigError(f'{source}: {err}') from None
+        raise ConfigError(f'{source}: {err}' if source else str(err)) from None
 
 
-def read_mapping(path: str | os.PathLike) -> dict:
+def read_mapping(path: str | os.PathLike[str]) -> dict[str, typing.Any]:
     """
     Read a YAML file whose top level is a mapping.
 
@@ -312,6 +351,6 @@ def read_mapping(path: str | os.PathLike) -> dict:
     return data
 
 
-def load(cls: type, path: str | os.PathLike) -> typing.Any:
+def load(cls: type, path: str | os.PathLike[str]) -> typing.Any:
     """Read the YAML file ``path`` and :func:`build` schema ``cls`` from it."""
     return build(cls, read_mapping(path), str(path))

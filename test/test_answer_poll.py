@@ -50,7 +50,8 @@ class Listener:
         rclpy.init(context=self.ctx, domain_id=int(env['ROS_DOMAIN_ID']))
         self.node = Node('poll_test_listener', context=self.ctx)
         self.executor = make_executor(self.ctx)
-        for node in [self.node, *(make(self.ctx) for make in others)]:
+        self.nodes = [self.node, *(make(self.ctx) for make in others)]
+        for node in self.nodes:
             self.executor.add_node(node)
         self.received: dict[str, list] = {}
         self._stop = threading.Event()
@@ -68,9 +69,17 @@ class Listener:
             self.executor.spin_once(timeout_sec=0.05)
 
     def close(self):
+        """
+        Stop spinning and destroy the nodes.
+
+        A node left alive keeps its DDS participant, and its publishers stayed in the graph of
+        every later test of the session (a second /exciter refused their runs).
+        """
         self._stop.set()
         self._thread.join(timeout=5)
         self.executor.shutdown()
+        for node in self.nodes:
+            node.destroy_node()
         self.rclpy.shutdown(context=self.ctx)
 
 

@@ -44,7 +44,7 @@ def test_abbreviations_are_refused_in_commands_and_sub_commands(argv, capsys):
 @pytest.mark.parametrize('module,argv', [('pentapod_damper.study.__main__', ['--dur', 'x']),
                                          ('pentapod_damper.sweep.__main__', ['--work', 'x']),
                                          ('pentapod_sim.cli.modes', ['--n-mod', 'x']),
-                                         ('pentapod_sim.parameters', ['--mark', '--x'])])
+                                         ('pentapod_sim.reference', ['--mark', 'parameters'])])
 def test_the_other_commands_refuse_abbreviations(module, argv, capsys):
     import importlib
     with pytest.raises(SystemExit) as stop:

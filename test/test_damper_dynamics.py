@@ -32,7 +32,7 @@ def test_shipped_dampers_pass_the_check_at_their_own_sample_rate(cache):
     plant, _ = load_or_build_model(position='P2', cache_dir=cache)
     for scn in dynamics.SCENARIOS:
         scenario = read_scenario(scn)
-        sections, rate = scenario.sections, float(scenario.shared['sample_rate'])
+        sections, rate = scenario.sections, scenario.plant.params.sample_rate
         check, _ = load_or_build_check_model('P2', check_f_max(rate), cache)
         laws = [law for law in scenario_laws(sections, 1.0 / rate)
                 if isinstance(law, ViscousDamper)]

@@ -35,9 +35,10 @@ from pentapod_damper.study.report import (
     summary_rows,
 )
 from pentapod_sim import interface
-from pentapod_sim.executables import EXECUTABLES
+from pentapod_sim.registry import executables
 
 ROOT = Path(__file__).resolve().parents[1]
+EXECUTABLES = executables()
 README = ROOT / 'README.md'
 MARKDOWN = [README, *sorted((ROOT / 'docs').glob('*.md'))]
 RESULTS = ROOT / 'docs' / 'results'

@@ -24,6 +24,7 @@ from pentapod_sim.scenario.domain import (
     isolated_env,
     isolation,
 )
+from pentapod_sim.scenario.network import loopback_profile
 
 ROOT = Path(__file__).resolve().parents[1]
 #: Domains this test file may use for its own participants and races (none of its locks
@@ -137,27 +138,32 @@ def test_a_domain_used_by_a_participant_without_a_lock_is_skipped(tmp_path):
         rclpy.shutdown(context=ctx)
 
 
-def test_isolation_sets_localhost_and_a_reserved_domain_unless_the_user_did(tmp_path,
-                                                                            monkeypatch):
+def test_isolation_sets_loopback_dds_and_a_reserved_domain_unless_the_user_did(tmp_path,
+                                                                               monkeypatch):
     monkeypatch.setenv('PENTAPOD_DOMAIN_LOCK_DIR', str(tmp_path))
+    local = {'FASTRTPS_DEFAULT_PROFILES_FILE': str(loopback_profile()),
+             'ROS_AUTOMATIC_DISCOVERY_RANGE': 'SYSTEM_DEFAULT'}     # test_network.py
     with allocate(DOMAINS, tmp_path) as other:        # a concurrent run's domain
         changes, lease = isolation({})
         try:
-            assert changes['ROS_AUTOMATIC_DISCOVERY_RANGE'] == 'LOCALHOST'
+            assert {k: changes[k] for k in local} == local
             assert int(changes['ROS_DOMAIN_ID']) == lease.domain != other.domain
             assert lease.domain in DOMAINS and lease.held
         finally:
             lease.release()
-    user = {'ROS_DOMAIN_ID': '42', 'ROS_AUTOMATIC_DISCOVERY_RANGE': 'SUBNET'}
+    user = {'ROS_DOMAIN_ID': '42', 'ROS_AUTOMATIC_DISCOVERY_RANGE': 'SUBNET',
+            'PENTAPOD_OPEN_NETWORK': '1'}
     changes, lease = isolation(user)
     assert changes == {} and lease.domain == 42       # kept, and locked while free
     lease.release()
-    assert isolation({'ROS_LOCALHOST_ONLY': '1', 'ROS_DOMAIN_ID': '7'})[0] == {}
+    with pytest.raises(RunError, match='open to the network'):     # not opened explicitly
+        isolation({'ROS_DOMAIN_ID': '42', 'ROS_AUTOMATIC_DISCOVERY_RANGE': 'SUBNET'})
+    assert isolation({'ROS_LOCALHOST_ONLY': '1', 'ROS_DOMAIN_ID': '7'})[0] == {
+        **local, 'ROS_LOCALHOST_ONLY': '0'}
     changes, _ = isolation(user, domain_id=43)        # --domain-id wins over the environment
     assert changes == {'ROS_DOMAIN_ID': '43'}
     with isolated_env({'PATH': '/bin', 'ROS_DOMAIN_ID': '44'}) as env:
-        assert env == {'PATH': '/bin', 'ROS_DOMAIN_ID': '44',
-                       'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST'}
+        assert env == {'PATH': '/bin', 'ROS_DOMAIN_ID': '44', **local}
 
 
 @pytest.mark.parametrize('value', ['abc', '233', '-1', '1.5'])
@@ -199,11 +205,11 @@ def _running_node_env(runner: subprocess.Popen, module: str, timeout: float = 12
     ({'ROS_DOMAIN_ID': '156', 'ROS_AUTOMATIC_DISCOVERY_RANGE': 'OFF'}, [],
      {'ROS_DOMAIN_ID': '156', 'ROS_AUTOMATIC_DISCOVERY_RANGE': 'OFF'}),
     ({'ROS_DOMAIN_ID': '156'}, ['--domain-id', '157'],
-     {'ROS_DOMAIN_ID': '157', 'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST'}),
+     {'ROS_DOMAIN_ID': '157', 'ROS_AUTOMATIC_DISCOVERY_RANGE': 'SYSTEM_DEFAULT'}),
 ], ids=['free-domain', 'user-environment', 'domain-id-option'])
 def test_runner_nodes_run_isolated(tmp_path, env_set, args, expect):
     """
-    The runner's nodes get LOCALHOST and a domain no concurrent run holds, reserved meanwhile.
+    The runner's nodes get loopback DDS and a domain no concurrent run holds, reserved meanwhile.
 
     The concurrent run is this test, holding the first free domain. User-set values and
     --domain-id are kept as given.
@@ -232,7 +238,8 @@ plant:
             node_env = _running_node_env(runner, 'pentapod_sim.nodes.plant_node')
             domain = int(node_env['ROS_DOMAIN_ID'])
             if expect is None:
-                assert node_env['ROS_AUTOMATIC_DISCOVERY_RANGE'] == 'LOCALHOST'
+                assert node_env['ROS_AUTOMATIC_DISCOVERY_RANGE'] == 'SYSTEM_DEFAULT'
+                assert node_env['FASTRTPS_DEFAULT_PROFILES_FILE'] == str(loopback_profile())
                 assert domain in DOMAINS and domain != other_run.domain
                 with pytest.raises(RunError):           # reserved by the runner meanwhile
                     allocate([domain])

@@ -15,7 +15,6 @@ from pentapod_sim.analysis.measured.frf_files import MeasuredFrfs, write_uff58
 from pentapod_sim.analysis.measured.labels import parse_label
 from pentapod_sim.analysis.measured.model_dofs import label_rows
 from pentapod_sim.cli import calibrate, modes, statespace
-from pentapod_sim.executables import EXECUTABLES
 from pentapod_sim.fe.assembly import build_model
 from pentapod_sim.fe.imported.export import export_fe_model
 from pentapod_sim.fe.machine_data import load_machine
@@ -23,6 +22,7 @@ from pentapod_sim.modes.solver import solve_modes
 from pentapod_sim.plant.config import default_path
 from pentapod_sim.plant.damping_file import load_damping_file
 from pentapod_sim.plant.model import PlantModel
+from pentapod_sim.registry import executables
 
 
 @pytest.fixture(scope='module')
@@ -38,7 +38,7 @@ def files(tmp_path_factory):
 
 
 def test_calibrate_is_an_executable():
-    assert EXECUTABLES['calibrate'] == 'pentapod_sim.cli.calibrate:main'
+    assert executables()['calibrate'] == 'pentapod_sim.cli.calibrate:main'
 
 
 def test_modes_on_an_imported_model(files, capsys):

@@ -1,6 +1,8 @@
 """The layout's rules, checked by walking every import of the two packages (also local ones)."""
 import ast
 from pathlib import Path
+import subprocess
+import sys
 
 import pytest
 
@@ -8,9 +10,9 @@ ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ('pentapod_sim', 'pentapod_damper')
 #: Pipeline order: a module may import only from its own stage or earlier ones.
 STAGES = [
-    ('pentapod_sim.errors', 'pentapod_sim.shutdown', 'pentapod_sim.executables',
+    ('pentapod_sim.errors', 'pentapod_sim.shutdown', 'pentapod_sim.registry',
      'pentapod_sim.figures', 'pentapod_sim.__init__', 'pentapod_sim.schema',
-     'pentapod_sim.parameters'),
+     'pentapod_sim.parameters', 'pentapod_sim.reference'),
     ('pentapod_sim.paths',),
     ('pentapod_sim.fe',),
     ('pentapod_sim.modes',),
@@ -29,6 +31,11 @@ STAGES = [
 ROS_MODULES = ('rclpy', 'rcl_interfaces', 'builtin_interfaces', 'sensor_msgs', 'geometry_msgs',
                'rosgraph_msgs', 'std_msgs', 'launch', 'launch_ros')
 MAX_LINES = 400
+#: The force-source node modules; started by the dozen in a scenario, they must not load the FE
+#: model code or the eigen solver (seconds of imports and memory per process for nothing).
+SOURCE_NODES = ('pentapod_sim.nodes.exciter_node', 'pentapod_damper.nodes.damper_node',
+                'pentapod_damper.nodes.pma_node', 'pentapod_damper.nodes.example_controller')
+FE_PACKAGES = ('pentapod_sim.fe', 'pentapod_sim.modes')
 
 
 def _modules():
@@ -100,3 +107,29 @@ def test_the_rule_catches_a_violation(tmp_path):
     path.write_text('def f():\n    from pentapod_damper.laws import tcp_damper\n')
     assert (2, 'pentapod_damper.laws') in list(_imports(path))
     assert _stage('pentapod_damper.laws') > _stage('pentapod_sim.plant.model')
+
+
+def _loaded_by(module: str) -> list[str]:
+    """Every module in ``sys.modules`` after importing ``module`` in a fresh interpreter."""
+    code = f'import sys\nimport {module}\nprint("\\n".join(sorted(sys.modules)))'
+    done = subprocess.run([sys.executable, '-c', code], cwd=ROOT, capture_output=True,
+                          text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    return done.stdout.split()
+
+
+def _fe_modules(loaded: list[str]) -> list[str]:
+    return [m for m in loaded if any(m == p or m.startswith(p + '.') for p in FE_PACKAGES)]
+
+
+@pytest.mark.parametrize('module', SOURCE_NODES)
+def test_source_nodes_load_no_fe_code(module):
+    """A force-source node imported on its own loads nothing of ``fe/`` or ``modes/``."""
+    loaded = _loaded_by(module)
+    assert module in loaded
+    assert _fe_modules(loaded) == []
+
+
+def test_the_source_rule_sees_the_fe_code_the_plant_loads():
+    """The same check on the plant node (which builds models from the FE model) finds it."""
+    assert 'pentapod_sim.fe.assembly' in _fe_modules(_loaded_by('pentapod_sim.nodes.plant_node'))

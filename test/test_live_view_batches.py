@@ -226,13 +226,11 @@ def viewed_run(tmp_path_factory):
         executor.add_node(plant)
         executor.add_node(reader)
         plant_node.run(plant, executor)
-        expected = len(plant.layouts) + 1
-        assert spin_until(executor, lambda: len(batches) == expected and all(
-            _last_step(m[-1], plant.dt) == STEPS - 1 for m in batches.values()), 30.0)
-        counts = {out.topic_name: out.dds_published for out, _ in plant.state_outs}
-        counts[interface.CLOCK] = plant.clock_out.dds_published
-        published = plant.fullrate.display.published
-        layouts = plant.layouts
+        layouts = interface.state_layouts(plant.core.output_names)
+        assert spin_until(executor, lambda: len(batches) == len(layouts) + 1 and all(
+            _last_step(m[-1], 1 / RATE) == STEPS - 1 for m in batches.values()), 30.0)
+        counts = plant.outputs.dds_published()
+        published = plant.outputs.display_batches()[1]
         time.sleep(1.0)                                         # the view's last windows
         client.stop()
         executor.shutdown()
@@ -338,14 +336,16 @@ def test_without_a_client_the_view_subscribes_to_nothing(tmp_path):
             '-p', f'sample_rate:={RATE}', '-p', "loop_check:='off'"])
         executor = make_executor(ctx)
         executor.add_node(plant)
-        batch_pubs = plant.fullrate.display.publishers
+        batch_pubs = plant.outputs.display_batches()[0]
 
         def watched():
             return [pub.get_subscription_count() > 0 for pub in batch_pubs]
         assert not spin_until(executor, lambda: any(watched()), 2.0)
         plant_node.run(plant, executor)
-        assert plant.fullrate.display.published == 0
-        assert [out.dds_published for out, _ in plant.state_outs] == [0] * len(plant.layouts)
+        assert plant.outputs.display_batches()[1] == 0
+        states = {t: n for t, n in plant.outputs.dds_published().items() if t != interface.CLOCK}
+        assert states == dict.fromkeys(
+            (lay.topic for lay in interface.state_layouts(plant.core.output_names)), 0)
         client = FoxgloveClient(f'ws://127.0.0.1:{port}').start()
         try:
             client.wait_for_topics([interface.TCP_STATE], 30.0)

@@ -7,7 +7,6 @@ The JSON round trip of a controller is tested in test/test_stability.py.
 """
 import logging
 import signal
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -18,10 +17,11 @@ from pentapod_damper.node_parameters import damper_laws, pma_law
 from pentapod_sim import interface, shutdown
 from pentapod_sim.errors import ConfigError
 from pentapod_sim.nodes import loop_check
-from pentapod_sim.nodes.loop_check import model_text, parallel, sort_models
+from pentapod_sim.nodes.loop_check import sort_models
 from pentapod_sim.nodes.run_status import status_values
+from pentapod_sim.nodes.source_model import model_text
 from pentapod_sim.recording.run_end import RunStatus
-from pentapod_sim.sim.controllers import controller_of, DiscreteController
+from pentapod_sim.sim.controllers import controller_of, DiscreteController, parallel
 
 DT = 1 / 4000.0
 
@@ -130,21 +130,21 @@ def test_a_stop_during_the_truncation_check_skips_the_rest_of_it(monkeypatch, wh
     """
     plant = demo_model(3, inputs=['tcp_force_x', 'tcp_force_y'])
     law = DiscreteController.static(['tcp_velocity_x'], ['tcp_force_x'], [[-100.0]])
-    node = SimpleNamespace(params=SimpleNamespace(loop_check='refuse'), model=plant,
-                           get_logger=lambda: logging.getLogger('plant'),
-                           loop_models=_Models(law.to_json(), when == 'waiting for the models'))
+    check = loop_check.TruncationCheck(
+        _Models(law.to_json(), when == 'waiting for the models'), plant, DT, 'refuse', 1 / DT,
+        5000.0, 'unused', logging.getLogger('plant'))
     built = []
 
-    def build(node):
+    def build(self):
         built.append(True)
         shutdown.request(signal.SIGINT)
         return None, ''
 
     def solved(*args):
         raise AssertionError('the eigenvalue problem ran after the stop request')
-    monkeypatch.setattr(loop_check, 'check_plant_model', build)
-    monkeypatch.setattr(loop_check, 'loop_result', solved)
-    assert loop_check.check_at_start(node, executor=None) is None
+    monkeypatch.setattr(loop_check.TruncationCheck, 'check_model', build)
+    monkeypatch.setattr(loop_check.TruncationCheck, 'result', solved)
+    assert check.at_start(executor=None) is None
     assert built == ([] if when == 'waiting for the models' else [True])
 
 
@@ -159,21 +159,20 @@ def test_a_stop_during_the_eigenvalue_problem_ends_the_check_at_once(monkeypatch
     import time
     plant = demo_model(3, inputs=['tcp_force_x', 'tcp_force_y'])
     law = DiscreteController.static(['tcp_velocity_x'], ['tcp_force_x'], [[-100.0]])
-    node = SimpleNamespace(params=SimpleNamespace(loop_check='refuse',
-                                                  model_cache_dir=str(tmp_path)),
-                           model=plant, dt=DT, get_logger=lambda: logging.getLogger('plant'),
-                           loop_models=_Models(law.to_json(), False))
+    check = loop_check.TruncationCheck(_Models(law.to_json(), False), plant, DT, 'refuse',
+                                       1 / DT, 5000.0, str(tmp_path), logging.getLogger('plant'))
     solving = threading.Event()
 
     def slow_check(*args):
         solving.set()
         time.sleep(10)
         raise AssertionError('the check was waited for')
-    monkeypatch.setattr(loop_check, 'check_plant_model', lambda node: (plant, 'check.npz'))
+    monkeypatch.setattr(loop_check.TruncationCheck, 'check_model',
+                        lambda self: (plant, 'check.npz'))
     monkeypatch.setattr(loop_check, 'check_loop', slow_check)
     threading.Timer(0.3, lambda: shutdown.request(signal.SIGINT)).start()
     start = time.monotonic()
-    assert loop_check.check_at_start(node, executor=None) is None
+    assert check.at_start(executor=None) is None
     assert solving.is_set()
     assert time.monotonic() - start < 2.0
     assert not list(tmp_path.glob('loop_check_*.json'))     # nothing kept of an unsolved check

@@ -29,7 +29,7 @@ from pentapod_damper.nodes.damper_node import DamperNode
 from pentapod_sim import interface
 from pentapod_sim.analysis.bag.reader import open_bag
 from pentapod_sim.nodes.common import spin_until
-from pentapod_sim.nodes.loop_check import MODEL_QOS
+from pentapod_sim.nodes.source_model import MODEL_QOS
 from pentapod_sim.plant.model import PlantModel
 from pentapod_sim.scenario.files import dump_params
 from pentapod_sim.sim.controllers import DiscreteController

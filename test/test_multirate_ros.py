@@ -111,4 +111,4 @@ def test_bad_substeps_stop_the_plant_naming_the_value(tmp_path, value):
                            '-p', f'model_file:={model_file}', '-p', f'substeps:={value}'],
                           env=dict(os.environ), capture_output=True, text=True, timeout=60)
     assert proc.returncode == 1
-    assert "'substeps'" in proc.stderr and value in proc.stderr, proc.stderr
+    assert f"node 'plant': parameter substeps = {value}" in proc.stderr, proc.stderr

@@ -11,8 +11,8 @@ import pytest
 from fixtures.demo_model import demo_model
 from fixtures.processes import NodeProcesses
 from pentapod_damper.laws import Dynamics, ProofMassActuator, strut_bending_damper, tcp_damper
-from pentapod_sim.executables import module_of, NODE_KINDS
-from pentapod_sim.parameters import table_of
+from pentapod_sim.parameters import params_of
+from pentapod_sim.registry import NODES
 from pentapod_sim.sim.closed_loop import excitation_matrix, simulate
 from pentapod_sim.sim.excitation import Excitation, ExcitationSpec
 from pentapod_sim.sim.stepping import DiscretePlant
@@ -331,10 +331,10 @@ damper_tcp:
 
 
 @pytest.mark.parametrize(('module', 'params', 'named'), [
-    ('pentapod_sim.nodes.plant_node', ['timing:=fast'], "'timing'"),
-    ('pentapod_sim.nodes.plant_node', ['sample_rate:=-5.0'], "'sample_rate'"),
+    ('pentapod_sim.nodes.plant_node', ['timing:=fast'], "node 'plant': parameter timing"),
+    ('pentapod_sim.nodes.plant_node', ['sample_rate:=-5.0'], 'parameter sample_rate = -5.0'),
     ('pentapod_damper.nodes.damper_node', ['bending_struts:=[7]'], 'strut number 7'),
-    ('pentapod_damper.nodes.pma_node', ['proof_mass:=0.0'], "'proof_mass'"),
+    ('pentapod_damper.nodes.pma_node', ['proof_mass:=0.0'], "'pma': parameter proof_mass"),
     ('pentapod_sim.nodes.exciter_node', ['kind:=hammer'], "'hammer'"),
 ])
 def test_bad_parameters_stop_node_with_named_error(ros_env, tmp_path, module, params, named):
@@ -360,17 +360,17 @@ def test_misspelt_override_stops_the_plant_naming_the_parameter(ros_env):
     assert 'plant model' not in proc.stdout + proc.stderr
 
 
-@pytest.mark.parametrize('kind', NODE_KINDS)
+@pytest.mark.parametrize('kind', NODES, ids=lambda k: k.name)
 def test_help_prints_the_table_and_starts_nothing(ros_env, tmp_path, kind):
     """`--help` exits 0 with the table; a started node would fail on these parameters."""
-    table = table_of(kind)
     bogus = {'plant': 'model_file:=/nonexistent/model.npz',
-             'recorder': f'output_dir:={tmp_path / "bags"}'}.get(kind, 'no_such_parameter:=1')
-    proc = subprocess.run([sys.executable, '-m', module_of(kind), '--help', '--ros-args', '-p',
+             'recorder': f'output_dir:={tmp_path / "bags"}'}.get(kind.name,
+                                                                 'no_such_parameter:=1')
+    proc = subprocess.run([sys.executable, '-m', kind.module, '--help', '--ros-args', '-p',
                            bogus], env=ros_env, capture_output=True, text=True, timeout=60)
     assert proc.returncode == 0, proc.stderr
-    assert proc.stdout.startswith(f'usage: ros2 run pentapod_testbed {kind} ')
-    for param in table:
+    assert proc.stdout.startswith(f'usage: ros2 run pentapod_testbed {kind.name} ')
+    for param in params_of(kind.name).ros_params():
         assert f'  {param.name} ({param.type}; default' in proc.stdout
     assert proc.stderr == '' and '[INFO]' not in proc.stdout
     assert not (tmp_path / 'bags').exists()

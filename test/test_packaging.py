@@ -18,8 +18,8 @@ PACKAGE = 'pentapod_testbed'
 
 
 def _executables() -> dict:
-    """The executables table, read like setup.py reads it (without importing the package)."""
-    return runpy.run_path(str(ROOT / 'pentapod_sim' / 'executables.py'))['EXECUTABLES']
+    """The executables, read like setup.py reads them (without importing the package)."""
+    return runpy.run_path(str(ROOT / 'pentapod_sim' / 'registry.py'))['executables']()
 
 
 def test_package_xml_is_format_3_ament_python():
@@ -31,10 +31,10 @@ def test_package_xml_is_format_3_ament_python():
 
 
 def test_every_executable_has_an_entry_point_and_every_node_kind_an_executable():
-    from pentapod_sim.executables import EXECUTABLES, NODE_KINDS
-    assert EXECUTABLES == _executables()
-    assert set(NODE_KINDS) <= set(EXECUTABLES)
-    for name, target in EXECUTABLES.items():
+    from pentapod_sim.registry import executables, NODES
+    assert executables() == _executables()
+    assert {kind.name for kind in NODES} <= set(executables())
+    for name, target in executables().items():
         module, func = target.split(':')
         assert callable(getattr(importlib.import_module(module), func)), name
 
@@ -201,7 +201,8 @@ def test_installed_package_runs_from_the_install_space(colcon_install, tmp_path)
         steps=steps, duration=steps / 2000.0, topics=topics))
     run = inst.run(lib / 'scenario', 'scenario.yaml', '--timeout', '240', cwd=cwd)
     assert run.returncode == 0, run.stdout + run.stderr
-    assert 'ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST' in run.stdout + run.stderr  # isolated
+    assert 'ROS_AUTOMATIC_DISCOVERY_RANGE=SYSTEM_DEFAULT' in run.stdout + run.stderr  # isolated
+    assert (share / 'config' / 'dds' / 'loopback.xml').is_file()    # its DDS profile
     info = inst.run(lib / 'analyze', 'info', cwd / 'bags' / 'installed', cwd=cwd)
     assert info.returncode == 0, info.stdout + info.stderr
     counts = {line.split()[0]: int(line.split()[2]) for line in info.stdout.splitlines()

@@ -3,7 +3,7 @@ A real-time plant that stalls catches up without its sources missing a deadline.
 
 The machine may take the plant's CPU for a few milliseconds (docs/nodes.md, "Real time");
 the plant then starts its next steps late and catches up. Each of those steps must still give
-its sources time to answer (:data:`pentapod_sim.nodes.realtime_loop.ANSWER_WINDOW`): the run
+its sources time to answer (:data:`pentapod_sim.sim.realtime.ANSWER_WINDOW`): the run
 then equals the lockstep run bit for bit, and no miss is blamed on a source that answered as
 fast as it could.
 """

@@ -18,6 +18,7 @@ import pytest
 import yaml
 
 from fixtures.demo_model import demo_model
+from fixtures.stopping import stop_handlers  # noqa: F401  (a fixture)
 from pentapod_sim.analysis.bag.reader import open_bag
 from pentapod_sim.scenario.files import dump_params
 from pentapod_sim.sim.stepping import ForceMixer, ForceSource
@@ -150,6 +151,8 @@ def test_a_stop_signal_ends_every_process_cleanly(tmp_path, runner_of, sig, targ
     assert 'Traceback' not in out and 'FATAL' not in out, out
     name = signal.Signals(sig).name
     assert f'stopped by {name}: ran ' in out, out
+    if target != 'plant':   # the sources got the signal before the plant announced the end
+        assert "the plant's run ended" not in out, out
     trace = np.load(tmp_path / 'trace.npz')
     n = int(trace['steps_run'])
     assert 0 < n < LONG and trace['y'].shape[0] == trace['u'].shape[0] == n
@@ -162,6 +165,54 @@ def test_a_stop_signal_ends_every_process_cleanly(tmp_path, runner_of, sig, targ
     read = open_bag(bag)
     assert counts and {t: read.topic(t).count for t in counts} == counts
     assert counts['/pentapod/tcp_state'] >= n - 1
+
+
+def test_a_finished_run_reads_as_finished(tmp_path, runner_of):
+    """
+    The runner stops the sources after the plant finished: each says so and exits 0.
+
+    Exciter, damper and a user's controller (the example) answer; the recorder closes its bag
+    by itself first. No node reports ``stopped by SIGINT``.
+    """
+    path = scenario(tmp_path, steps=400)
+    doc = yaml.safe_load(path.read_text())
+    doc['example_controller'] = {'ros__parameters': {'gain': 500.0}}
+    doc['plant']['ros__parameters']['sources'].append('example')
+    path.write_text(dump_params(doc))
+    run = runner_of(path)
+    code = run.proc.wait(timeout=180)
+    out = run.text()
+    assert code == 0, out
+    assert 'finished: ran 400 of 400 steps' in out, out
+    assert 'stopped by' not in out and 'Traceback' not in out, out
+    sources = ['exciter', 'damper', 'example_controller']
+    for node in sources:
+        assert f"[{node}]: the plant's run ended (finished); stopped" in out, out
+    line = next(x for x in out.splitlines() if 'stopped after the plant ended: ' in x)
+    stopped = dict(re.findall(r'(\w+) \(([^)]*)\)', line.split('ended: ')[1]))
+    assert stopped == dict.fromkeys(sources, 'exited with code 0'), line
+    assert metadata_counts(tmp_path / 'bags' / 'run')['/pentapod/tcp_state'] == 400
+
+
+@pytest.mark.usefixtures('stop_handlers')
+def test_only_an_end_announced_before_the_stop_signal_explains_it():
+    """A source's watch of the run status: finished, then a new run, then a stop's status."""
+    import logging
+    from types import SimpleNamespace
+
+    from pentapod_sim import interface, shutdown
+    from pentapod_sim.nodes.run_status import PlantRunWatch
+    node = SimpleNamespace(get_logger=lambda: logging.getLogger('source'),
+                           create_subscription=lambda *args: None)
+    watch = PlantRunWatch(node)
+    assert not watch.explains_stop()                  # no run seen
+    watch.on_status(SimpleNamespace(message=interface.RUN_FINISHED))
+    assert watch.explains_stop()
+    watch.on_status(SimpleNamespace(message=interface.RUN_RUNNING))  # a new run started
+    assert not watch.explains_stop()
+    shutdown.request(signal.SIGINT)
+    watch.on_status(SimpleNamespace(message=interface.RUN_STOPPED))  # stopped by that signal
+    assert not watch.explains_stop()
 
 
 def test_a_stop_signal_during_start_up_ends_the_wait_at_once(tmp_path, runner_of):

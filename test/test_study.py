@@ -12,7 +12,7 @@ from pentapod_damper.study.analytic import discrete_frf, improvement_share, pma_
 from pentapod_damper.study.config import load_study_config
 from pentapod_damper.study.pipeline import PositionModel, scenario_analytic
 from pentapod_damper.study.report import peak_rows, struts12_share, StudyResults, summary_rows
-from pentapod_damper.study.runs import run_sections
+from pentapod_damper.study.runs import study_scenario
 from pentapod_sim.errors import ConfigError
 from pentapod_sim.plant.frf import closed_loop_frf
 from pentapod_sim.plant.ports import collocated_output
@@ -96,18 +96,24 @@ def test_filtered_pma_has_no_viscous_equivalent():
         continuous_dampers([law])
 
 
-def test_run_file_applies_study_settings_and_adds_a_recorder(tmp_path):
-    cfg = load_study_config(duration=4.0)
-    doc = run_sections('pma_5kg', 'P1', tmp_path / 'm.npz', cfg, tmp_path / 'bag',
-                       {'model_hash': 'abc'})
-    plant = doc['plant']['ros__parameters']
-    assert plant['position'] == 'P1' and plant['duration'] == 4.0
-    assert plant['model_file'] == str(tmp_path / 'm.npz')
-    assert doc['exciter']['ros__parameters']['amplitude'] == cfg.amplitude
-    assert doc['/**']['ros__parameters']['sample_rate'] == cfg.sample_rate
-    rec = doc['recorder']['ros__parameters']
-    assert rec['bag_name'] == 'bag' and yaml.safe_load(rec['run_info'])['model_hash'] == 'abc'
-    assert doc['pma']['ros__parameters']['proof_mass'] == 5.0
+def test_a_run_applies_study_settings_and_adds_a_recorder(tmp_path):
+    """The study's typed settings reach every node's typed parameters, and its file."""
+    cfg = load_study_config(duration=4.0, sample_rate=2500.0)
+    run = study_scenario('pma_5kg', 'P1', tmp_path / 'm.npz', cfg, tmp_path / 'bag',
+                         {'model_hash': 'abc'})
+    plant = run.plant.params
+    assert (plant.position, plant.duration, plant.model_file) == ('P1', 4.0,
+                                                                   str(tmp_path / 'm.npz'))
+    assert run.node('exciter').params.amplitude == cfg.amplitude
+    for name in ('plant', 'exciter', 'pma'):
+        assert run.node(name).params.dt == cfg.dt == 1 / 2500.0, name
+        assert run.node(name).params.wait_for_subscribers == ('recorder',), name
+    rec = run.node('recorder').params
+    assert rec.bag_name == 'bag' and yaml.safe_load(rec.run_info)['model_hash'] == 'abc'
+    assert run.node('pma').params.proof_mass == 5.0
+    assert [n.name for n in run.nodes] == ['exciter', 'pma', 'recorder', 'plant']  # file order
+    doc = run.write(tmp_path / 'scenario.yaml').read_text()      # the run's one file
+    assert '/**' not in doc and doc.count("'sample_rate': 2500.0") == 3
 
 
 @pytest.mark.parametrize('override, message', [

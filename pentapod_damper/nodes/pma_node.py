@@ -19,7 +19,7 @@ import array
 
 from sensor_msgs.msg import JointState
 
-from pentapod_damper.node_parameters import PMA, pma_law
+from pentapod_damper.node_parameters import PmaParams
 from pentapod_sim.interface import PMA_STATE
 from pentapod_sim.nodes.common import run_node
 from pentapod_sim.nodes.lockstep_source import LockstepSource
@@ -29,9 +29,11 @@ from pentapod_sim.sim.controllers import controller_of, DiscreteController
 class PmaNode(LockstepSource):
     """Proof-mass actuator as a lockstep force source."""
 
+    Params = PmaParams
+
     def __init__(self, **kwargs):
-        super().__init__('pma', PMA, **kwargs)
-        self.law = pma_law(self.params, 1.0 / self.params.sample_rate)
+        super().__init__('pma', **kwargs)
+        self.law = self.params.law()
         self.setup(self.law.sensor_ports, self.law.actuator_ports)
         self.joints = [p.replace('pma_force_', 'pma_') for p in self.law.actuator_ports]
         self.state_out = self.info_outlet(JointState, PMA_STATE)
@@ -64,7 +66,7 @@ class PmaNode(LockstepSource):
 
 def main(argv=None) -> int:
     """Entry point of ``ros2 run pentapod_testbed pma``."""
-    return run_node(PmaNode, argv, table=PMA)
+    return run_node(PmaNode, argv)
 
 
 if __name__ == '__main__':

@@ -16,6 +16,7 @@ from typing import Any
 
 from pentapod_sim.errors import ConfigError
 from pentapod_sim.fe.machine_data import load_positions
+from pentapod_sim.parameters import sample_time
 from pentapod_sim.paths import config_dir
 from pentapod_sim.plant.config import FrequencyGrid
 from pentapod_sim.scenario.files import scenario_names
@@ -129,6 +130,11 @@ class StudyConfig:
     damping_amplitude: float
     damping_periods: int
     damping_time_constants: float
+
+    @property
+    def dt(self) -> float:
+        """Sample time [s] of every run (:func:`pentapod_sim.parameters.sample_time`)."""
+        return sample_time(self.sample_rate)
 
 
 @dataclass(frozen=True)

@@ -4,10 +4,10 @@ What the dampers' actuator/sensor dynamics buy (truncation check) and cost (damp
 For every damping scenario with viscous dampers and every position, the sampled loop at the
 study's sample rate is built twice: as the scenario file configures it (the *buildable*
 default: gain, low-pass and delay of its damper nodes) and as the *ideal* sampled damper (the
-node's default gain, :data:`pentapod_damper.node_parameters.DAMPER`, the paper's or the best
-value of the gain sweep, with no dynamics: u_k answers y_k through a zero-order hold). Each is
-checked on the plant and on the check model (:func:`pentapod_sim.sim.stability.check_loop`),
-and its exact TCP peak reduction is computed
+node's default gain, :class:`pentapod_damper.node_parameters.DamperParams`, the paper's or the
+best value of the gain sweep, with no dynamics: u_k answers y_k through a zero-order hold).
+Each is checked on the plant and on the check model
+(:func:`pentapod_sim.sim.stability.check_loop`), and its exact TCP peak reduction is computed
 (:class:`pentapod_damper.study.analytic.SampledPairFrf`, searched at the resonances) against the
 exact open-loop peak. ``--try order,bandwidth_hz,delay_steps`` replaces the scenario's dynamics
 to compare candidates; ``--markdown`` prints the table of
@@ -24,7 +24,7 @@ from __future__ import annotations
 import sys
 
 from pentapod_damper.laws import Dynamics, ViscousDamper
-from pentapod_damper.node_parameters import DAMPER, DYNAMICS_PARAMS
+from pentapod_damper.node_parameters import DamperParams, DynamicsParams
 from pentapod_damper.scenario_laws import scenario_laws
 from pentapod_damper.study.analytic import SampledPairFrf
 from pentapod_damper.study.config import load_study_config
@@ -44,8 +44,8 @@ SCENARIOS = ('strut_damping_all', 'strut_damping_12', 'strut_chord_damping_all',
 
 #: Damper node parameters that set its gains and dynamics (from the node's table); the ideal
 #: variant drops them, so the node's defaults apply.
-_LAW_KEYS = frozenset([p.name for p in DYNAMICS_PARAMS]
-                      + [p.name for p in DAMPER.params if p.name.endswith('_gain')])
+_LAW_KEYS = frozenset([p.name for p in DynamicsParams.ros_params()]
+                      + [p.name for p in DamperParams.ros_params() if p.name.endswith('_gain')])
 
 
 def ideal_laws(scenario: str, dt: float) -> list:

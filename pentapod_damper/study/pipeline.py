@@ -18,7 +18,7 @@ from typing import Callable
 
 import numpy as np
 
-from pentapod_damper.node_parameters import PMA
+from pentapod_damper.node_parameters import PmaParams
 from pentapod_damper.scenario_laws import continuous_dampers, scenario_laws
 from pentapod_damper.study.analytic import (
     continuous_frf,
@@ -148,7 +148,7 @@ def scenario_analytic(model: PositionModel, scenario: str, cfg: StudyConfig,
     pma = {}
     for name, params in sections.items():
         if name.startswith('pma'):
-            values = PMA.values(params, f'node {name!r}')     # the PMA node's defaults
+            values = PmaParams.build(params, f'node {name!r}')    # the PMA node's defaults
             pma = {'mass': values.proof_mass, 'gain': values.gain,
                    'directions': values.directions}
     return ScenarioAnalytic(scenario, laws, dampers, cont, disc, pma, frf, peak, loop, sampled)

@@ -1,9 +1,10 @@
 """
-One study run on the testbed: write its parameter file, start the nodes, keep the bag.
+One study run on the testbed: its scenario with the study's settings, the nodes, the bag.
 
-A run's parameter file is the scenario file (config/scenarios/<name>.yaml) with the study's
-settings applied (position, model file, sample rate, excitation) and a recorder node added;
-it is stored next to the bag, so every run can be repeated with
+A run is the scenario (config/scenarios/<name>.yaml, read and checked once) with the study's
+typed settings applied to its nodes' typed parameters (position, model file, sample rate,
+excitation) and a recorder node added (:func:`study_scenario`). The runner writes it as the
+run's one parameter file next to the bag, so every run can be repeated with
 ``python -m pentapod_sim.scenario.runner <run folder>/scenario.yaml``.
 """
 from __future__ import annotations
@@ -23,7 +24,8 @@ from pentapod_damper.study.config import StudyConfig
 from pentapod_sim import __version__
 from pentapod_sim.errors import RunError
 from pentapod_sim.interface import EXCITATION, excitation_spec_topic, PMA_STATE, TCP_STATE
-from pentapod_sim.scenario.files import dump_params, read_scenario
+from pentapod_sim.registry import PLANT, RECORDER
+from pentapod_sim.scenario.files import read_scenario, Scenario
 from pentapod_sim.scenario.runner import run_scenario
 from pentapod_sim.scenario.warm_start import WarmStarter
 
@@ -78,44 +80,47 @@ def damping_excitation(cfg: StudyConfig, settle: float) -> dict[str, Any]:
             'duration': (settle_periods + cfg.damping_periods) * period}
 
 
-def run_sections(scenario: str, position: str, model_file: Path, cfg: StudyConfig,
-                 bag_dir: Path, run_info: dict, kind: str = 'random',
-                 exciter: dict | None = None) -> dict:
+def study_scenario(scenario: str, position: str, model_file: Path, cfg: StudyConfig,
+                   bag_dir: Path, run_info: dict, kind: str = 'random',
+                   exciter: dict | None = None) -> Scenario:
     """
-    Node sections of one run: the scenario's, with the study settings and a recorder.
+    One run: the scenario's nodes with the study settings, and a recorder (typed, checked).
 
-    ``exciter`` replaces the exciter parameters of ``kind`` (damping runs); the run then lasts
-    the exciter's ``duration``.
-
-    Returns
-    -------
-    dict
-        A ROS 2 parameter file as a mapping (``node: {ros__parameters: {...}}``).
+    Every node at the study's sample rate; ``exciter`` replaces the exciter parameters of
+    ``kind`` (damping runs), and the run then lasts the exciter's ``duration``. The
+    scenario's own recorders are replaced by the run's, which every node waits for.
     """
-    sections = read_scenario(scenario).sections
+    base = read_scenario(scenario)
+    run = base.without(n.name for n in base.of_role(RECORDER) if n.name != 'recorder')
     duration = run_duration(cfg, kind, exciter)
-    doc: dict[str, Any] = {'/**': {'ros__parameters': {'sample_rate': cfg.sample_rate}}}
-    for name, params in sections.items():
-        params = {k: v for k, v in params.items() if k != 'sample_rate'}   # from /** only
-        if name.startswith('plant'):
+    for node in run.nodes:
+        changes: dict[str, Any] = {}
+        if hasattr(node.params, 'sample_rate'):
+            changes['sample_rate'] = cfg.sample_rate
+        if hasattr(node.params, 'wait_for_subscribers'):
+            # nothing is published before the recorder is matched (plant: step 0; sources:
+            # their first answer), so the bag holds every step
+            changes['wait_for_subscribers'] = ['recorder']
+        if node.role == PLANT:
             # the study checks every loop against its check model itself
             # (pipeline.scenario_analytic): the plant's start-up check would repeat it
-            params.update(position=position, model_file=str(model_file), duration=duration,
-                          timing='lockstep', steps=0, output_file='', loop_check='off',
-                          # the waited-for recorder gets every step even if it matches late
-                          # (transient-local per-step writers; in a composition the hand-off)
-                          subscriber_settle=0.0)
-        elif name.startswith('exciter'):
-            params = dict(exciter) if exciter else excitation_params(cfg, kind)
-        # nothing is published before the recorder is matched (plant: step 0; sources: their
-        # first answer), so the bag holds every step
-        params['wait_for_subscribers'] = ['recorder']
-        doc[name] = {'ros__parameters': params}
-    info = dict(run_info, scenario_parameters=dict(doc))   # the nodes' sections, as run
-    doc['recorder'] = {'ros__parameters': {
+            changes.update(position=position, model_file=str(model_file), duration=duration,
+                           timing='lockstep', steps=0, output_file='', loop_check='off',
+                           # the waited-for recorder gets every step even if it matches late
+                           # (transient-local per-step writers; in a composition the hand-off)
+                           subscriber_settle=0.0)
+        if node.role == RECORDER:
+            continue                              # replaced below
+        if node.kind == 'exciter':
+            signal = dict(exciter) if exciter else excitation_params(cfg, kind)
+            run = run.with_node(node.name, {**signal, **changes})
+        else:
+            run = run.with_params(node.name, **changes)
+    info = dict(run_info, scenario_parameters={   # the nodes' sections, as run
+        name: {'ros__parameters': section} for name, section in run.sections.items()})
+    return run.with_node('recorder', {
         'topics': RECORDED_TOPICS, 'output_dir': str(bag_dir.parent), 'bag_name': bag_dir.name,
-        'run_info': yaml.safe_dump(info, sort_keys=False)}}
-    return doc
+        'run_info': yaml.safe_dump(info, sort_keys=False)})
 
 
 def run_duration(cfg: StudyConfig, kind: str, exciter: dict | None = None) -> float:
@@ -149,13 +154,12 @@ def run_on_testbed(scenario: str, position: str, model_file: Path, model_hash: s
     info = {'study_run': name, 'scenario': scenario, 'position': position,
             'excitation': kind, 'model_file': str(model_file), 'model_hash': model_hash,
             'sample_rate': cfg.sample_rate, 'package_version': __version__}
-    doc = run_sections(scenario, position, model_file, cfg, bag_dir, info, kind, exciter)
+    run = study_scenario(scenario, position, model_file, cfg, bag_dir, info, kind, exciter)
     params_file = run_dir / 'scenario.yaml'
-    params_file.write_text(dump_params(doc))
     env = dict(os.environ, ROS_LOG_DIR=str(run_dir / 'ros_log'))
     t0 = time.perf_counter()
-    code = run_scenario(params_file, {}, timeout, env, log_dir=run_dir / 'logs',
-                        composed=composed, warm=WARM)
+    code = run_scenario(run, {}, timeout, env, log_dir=run_dir / 'logs', composed=composed,
+                        warm=WARM, params_file=params_file)
     wall = time.perf_counter() - t0
     if code != 0:
         errors = [line.strip() for log in sorted((run_dir / 'logs').glob('*.log'))

@@ -22,6 +22,7 @@ from pentapod_sim.errors import UnreachablePoseError
 from pentapod_sim.fe.assembly import build_model
 from pentapod_sim.modes.causes import strain_energy_shares, tcp_directions
 from pentapod_sim.modes.solver import solve_modes
+from pentapod_sim.parameters import sample_time
 from pentapod_sim.plant.build import plant_from_fe, reduce_plant
 
 #: Stiffness groups whose modes count as frame modes (the paper's frame modes are caused by
@@ -114,7 +115,7 @@ def first_modes(fe, f_max: float) -> dict:
 
 def loops_of(settings: SweepSettings) -> dict[str, Loop]:
     """Column label -> damped loop of every scenario and gain factor."""
-    dt = 1.0 / settings.sample_rate
+    dt = sample_time(settings.sample_rate)
     return {label: Loop(settings.sections[name], dt, factor)
             for label, name, factor in settings.labels()}
 
@@ -128,7 +129,7 @@ def evaluate(pose: np.ndarray, settings: SweepSettings) -> dict:
     row['n_modes_kept'] = plant.n_modes
     freq = np.linspace(*settings.freq[:2], int(settings.freq[2]))
     row.update(loop_columns(plant, loops_of(settings), freq, settings.band,
-                            1.0 / settings.sample_rate, settings.pma_force_amplitude,
+                            sample_time(settings.sample_rate), settings.pma_force_amplitude,
                             settings.share_labels()))
     return row
 

@@ -40,6 +40,7 @@ from pentapod_sim.cli import (
 from pentapod_sim.cli.statespace_tune import add_tune_parser
 from pentapod_sim.errors import ConfigError
 from pentapod_sim.fe.model import FEModel
+from pentapod_sim.parameters import sample_time
 from pentapod_sim.plant import frf, frf_plot, reduction
 from pentapod_sim.plant.build import (
     config_damping,
@@ -238,7 +239,8 @@ def _sampled_loop_check(args: argparse.Namespace, position: str, plant: PlantMod
     f_max = check_f_max(rate, args.check_f_min)
     check = check_model_from_fe(args.fe_model, args.cfg, f_max,
                                 lambda msg: LOGGER.info('check model: %s', msg))
-    result = check_loop(plant, check, laws, 1.0 / rate, args.on_unstable, label=position)
+    result = check_loop(plant, check, laws, sample_time(rate), args.on_unstable,
+                        label=position)
     print(result.summary())
     return result
 
@@ -252,7 +254,7 @@ def _loop_poles(args: argparse.Namespace, position: str, plant: PlantModel,
     """Poles per mode (below the FRF band's top) of the sampled and continuous loop: CSV."""
     from pentapod_sim.sim.loop_poles import closed_loop_poles, continuous_loop_poles
     rate = args.sample_rate or args.cfg.sample_rate
-    sampled = closed_loop_poles(plant, laws, 1.0 / rate)
+    sampled = closed_loop_poles(plant, laws, sample_time(rate))
     cont = continuous_loop_poles(plant, laws)
     rows = []
     for i in map(int, np.flatnonzero(plant.frequencies_hz <= args.cfg.frequency.f_max)):

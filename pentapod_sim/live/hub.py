@@ -32,10 +32,10 @@ import numpy.typing as npt
 from pentapod_sim import interface
 from pentapod_sim.errors import ConfigError
 from pentapod_sim.live.envelope import Sample
+from pentapod_sim.live.params import LiveViewParams
 from pentapod_sim.live.spectrum import RunningSpectrum
 from pentapod_sim.live.status import RunStatus, STATUS_NAMES
 from pentapod_sim.live.streams import BatchStream, Shape, TopicStream
-from pentapod_sim.parameters import Values
 from pentapod_sim.recording.msgdefs import message_definition
 
 LOGGER = logging.getLogger(__name__)
@@ -86,8 +86,8 @@ class LiveHub:
 
     Parameters
     ----------
-    params : Values
-        The node's values (:data:`pentapod_sim.live.params.LIVE_VIEW`).
+    params : LiveViewParams
+        The node's parameters (:class:`pentapod_sim.live.params.LiveViewParams`).
     encoder : Encoder
         Message serialiser.
     clock : callable
@@ -96,7 +96,7 @@ class LiveHub:
         Called by the worker at the start of every pass to fill the topic streams.
     """
 
-    def __init__(self, params: Values, encoder: Encoder,
+    def __init__(self, params: LiveViewParams, encoder: Encoder,
                  clock: Callable[[], float] = time.monotonic,
                  poll: Callable[[], None] = lambda: None):
         self.p, self.encoder, self.clock, self.poll = params, encoder, clock, poll

@@ -84,21 +84,34 @@ class AnswerPoller:
 
     Parameters
     ----------
-    node : PlantNode
-        Its ``force_subs`` (source -> subscription), ``mixer`` and ``_on_force`` are used.
+    node : rclpy.node.Node
+        The plant node (graph queries, the drain's topic, the log).
+    inputs : ForceInputs
+        The plant's force subscriptions (:mod:`pentapod_sim.nodes.force_inputs`).
     poll_time : float
         Longest poll per step [s] (parameter ``answer_poll_time``; 0: never).
     """
 
-    def __init__(self, node, poll_time: float):
+    def __init__(self, node, inputs, poll_time: float):
         self.node = node
+        self.inputs = inputs
         self.poll_time = poll_time
         self.cpus = usable_cpus()
         self.active = False
-        self.running = False     # the lockstep run started: changes are logged from then on
+        self.logging = False     # the lockstep run started: changes are logged from then on
+        self.composed = False    # a composed plant drains the executor itself
         self.peers: set = set()
         self.polled = 0          # steps whose answers all came by polling
         self.drain: Drain | None = None
+
+    def in_composition(self) -> None:
+        """
+        A composed plant: never poll.
+
+        Its in-process sources answer inside its publish, and it drains the executor itself
+        (:func:`pentapod_sim.nodes.local_bus.connect`).
+        """
+        self.composed = True
 
     def prepare(self) -> None:
         """
@@ -107,13 +120,18 @@ class AnswerPoller:
         Until it has, a drain runs one queued event only, and the events of the answers taken
         by polling would bury the timers' (the run status stopped for whole runs so).
         """
-        if (self.poll_time > 0 and self.node.force_subs and self.drain is None
-                and self.node.drain is None):     # a composed plant drains anyway
+        if (self.poll_time > 0 and self.inputs.on_dds() and self.drain is None
+                and not self.composed):
             self.drain = Drain(self.node, POLL_DRAIN_PERIOD)
 
-    def refresh(self, output_topics: Iterable[str], force_topics: Iterable[str]) -> None:
+    def start(self, log_changes: bool) -> None:
+        """The run starts: from now on log when polling turns on or off (if ``log_changes``)."""
+        self.logging = log_changes
+
+    def refresh(self, output_topics: Iterable[str], force_topics: Iterable[str],
+                step: int) -> None:
         """Apply :func:`polling_pays` to the graph as it is now (log a change during the run)."""
-        if self.poll_time <= 0 or not self.node.force_subs:
+        if self.poll_time <= 0 or not self.inputs.on_dds():
             self.active = False
             return
         self.prepare()
@@ -121,8 +139,8 @@ class AnswerPoller:
         self.peers = busy_peers(self.node, output_topics, force_topics)
         self.active = (polling_pays(self.poll_time, self.cpus, len(self.peers))
                        and self.drain is not None and self.drain.ready())
-        if self.running and self.active != was:
-            self.node.get_logger().info(f'from step {self.node.core.k} on, {self.describe()}')
+        if self.logging and self.active != was:
+            self.node.get_logger().info(f'from step {step} on, {self.describe()}')
 
     def describe(self) -> str:
         """One line for the log: polling or not, and why."""
@@ -136,25 +154,19 @@ class AnswerPoller:
 
     def poll(self, step: int) -> None:
         """Take step ``step``'s answers from the subscriptions until all are in or time is up."""
-        subs, on_force, mixer = self.node.force_subs, self.node._on_force, self.node.mixer
+        if not self.active:
+            return
         end = time.perf_counter() + self.poll_time
-        while True:
-            waiting = mixer.missing(step)
-            if not waiting:
-                self.polled += 1
-                return
-            for name in waiting:
-                sub = subs.get(name)
-                if sub is None:
-                    continue
-                with sub.handle:
-                    taken = sub.handle.take_message(sub.msg_type, sub.raw)
-                if taken is not None:
-                    on_force(name, taken[0])
+        while not self.inputs.take_waiting(step):
             if time.perf_counter() > end:
                 return
+        self.polled += 1
 
     def tick(self, executor) -> None:
-        """Let the executor run what queued up meanwhile (every DRAIN_PERIOD s)."""
-        if self.drain is not None:
+        """While polling: let the executor run what queued up meanwhile (every drain period)."""
+        if self.active and self.drain is not None:
             self.drain.tick(executor)
+
+    def polled_steps(self) -> int:
+        """Steps whose answers all came by polling."""
+        return self.polled

@@ -1,9 +1,9 @@
 """
-Shared pieces of the testbed nodes: QoS constants, parameters, stamps, spinning, main().
+Shared pieces of the testbed nodes: QoS constants, stamps, spinning, main().
 
-Every node declares its parameters from its table (:mod:`pentapod_sim.parameters`) with
-:func:`declare_table`, which refuses unknown override names; :func:`run_node` prints the
-table for ``--help`` and each error once.
+Every node declares its parameters from its ``Params`` class
+(:class:`pentapod_sim.nodes.testbed_node.TestbedNode`); :func:`run_node` prints them for
+``--help`` and each error once.
 
 Every node spins with ``spin_once`` loops on rclpy's EventsExecutor (about 5x faster per
 round trip than the default executor here; its ``spin()`` hung in tests, ``spin_once`` does
@@ -12,14 +12,12 @@ not), falling back to the SingleThreadedExecutor if it is missing.
 from __future__ import annotations
 
 import gc
-import math
 import os
 import sys
 import time
 from typing import Callable
 
 from builtin_interfaces.msg import Time
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType
 import rclpy
 from rclpy.duration import Duration
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
@@ -30,8 +28,8 @@ from rclpy.utilities import remove_ros_args
 
 from pentapod_sim import interface, shutdown
 from pentapod_sim.errors import ConfigError, RunError
-from pentapod_sim.nodes.overrides import override_origins
-from pentapod_sim.parameters import all_tables, Param, ParameterTable, Values
+from pentapod_sim.nodes.testbed_node import usage
+from pentapod_sim.scenario import network
 
 RCLError = rclpy_implementation.RCLError
 
@@ -61,116 +59,6 @@ INFO_QOS = qos('info')
 #: published from now on, none of a writer's history.
 STATE_SUB_QOS = qos('state', fresh=True)
 FORCE_SUB_QOS = qos('force', fresh=True)
-
-_TYPES = {'bool': ParameterType.PARAMETER_BOOL, 'int': ParameterType.PARAMETER_INTEGER,
-          'float': ParameterType.PARAMETER_DOUBLE, 'str': ParameterType.PARAMETER_STRING,
-          'double[]': ParameterType.PARAMETER_DOUBLE_ARRAY,
-          'integer[]': ParameterType.PARAMETER_INTEGER_ARRAY,
-          'string[]': ParameterType.PARAMETER_STRING_ARRAY}
-_INT64 = 2 ** 63 - 1
-#: The arguments run_node gave rclpy.init (None: a node started otherwise; sys.argv is used).
-_process_args: list[str] | None = None
-
-
-def descriptor(param: Param) -> ParameterDescriptor:
-    """ROS parameter descriptor of a table entry: type, description with unit, range."""
-    desc = ParameterDescriptor(type=_TYPES[param.type], read_only=param.read_only,
-                               description=param.full_description(),
-                               additional_constraints=param.range_text())
-    if param.type == 'float' and (param.low is not None or param.high is not None):
-        desc.floating_point_range = [FloatingPointRange(
-            from_value=-math.inf if param.low is None else float(param.low),
-            to_value=math.inf if param.high is None else float(param.high), step=0.0)]
-    elif param.type == 'int' and (param.low is not None or param.high is not None):
-        desc.integer_range = [IntegerRange(
-            from_value=-_INT64 if param.low is None else int(param.low),
-            to_value=_INT64 if param.high is None else int(param.high), step=1)]
-    return desc
-
-
-def node_args(cli_args=None) -> list[str]:
-    """Command-line arguments that reached a node: the process's and its own ``cli_args``."""
-    process = sys.argv if _process_args is None else _process_args
-    return list(process) + list(cli_args or [])
-
-
-def declare_param(node, table: ParameterTable, name: str, default=None):
-    """
-    Declare one parameter of ``table`` and return its value as the node uses it.
-
-    ``name`` may be an instance of a placeholder name (``source_ports.damper``). A value the
-    table refuses raises ConfigError naming the node, the parameter and the value.
-    """
-    param = table[name]
-    value = param.default if default is None else default
-    override = node._parameter_overrides.get(name)
-    where = f'node {node.get_name()!r}'
-    # rclpy types a parameter by its default and takes [] for a byte array: an empty list is
-    # declared as its "none" mark ([''] or [0]), an override as itself (once checked)
-    empty = [param.none_mark] if param.none_mark is not None else value
-    try:
-        if override is not None and override.value is None and param.is_array:
-            # an empty list in a parameter file arrives untyped: it is the empty list
-            declared = node.declare_parameter(name, empty, descriptor(param),
-                                              ignore_override=True)
-        else:
-            if override is not None:
-                table.check({name: override.value}, where)
-                value = override.value
-            declared = node.declare_parameter(name, empty if value == [] else value,
-                                              descriptor(param))
-    except ConfigError:
-        raise
-    except Exception as err:  # rclpy raises several types for bad overrides
-        raise ConfigError(f'{where}: parameter {name!r}: {err}') from None
-    return param.clean(declared.value)
-
-
-def declare_table(node, table: ParameterTable, args=None, defaults=None) -> Values:
-    """
-    Declare every plain parameter of ``table`` on ``node`` and return the typed values.
-
-    First every override given to the node (``-p``, ``--params-file``, constructor) is
-    checked: a name the table does not know is refused with a ConfigError naming the closest
-    known one, unless it reaches the node only through a wildcard section (``/**``) and some
-    node executable declares it (see :mod:`pentapod_sim.nodes.overrides`).
-
-    Parameters
-    ----------
-    node : rclpy.node.Node
-        The node, created with ``allow_undeclared_parameters=False`` (rclpy's default).
-    table : ParameterTable
-        Its parameters.
-    args : sequence of str, optional
-        The command line the overrides came from (default :func:`node_args`).
-    defaults : dict, optional
-        Defaults known only at run time (``source_name``: the node's name).
-    """
-    refuse_unknown_overrides(node, table, node_args() if args is None else args)
-    defaults = defaults or {}
-    return Values(table, {p.name: declare_param(node, table, p.name, defaults.get(p.name))
-                          for p in table if p.pattern is None})
-
-
-def refuse_unknown_overrides(node, table: ParameterTable, args) -> None:
-    """
-    ConfigError for an override the node does not know (see :func:`declare_table`).
-
-    rclpy keeps the overrides of a node in ``Node._parameter_overrides`` (filled from rcl
-    in the constructor; there is no public getter). With ``allow_undeclared_parameters=False``
-    rclpy silently drops overrides that are never declared, so they are compared here with
-    the table and the parameters rclpy declared itself (``use_sim_time``, ...).
-    """
-    unknown = [name for name in node._parameter_overrides
-               if name not in table and not node.has_parameter(name)]
-    if not unknown:
-        return
-    origins = override_origins(args, node.get_name(), node.get_fully_qualified_name())
-    for name in unknown:
-        if name in origins.shared and name not in origins.own and any(
-                name in other for other in all_tables().values()):
-            continue                    # a shared /** entry meant for other nodes
-        raise table.unknown(name, f'node {node.get_name()!r}')
 
 
 def freeze_start_up() -> None:
@@ -231,8 +119,6 @@ def subscribers_of(node, publisher) -> tuple[set, bool]:
     return {info.node_name for info in graph}, publisher.get_subscription_count() >= len(graph)
 
 
-#: Wall time [s] between two checks of the plant's force topics' publishers during a run.
-GRAPH_CHECK_PERIOD = 0.25
 #: Wall time [s] a second publisher on a force topic gets to be discovered by node name.
 NAME_DISCOVERY = 2.0
 _UNKNOWN_NAME = '_NODE_NAME_UNKNOWN_'
@@ -291,32 +177,32 @@ def wants_help(args) -> bool:
     return any(a in ('-h', '--help') for a in remove_ros_args(list(args))[1:])
 
 
-def usage(table: ParameterTable) -> str:
-    """``--help`` text of a node executable: usage line, summary and parameter table."""
-    return (f'usage: ros2 run pentapod_testbed {table.node} [--ros-args [-p NAME:=VALUE] ... '
-            f'[--params-file FILE] ...]\n\n{table.node}: {table.summary}\n\n'
-            f'parameters (docs/parameters.md):\n{table.text()}')
-
-
 def run_node(factory: Callable[..., object], argv=None, run: Callable | None = None, *,
-             table: ParameterTable | None = None, executor: Callable = make_executor) -> int:
+             executor: Callable = make_executor) -> int:
     """
     Jazzy-style main: init, build the node, spin or ``run(node, executor)``, clean shutdown.
 
-    ``--help`` prints the usage and ``table`` and starts nothing. Returns 0 on a clean end,
+    For a node class ``factory``, ``--help`` prints its usage and parameters and starts
+    nothing. Returns 0 on a clean end,
     1 after printing one ``error: ...`` line on a ConfigError/RunError, and 128 + the signal
-    number after a clean stop on SIGINT, SIGTERM or SIGHUP (:mod:`pentapod_sim.shutdown`).
+    number after a clean stop on SIGINT, SIGTERM or SIGHUP (:mod:`pentapod_sim.shutdown`),
+    unless the node's ``stopped_after_run_end()`` says (and logs) that the plant's run had
+    ended before the signal: a source stopped after the run it served is a clean end, 0
+    (:class:`pentapod_sim.nodes.run_status.PlantRunWatch`).
     """
-    global _process_args
     args = list(sys.argv if argv is None else argv)
     try:
-        if table is not None and wants_help(args):
-            print(usage(table))
+        if isinstance(factory, type) and wants_help(args):
+            print(usage(factory))
             return 0
     except RCLError as err:            # e.g. a parameter file rcl cannot parse
         print(f'error: {str(err).splitlines()[0]}', file=sys.stderr)
         return 1
-    _process_args = args
+    try:                    # DDS on the loopback unless opened (docs/nodes.md, "Isolation")
+        network.prepare_process()
+    except (ConfigError, RunError) as err:
+        print(f'error: {err}', file=sys.stderr)
+        return 1
     # SIGINT/SIGTERM/SIGHUP only request a stop (pentapod_sim.shutdown); rclpy's own handlers
     # would invalidate the context at once, so a node could neither finish its step nor
     # publish, write its files or wait for acknowledgements.
@@ -324,8 +210,10 @@ def run_node(factory: Callable[..., object], argv=None, run: Callable | None = N
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     node = None
     code = 0
+    served = False           # stopped after the plant's run it served had ended
     try:
         node = factory()
+        network.check_sockets()             # the participant's sockets exist by now
         spinner = executor()
         if hasattr(node, 'add_to'):          # several nodes (a composed run)
             node.add_to(spinner)
@@ -344,8 +232,12 @@ def run_node(factory: Callable[..., object], argv=None, run: Callable | None = N
         code = 1
     finally:
         if node is not None:
+            after_end = getattr(node, 'stopped_after_run_end', None)
+            served = code == 0 and shutdown.requested() and callable(after_end) and after_end()
             node.destroy_node()
         rclpy.try_shutdown()
+    if served:
+        return 0
     if code == 0 and shutdown.requested():
         print(f'stopped by {shutdown.signal_name()}', file=sys.stderr)
         code = shutdown.exit_code()

@@ -1,12 +1,13 @@
 """
 A composed run: every node of a scenario in one process, on one executor.
 
-rclpy has no component container, so this module is one: it builds the same node classes that
-run as separate processes (:data:`pentapod_sim.executables.COMPONENTS`, plus a user's
-controller given as ``--component NAME=module:Class``), each with the scenario file as its
-parameter file and its section's name, adds them all to one executor and runs the plant's
-loop. The plant and its in-process lockstep sources hand their per-step messages to each other
-directly, without DDS (:mod:`pentapod_sim.nodes.local_bus`): the sources answer inside the
+rclpy has no component container, so this module is one: it reads the scenario once
+(:func:`pentapod_sim.scenario.files.read_scenario`), builds the same node classes that run as
+separate processes (the registry's, :data:`pentapod_sim.registry.NODES`, and a user's class a
+section names with ``node_class: module:Class``), each with its section's name and its checked
+values as parameter overrides, adds them all to one executor and runs the plant's loop. The
+plant and its in-process lockstep sources hand their per-step messages to each other directly,
+without DDS (:mod:`pentapod_sim.nodes.local_bus`): the sources answer inside the
 plant's publish, a recorder in the composition takes these topics from the hand-off too
 (and writes the bytes DDS would have delivered), and DDS carries a message only to subscribers
 outside that hand-off (the live view, other processes). The arithmetic and the values are the
@@ -14,49 +15,39 @@ same, so the traces and bags equal those of the separate-process run bit for bit
 signals, exit codes and errors behave as for a single node
 (:func:`pentapod_sim.nodes.common.run_node`)::
 
-    python -m pentapod_sim.nodes.composed SCENARIO [--component NAME=module:Class ...]
+    python -m pentapod_sim.nodes.composed SCENARIO
 """
 from __future__ import annotations
 
 import argparse
-import importlib
 import sys
+
+from rclpy.parameter import Parameter
 
 from pentapod_sim import shutdown
 from pentapod_sim.errors import ConfigError
-from pentapod_sim.executables import COMPONENTS
 from pentapod_sim.nodes import local_bus, plant_node
 from pentapod_sim.nodes.common import run_node, spin_until
-from pentapod_sim.scenario.files import read_scenario, resolve
-
-
-def load_class(target: str):
-    """The class of a ``module:Class`` string (ConfigError names a bad one)."""
-    module, _, name = target.partition(':')
-    try:
-        return getattr(importlib.import_module(module), name)
-    except (ImportError, AttributeError, ValueError) as err:
-        raise ConfigError(f'component {target!r}: {err}') from None
+from pentapod_sim.parameters import load_class
+from pentapod_sim.registry import PLANT
+from pentapod_sim.scenario.files import read_scenario, resolve, Scenario
 
 
 class Composition:
     """The nodes of one scenario in this process; the plant is the one that runs the loop."""
 
-    def __init__(self, path, extra: dict[str, str]):
-        scenario = read_scenario(path)
+    def __init__(self, scenario: Scenario):
         self.nodes = []
         self.plant = None
         for node in scenario.nodes:
-            cls = load_class(extra.get(node.name, COMPONENTS[node.executable]))
-            args = ['--ros-args', '-r', f'__node:={node.name}', '--params-file', str(path)]
-            made = cls(cli_args=args)
+            overrides = [Parameter(name, value=value)
+                         for name, value in node.ros_values().items()]
+            made = load_class(node.node_class)(
+                cli_args=['--ros-args', '-r', f'__node:={node.name}'],
+                parameter_overrides=overrides)
             self.nodes.append(made)
-            if node.executable == 'plant':
+            if node.role == PLANT:
                 self.plant = made
-        for name, target in extra.items():
-            if name not in {n.name for n in scenario.nodes}:
-                self.nodes.append(load_class(target)(cli_args=['--ros-args', '-r',
-                                                               f'__node:={name}']))
         self.bus = None
 
     def add_to(self, executor) -> None:
@@ -89,8 +80,7 @@ def run(composition: Composition, executor) -> None:
     try:
         plant_node.run(plant, executor)
     finally:
-        if plant.drain is not None and plant.context.ok():
-            plant.drain.flush(executor, FINAL_DRAIN)
+        plant.flush_bus(executor, FINAL_DRAIN)
     if not shutdown.requested():
         # deliveries still queued in-process: until every recorder drained the announced end
         # (at most the time rclpy's DDS deliveries need), else that time
@@ -109,17 +99,13 @@ def main(argv=None) -> int:
     argv = list(sys.argv if argv is None else argv)
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('scenario', help='scenario name (config/scenarios) or YAML file')
-    parser.add_argument('--component', action='append', default=[], metavar='NAME=MOD:CLASS',
-                        help="a node class of yours for the node NAME (replaces the scenario's "
-                        'executable for that name, or adds a node)')
     args = parser.parse_args(argv[1:])
     try:
-        path = resolve(args.scenario)
-        extra = dict(item.split('=', 1) for item in args.component)
-    except (ConfigError, ValueError) as err:
+        scenario = read_scenario(resolve(args.scenario))
+    except ConfigError as err:
         print(f'error: {err}', file=sys.stderr)
         return 1
-    return run_node(lambda: Composition(path, extra), argv[:1], run)
+    return run_node(lambda: Composition(scenario), argv[:1], run)
 
 
 if __name__ == '__main__':

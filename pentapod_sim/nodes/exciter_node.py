@@ -20,7 +20,7 @@ from pentapod_sim.errors import ConfigError
 from pentapod_sim.interface import EXCITATION, excitation_spec_topic, stamp_ns, step_of
 from pentapod_sim.nodes.common import qos, run_node
 from pentapod_sim.nodes.lockstep_source import LockstepSource
-from pentapod_sim.nodes.parameter_tables import excitation_spec, EXCITER
+from pentapod_sim.nodes.parameter_tables import ExciterParams
 from pentapod_sim.sim.excitation import Excitation
 from pentapod_sim.sim.excitation_spec import spec_message
 
@@ -30,10 +30,12 @@ TCP_PORTS = ['tcp_force_x', 'tcp_force_y', 'tcp_force_z']
 class ExciterNode(LockstepSource):
     """Force source at the TCP driven by /clock."""
 
+    Params = ExciterParams
+
     def __init__(self, **kwargs):
-        super().__init__('exciter', EXCITER, **kwargs)
-        spec = excitation_spec(self.params)
-        self.dt = 1.0 / self.params.sample_rate
+        super().__init__('exciter', **kwargs)
+        spec = self.params.spec()
+        self.dt = self.params.dt
         try:
             self.signal = Excitation(spec, self.dt)
         except ConfigError as err:
@@ -82,7 +84,7 @@ def describe(signal: Excitation) -> str:
 
 def main(argv=None) -> int:
     """Entry point of ``ros2 run pentapod_testbed exciter``."""
-    return run_node(ExciterNode, argv, table=EXCITER)
+    return run_node(ExciterNode, argv)
 
 
 if __name__ == '__main__':

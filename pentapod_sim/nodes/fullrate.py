@@ -34,19 +34,19 @@ class FullRateOutputs:
     """
     The plant node's full-rate outputs (none for a single-rate plant) and display batches.
 
-    The display batches are :class:`~pentapod_sim.nodes.display_batch.DisplayBatches`,
-    attribute ``display``.
-
     Parameters
     ----------
     node : rclpy.node.Node
-        The plant node (creates the publisher when N > 1 and the model has TCP outputs; its
-        ``mixer`` and parameter ``display_batch_period`` make the display batches).
+        The plant node (creates the publishers: the full-rate one when N > 1).
     core : DiscretePlant or MultiRatePlant
         The plant core.
+    mixer : ForceMixer
+        The plant's force mixer (the display batches of the sources' forces).
+    display_period : float
+        Simulated time per display batch [s] (parameter ``display_batch_period``).
     """
 
-    def __init__(self, node, core):
+    def __init__(self, node, core, mixer, display_period: float):
         self.core = core
         self.substeps = getattr(core, 'substeps', 1)
         self.layout = (fullrate_layout(core.output_names, self.substeps)
@@ -56,7 +56,7 @@ class FullRateOutputs:
         self.msg = JointState(name=self.layout.joints) if self.layout else None
         self.active = False
         self._rows = np.empty((self.substeps, len(core.output_names)))
-        self.display = DisplayBatches(node, core, node.mixer, node.params.display_batch_period)
+        self.display = DisplayBatches(node, core, mixer, display_period)
         self._context = node.context
 
     def refresh(self) -> None:
@@ -64,19 +64,26 @@ class FullRateOutputs:
         self.active = self.pub is not None and self.pub.get_subscription_count() > 0
         self.display.refresh()
 
-    @property
     def publishers(self) -> list:
         """The publishers (for the plant's subscriber waits and acks)."""
         return ([self.pub] if self.pub is not None else []) + self.display.publishers
+
+    def topics(self) -> list[str]:
+        """The per-step topic (N > 1), published or not."""
+        return [self.pub.topic_name] if self.pub is not None else []
+
+    def active_topics(self) -> list[str]:
+        """The per-step topic, if it is published every exchange now."""
+        return [self.pub.topic_name] if self.active else []
+
+    def display_batches(self) -> tuple[list, int]:
+        """The display-batch publishers and the number of batches published."""
+        return self.display.publishers, self.display.published
 
     def flush(self) -> None:
         """Publish the open display batch (the run ended; not after the context shut down)."""
         if self._context.ok():
             self.display.flush()
-
-    def active_topics(self) -> list[str]:
-        """The topic, if it is published every exchange now."""
-        return [self.pub.topic_name] if self.active else []
 
     def record(self, k: int, y: np.ndarray, u: np.ndarray, trace) -> None:
         """
@@ -87,10 +94,10 @@ class FullRateOutputs:
         """
         trace.record(k, y, u)
         self.display.record(k, y)
-        full = trace.full
-        if not self.active and full is None:
+        kept = trace.fine_rows(k)
+        if not self.active and kept is None:
             return
-        rows = full[k] if full is not None else self._rows
+        rows = kept if kept is not None else self._rows
         self.core.fine_outputs(u, y, rows)
         if self.active:
             pos, vel = self.layout.values(rows.reshape(-1))

@@ -22,7 +22,7 @@ in the run status from the gaps in the publishers' sequence numbers). The plant'
 (/pentapod/run_status) comes through an ordinary subscription and is passed through.
 See docs/live_view.md.
 
-Parameters: :data:`pentapod_sim.live.params.LIVE_VIEW`.
+Parameters: :class:`pentapod_sim.live.params.LiveViewParams`.
 """
 from __future__ import annotations
 
@@ -34,7 +34,6 @@ from geometry_msgs.msg import WrenchStamped
 import rclpy
 from rclpy.callback_groups import CallbackGroup
 from rclpy.executors import SingleThreadedExecutor
-from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import JointState
@@ -42,9 +41,10 @@ from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
 from pentapod_sim import interface, shutdown
 from pentapod_sim.live.hub import LiveHub, lower_priority
-from pentapod_sim.live.params import LIVE_VIEW
+from pentapod_sim.live.params import LiveViewParams
 from pentapod_sim.live.streams import SUPPORTED_TYPES
-from pentapod_sim.nodes.common import declare_table, node_args, qos, run_node, stamp_msg
+from pentapod_sim.nodes.common import qos, run_node, stamp_msg
+from pentapod_sim.nodes.testbed_node import TestbedNode
 
 MESSAGE_CLASSES = {interface.JOINT_STATE: JointState, interface.WRENCH_STAMPED: WrenchStamped}
 #: Topics subscribed at start, before any publisher exists (others come by discovery).
@@ -96,12 +96,14 @@ class PolledGroup(CallbackGroup):
         """Nothing to end."""
 
 
-class LiveViewNode(Node):
+class LiveViewNode(TestbedNode):
     """Subscriptions and discovery of the live view (parameters: docs/parameters.md)."""
+
+    Params = LiveViewParams
 
     def __init__(self, **kwargs):
         super().__init__('live_view', **kwargs)
-        self.params = params = declare_table(self, LIVE_VIEW, node_args(kwargs.get('cli_args')))
+        params = self.params
         self.qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=params.queue_depth,
                               reliability=ReliabilityPolicy[params.reliability.upper()],
                               durability=DurabilityPolicy.VOLATILE)
@@ -233,8 +235,7 @@ def serve(node: LiveViewNode, executor) -> None:
 
 def main(argv=None) -> int:
     """Entry point of ``ros2 run pentapod_testbed live_view``."""
-    return run_node(LiveViewNode, argv, serve, table=LIVE_VIEW,
-                    executor=SingleThreadedExecutor)
+    return run_node(LiveViewNode, argv, serve, executor=SingleThreadedExecutor)
 
 
 if __name__ == '__main__':

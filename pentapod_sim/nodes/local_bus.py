@@ -44,8 +44,6 @@ import os
 import time
 from typing import Callable
 
-from pentapod_sim.interface import force_topic
-
 #: Wall time [s] between two drains of the executor by a composed plant's loop (a drain that
 #: finds nothing to do costs about 60 us here).
 DRAIN_PERIOD = 5e-3
@@ -220,19 +218,13 @@ def connect(plant, nodes, executor) -> LocalBus | None:
     executors (``PENTAPOD_EXECUTOR=single``): those take one message per subscription per
     wait, so a drain could not keep up with a recorder; such a composition stays on DDS.
     """
-    sources = [n for n in nodes if n is not plant and hasattr(n, 'use_bus')
-               and n.source_name in plant.mixer.sources]
+    candidates = [n for n in nodes if n is not plant and hasattr(n, 'use_bus')]
+    names = plant.own_sources([n.source_name for n in candidates])
+    sources = [n for n in candidates if n.source_name in names]
     if not sources or hasattr(executor, 'wait_for_ready_callbacks'):
         return None
     bus = LocalBus()
-    names = {s.source_name for s in sources}
-    for name, sub in list(plant.force_subs.items()):
-        if name in names:
-            plant.destroy_subscription(sub)
-            del plant.force_subs[name]
-            bus.subscribe(force_topic(name), lambda msg, name=name: plant._on_force(name, msg))
-    for outlet in plant.outlets():
-        outlet.attach(bus)
+    plant.join_bus(bus, names)
     for source in sources:
         source.use_bus(bus)
     topics = {o.topic_name: o.pub.msg_type
@@ -240,5 +232,4 @@ def connect(plant, nodes, executor) -> LocalBus | None:
     for node in nodes:
         if hasattr(node, 'take_from_bus'):
             node.take_from_bus(bus, topics)
-    plant.drain = Drain(plant)
     return bus

@@ -6,11 +6,12 @@ none), waits until it holds every needed message of one stamp t_k, computes u_k 
 :meth:`LockstepSource.compute` and publishes it on /pentapod/forces/<source_name> with the
 same stamp. It publishes the linear model of its law once on
 /pentapod/controller_models/<source_name> for the plant's truncation check
-(:meth:`LockstepSource.linear_model`, :mod:`pentapod_sim.nodes.loop_check`). A re-published
+(:meth:`LockstepSource.linear_model`, :mod:`pentapod_sim.nodes.source_model`). A re-published
 step (same stamp again) gets the cached answer, so stateful laws advance exactly once per step.
 Messages with NaN/Inf or a missing joint are rejected, counted and warned about. In a composed
 run the plant's messages and the answers pass in-process (:meth:`LockstepSource.use_bus`,
-:mod:`pentapod_sim.nodes.local_bus`).
+:mod:`pentapod_sim.nodes.local_bus`). Stopped after the plant's run ended, a source says so and
+exits 0 (:class:`pentapod_sim.nodes.run_status.PlantRunWatch`).
 """
 from __future__ import annotations
 
@@ -20,7 +21,6 @@ import time
 from typing import Sequence
 
 import numpy as np
-from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
@@ -28,39 +28,41 @@ from std_msgs.msg import String
 from pentapod_sim.errors import ConfigError
 from pentapod_sim.interface import CLOCK, force_topic, port_location
 from pentapod_sim.nodes.common import (
-    declare_table,
     FORCE_QOS,
     INFO_QOS,
-    node_args,
     set_stamp,
     stamp_to_ns,
     STATE_SUB_QOS,
     subscribers_of,
 )
 from pentapod_sim.nodes.local_bus import LocalBus, Outlet
-from pentapod_sim.nodes.loop_check import model_text, publish_model
-from pentapod_sim.parameters import ParameterTable
+from pentapod_sim.nodes.run_status import PlantRunWatch
+from pentapod_sim.nodes.source_model import model_text, publish_model
+from pentapod_sim.nodes.testbed_node import TestbedNode
 
 
-class LockstepSource(Node):
+class LockstepSource(TestbedNode):
     """
     A node that answers each plant step with forces on some input ports.
 
-    Subclasses pass their parameter table (which includes
-    :data:`pentapod_sim.nodes.parameter_tables.SOURCE_PARAMS`), find the values in
-    ``self.params``, call :meth:`setup` and implement :meth:`compute`.
+    Subclasses set ``Params`` (a subclass of
+    :class:`pentapod_sim.parameters.SourceParams`), find the values in ``self.params``, call
+    :meth:`setup` and implement :meth:`compute`.
     """
 
-    def __init__(self, default_name: str, table: ParameterTable, **kwargs):
+    def __init__(self, default_name: str, **kwargs):
         super().__init__(default_name, **kwargs)
-        self.params = declare_table(self, table, node_args(kwargs.get('cli_args')),
-                                    defaults={'source_name': self.get_name()})
         self.source_name = self.params.source_name or self.get_name()
         self.wait_for = self.params.wait_for_subscribers
         self.info_outs: list[Outlet] = []   # diagnostic publishers (info_outlet)
         self.rejected = {}
         self.answered = 0
         self._last_warn = 0.0
+        self.plant_run = PlantRunWatch(self)
+
+    def param_defaults(self) -> dict:
+        """``source_name`` defaults to the node's name."""
+        return {'source_name': self.get_name()}
 
     def setup(self, sensor_ports: Sequence[str], actuator_ports: Sequence[str]) -> None:
         """Create the subscriptions for the sensors and the force publisher."""
@@ -140,6 +142,10 @@ class LockstepSource(Node):
     def publish_model(self) -> None:
         """Publish the current model again (e.g. after a gain changed)."""
         self.model_pub.publish(String(data=self.model_text()))
+
+    def stopped_after_run_end(self) -> bool:
+        """After a stop signal: True (logged) if the plant's run had ended before it came."""
+        return self.plant_run.explains_stop()
 
     def compute(self, stamp_ns: int, sensors: np.ndarray) -> np.ndarray:
         """Return efforts for ``actuator_ports`` at this step (N or N m)."""

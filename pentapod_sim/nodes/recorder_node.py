@@ -20,7 +20,7 @@ from the composition's bus as message objects (:meth:`RecorderNode.take_from_bus
 log times, duplicate skipping, counts), and its DDS subscriptions of those topics record
 nothing.
 
-Parameters: :data:`pentapod_sim.nodes.parameter_tables.RECORDER` (docs/parameters.md).
+Parameters: :class:`pentapod_sim.nodes.parameter_tables.RecorderParams` (docs/parameters.md).
 """
 import datetime
 import importlib
@@ -31,14 +31,13 @@ import time
 import rclpy
 from rclpy.clock import Clock, ClockType
 from rclpy.executors import SingleThreadedExecutor
-from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 import yaml
 
 from pentapod_sim import interface, shutdown
 from pentapod_sim.errors import BagError, ConfigError
-from pentapod_sim.nodes.common import declare_table, node_args, run_node
-from pentapod_sim.nodes.parameter_tables import RECORDER
+from pentapod_sim.nodes.common import run_node
+from pentapod_sim.nodes.parameter_tables import RecorderParams
 from pentapod_sim.nodes.recorder_qos import (
     BEST_EFFORT,
     LATE_JOINER,
@@ -47,6 +46,7 @@ from pentapod_sim.nodes.recorder_qos import (
     offered_qos,
     subscription_qos,
 )
+from pentapod_sim.nodes.testbed_node import TestbedNode
 from pentapod_sim.nodes.wire_cdr import serializer, type_name
 from pentapod_sim.recording import BagWriter
 from pentapod_sim.recording.msgdefs import has_header_stamp
@@ -77,12 +77,14 @@ def message_class(msg_type: str):
     return getattr(importlib.import_module(f'{pkg}.msg'), name)
 
 
-class RecorderNode(Node):
+class RecorderNode(TestbedNode):
     """Record topics to a rosbag2-compatible MCAP bag."""
+
+    Params = RecorderParams
 
     def __init__(self, **kwargs):
         super().__init__('recorder', **kwargs)
-        self.params = params = declare_table(self, RECORDER, node_args(kwargs.get('cli_args')))
+        params = self.params
         self.duplicates = {}
         self.wanted = params.topics
         utc = datetime.datetime.now(datetime.timezone.utc).strftime('%Y%m%dT%H%M%SZ')
@@ -373,8 +375,7 @@ def main(argv=None) -> int:
     """Entry point of ``ros2 run pentapod_testbed recorder``."""
     # the default executor: rclpy's EventsExecutor did not fire the steady-clock discovery and
     # flush timers here
-    return run_node(RecorderNode, argv, record, table=RECORDER,
-                    executor=SingleThreadedExecutor)
+    return run_node(RecorderNode, argv, record, executor=SingleThreadedExecutor)
 
 
 if __name__ == '__main__':

@@ -21,6 +21,7 @@ from pentapod_sim.errors import ConfigError, ModelFileError
 from pentapod_sim.fe.assembly import build_model
 from pentapod_sim.fe.machine_data import load_machine, MachineParams
 from pentapod_sim.fe.model import FEModel
+from pentapod_sim.modes.slicing import Progress
 from pentapod_sim.modes.solver import solve_modes
 from pentapod_sim.paths import config_dir
 from pentapod_sim.plant.config import (
@@ -158,7 +159,8 @@ def keep_by_relevance(plant_all: PlantModel,
 
 
 def plant_from_fe(fe: FEModel, reduction_cfg: ReductionConfig,
-                  progress: Callable[[str], None] | None = None
+                  progress: Callable[[str], None] | None = None,
+                  modes_progress: Progress | None = None
                   ) -> tuple[PlantModel, npt.NDArray[np.intp]]:
     """
     Plant with every mode below ``modes_f_max`` of an FE model, and the relevant modes.
@@ -171,6 +173,8 @@ def plant_from_fe(fe: FEModel, reduction_cfg: ReductionConfig,
         As :func:`load_reduction_config` returns.
     progress : callable, optional
         Receives one message per stage.
+    modes_progress : callable, optional
+        The mode solver's progress callback (:func:`pentapod_sim.modes.solver.solve_modes`).
 
     Returns
     -------
@@ -184,7 +188,7 @@ def plant_from_fe(fe: FEModel, reduction_cfg: ReductionConfig,
     say = progress or (lambda msg: LOG.info('%s', msg))
     cfg = reduction_cfg
     say(f'FE model: {fe.n_dof} DOF; solving modes below {cfg.modes_f_max} Hz')
-    modes = solve_modes(fe.K, fe.M, f_max=cfg.modes_f_max)
+    modes = solve_modes(fe.K, fe.M, f_max=cfg.modes_f_max, progress=modes_progress)
     say(f'{modes.n_modes} modes, {modes.frequencies[0]:.2f} .. {modes.frequencies[-1]:.2f} Hz')
     inputs, outputs = list(cfg.inputs), list(cfg.outputs)
     chord = cfg.chord_position

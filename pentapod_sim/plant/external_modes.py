@@ -29,6 +29,7 @@ import numpy.typing as npt
 import yaml
 
 from pentapod_sim.errors import ModelFileError
+from pentapod_sim.plant.model import read_npz
 from pentapod_sim.plant.ports import modal_points
 
 CSV_COLUMNS = ('mode', 'frequency_hz', 'point', 'ux', 'uy', 'uz', 'rx', 'ry', 'rz')
@@ -118,11 +119,7 @@ def save_csv(data: ModalData, path: str | Path) -> Path:
 
 
 def _load_npz(path: Path) -> ModalData:
-    try:
-        with np.load(path, allow_pickle=False) as npz:
-            arrays = {k: npz[k] for k in npz.files}
-    except (OSError, ValueError) as err:
-        raise ModelFileError(f'cannot read modal data {path}: {err}') from None
+    arrays = read_npz(path, 'modal data file')
     if 'frequencies_hz' not in arrays:
         raise ModelFileError(f'{path}: no array frequencies_hz')
     shapes = {k.split(':', 1)[1]: np.asarray(v, float) for k, v in arrays.items()

@@ -32,6 +32,60 @@ _ARRAYS = ('omega', 'zeta', 'b', 'c_disp', 'c_vel', 'd')
 _LISTS = ('input_names', 'output_names', 'input_units', 'output_units',
           'input_descriptions', 'output_descriptions')
 FILE_FORMAT = 'pentapod-plant-model-1'
+#: First bytes of a zip archive (an .npz) and of a single saved array (.npy).
+ZIP_MAGIC, NPY_MAGIC = b'PK\x03\x04', b'\x93NUMPY'
+
+
+def _file_kind(head: bytes) -> str:
+    """What a file that is no .npz archive is, from its first bytes (for error messages)."""
+    if not head:
+        return 'an empty file'
+    if head.startswith(NPY_MAGIC):
+        return 'a single array (.npy), not an archive of named arrays'
+    text = '\0'
+    for cut in range(4):        # the first bytes may end inside a multi-byte character
+        try:
+            text = head[:len(head) - cut].decode('utf-8')
+            break
+        except UnicodeDecodeError:
+            pass
+    if not all(c.isprintable() or c in '\t\r\n' for c in text):
+        return f'binary data starting {head[:8]!r}'
+    first = text.splitlines()[0] if text.strip() else ''
+    return f'a text file starting {first[:40]!r}' if first else 'a text file'
+
+
+def read_npz(path: str | Path, what: str) -> dict[str, np.ndarray]:
+    """
+    The arrays of an .npz archive; a file of another kind is one :class:`ModelFileError` line.
+
+    Nothing is unpickled: an array of Python objects is refused, naming it. ``what`` names the
+    expected content in messages (e.g. ``plant model``).
+    """
+    path = Path(path)
+    try:
+        with open(path, 'rb') as stream:
+            head = stream.read(64)
+    except OSError as err:
+        raise ModelFileError(f'cannot read {what} {path}: {err.strerror or err}') from None
+    if not head.startswith(ZIP_MAGIC):
+        raise ModelFileError(f'{path} is not a {what} (an .npz archive): it is '
+                             f'{_file_kind(head)}')
+    arrays, unreadable = {}, []
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            for name in data.files:
+                try:
+                    arrays[name] = data[name]
+                except ValueError:          # object arrays (pickles) or a damaged header
+                    unreadable.append(name)
+    except (OSError, EOFError, zipfile.BadZipFile, ValueError) as err:
+        raise ModelFileError(f'{path} is not a readable {what}: a damaged .npz archive '
+                             f'({type(err).__name__})') from None
+    if unreadable:
+        raise ModelFileError(f'{path} is not a {what}: its array(s) {", ".join(unreadable)} '
+                             'hold Python objects (never loaded) or are damaged')
+    return arrays
 
 
 @dataclass
@@ -222,14 +276,23 @@ class PlantModel:
         -------
         Path
             The written file.
+
+        Raises
+        ------
+        ModelFileError
+            One line if the folder or file cannot be made (e.g. a folder that is a file).
         """
         path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
         header: dict[str, Any] = {n: list(getattr(self, n)) for n in _LISTS}
         header.update(format=FILE_FORMAT, meta=self.meta, content_hash=self.content_hash())
-        with open(path, 'wb') as stream:
-            np.savez(stream, header=np.array(json.dumps(header)),
-                     **{n: getattr(self, n) for n in _ARRAYS})
+        try:        # e.g. a cache folder that is a file: one line, not a traceback
+            path.parent.mkdir(parents=True, exist_ok=True)
+            with open(path, 'wb') as stream:
+                np.savez(stream, header=np.array(json.dumps(header)),
+                         **{n: getattr(self, n) for n in _ARRAYS})
+        except OSError as err:
+            raise ModelFileError(f'cannot write plant model {path}: {err.strerror or err} '
+                                 f'({err.filename or path})') from None
         LOG.info('saved plant model (%d modes) to %s', self.n_modes, path)
         return path
 
@@ -243,12 +306,18 @@ class PlantModel:
         ModelFileError
             If the file is unreadable, lacks arrays, or its numbers do not match the hash.
         """
+        data = read_npz(path, 'plant model')
+        missing = [n for n in ('header', *_ARRAYS) if n not in data]
+        if missing:
+            raise ModelFileError(f'{path} is an .npz archive but not a plant model: it lacks '
+                                 f'{", ".join(missing)} (has {", ".join(sorted(data)) or "none"})')
         try:
-            with np.load(path, allow_pickle=False) as data:
-                header = json.loads(str(data['header']))
-                arrays = {n: data[n] for n in _ARRAYS}
-        except (OSError, ValueError, KeyError, zipfile.BadZipFile) as err:
-            raise ModelFileError(f'cannot read plant model {path}: {err}') from None
+            header = json.loads(str(data['header']))
+        except ValueError:
+            header = None
+        if not isinstance(header, dict):
+            raise ModelFileError(f'{path}: its header is not the JSON mapping of a plant model')
+        arrays: dict[str, Any] = {n: data[n] for n in _ARRAYS}
         if header.get('format') != FILE_FORMAT:
             raise ModelFileError(f'{path}: format {header.get("format")!r}, expected '
                                  f'{FILE_FORMAT!r}')

@@ -5,7 +5,9 @@ A ROS 2 Jazzy process that is told nothing discovers peers on its whole subnet o
 any participant on the network could publish forces into a run. The scenario runner, the
 launch file and the test session therefore set, unless the user already has:
 
-* ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``, so discovery stays on this host;
+* DDS on the loopback interface only (:mod:`pentapod_sim.scenario.network`: the package's
+  Fast DDS profile and ``ROS_AUTOMATIC_DISCOVERY_RANGE=SYSTEM_DEFAULT``; a run the user opened
+  to the network is refused unless opened explicitly);
 * ``ROS_DOMAIN_ID`` = a domain that is free on this host, *reserved for the whole run*.
 
 A free domain is one that (1) no other cooperating run holds and (2) no DDS participant on
@@ -51,6 +53,11 @@ import tempfile
 from typing import Iterable, Iterator, Mapping
 
 from pentapod_sim.errors import ConfigError, RunError
+from pentapod_sim.scenario.network import (
+    check_environment,
+    local_changes,
+    RANGE_VAR,  # noqa: F401 (re-exported)
+)
 
 #: Domains handed out (inclusive): see the module docstring.
 DOMAINS = range(1, 102)
@@ -59,9 +66,6 @@ MAX_DOMAIN_ID = 232
 #: Participants per domain whose discovery port is probed (a run of ours has about 5).
 PROBED_PARTICIPANTS = 24
 DOMAIN_VAR = 'ROS_DOMAIN_ID'
-RANGE_VAR = 'ROS_AUTOMATIC_DISCOVERY_RANGE'
-#: Deprecated predecessor of ``ROS_AUTOMATIC_DISCOVERY_RANGE``; a value set is respected.
-LOCALHOST_ONLY_VAR = 'ROS_LOCALHOST_ONLY'
 LOCK_DIR_VAR = 'PENTAPOD_DOMAIN_LOCK_DIR'
 
 
@@ -195,22 +199,25 @@ def isolation(env: Mapping[str, str], domain_id: int | str | None = None,
     """
     Variables to add to ``env`` so a run is isolated, and the lease reserving its domain.
 
-    ``domain_id`` (e.g. ``--domain-id``) wins over ``env``. Values the user set in ``env`` are
-    kept (not returned): ``ROS_AUTOMATIC_DISCOVERY_RANGE``, the deprecated
-    ``ROS_LOCALHOST_ONLY`` and ``ROS_DOMAIN_ID`` (used even if another run holds it: the user
-    chose it; locked if nobody does). The caller holds the returned lease, if any, for as long
-    as the run lasts.
+    ``domain_id`` (e.g. ``--domain-id``) wins over ``env``. Local discovery (the default,
+    LOCALHOST or OFF) gets the loopback-only DDS variables of
+    :func:`pentapod_sim.scenario.network.local_changes`; a discovery range, static peers or a
+    DDS profile the user chose is kept, and refused unless the network was opened explicitly.
+    ``ROS_DOMAIN_ID`` set in ``env`` is kept (used even if another run holds it: the user chose
+    it; locked if nobody does). The caller holds the returned lease, if any, for as long as the
+    run lasts.
 
     Raises
     ------
     ConfigError
         If the chosen domain is not an integer in 0-232.
     RunError
-        If no domain is free.
+        If no domain is free, or DDS would be open to the network without
+        ``PENTAPOD_OPEN_NETWORK=1`` or SROS2
+        (:func:`pentapod_sim.scenario.network.check_environment`).
     """
-    changes: dict[str, str] = {}
-    if not env.get(RANGE_VAR, '').strip() and not env.get(LOCALHOST_ONLY_VAR, '').strip():
-        changes[RANGE_VAR] = 'LOCALHOST'
+    changes = local_changes(env)
+    check_environment({**env, **changes})
     if domain_id is not None:
         changes[DOMAIN_VAR] = str(domain_id).strip()
         chosen = user_domain(changes)
@@ -248,7 +255,7 @@ def main(argv: list[str] | None = None) -> int:
         argv = argv[1:]
     if not argv or argv[0] in ('-h', '--help'):
         print('usage: python -m pentapod_sim.scenario.domain COMMAND [ARG...]\n\n'
-              'Run COMMAND with ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST and a free\n'
+              'Run COMMAND with DDS on the loopback interface only and a free\n'
               'ROS_DOMAIN_ID reserved for its lifetime (values already set are kept).')
         return 0 if argv else 2
     try:

@@ -3,12 +3,15 @@ Start a whole scenario from a ROS parameter file: every node its own process, li
 
 A scenario file (config/scenarios/*.yaml) is an ordinary ROS 2 parameter file: one
 ``<node_name>: ros__parameters:`` section per node plus an optional ``/**`` section shared by
-all (e.g. ``sample_rate``). The executable of a node follows from its name's prefix
-(:data:`pentapod_sim.executables.NODE_KINDS`: ``plant``, ``exciter``, ``damper*``, ``pma*``,
-``example_controller*``, ``recorder*``). The runner starts the sources first, then the plant,
-waits for the plant to end, stops the others with SIGINT (SIGKILL after a grace period) and
-returns the plant's exit code (nonzero also if another node failed).
-launch/testbed.launch.py uses the same parser.
+all (e.g. ``sample_rate``). A node runs the node kind its name starts with
+(:data:`pentapod_sim.registry.NODES`: ``plant``, ``exciter``, ``damper*``, ``pma*``,
+``example_controller*``, ``recorder*``, ``live_view*``) or the class its section names
+(``node_class: module:Class``, run by :mod:`pentapod_sim.nodes.component`). The runner checks
+the file (:func:`pentapod_sim.scenario.files.read_scenario`), writes the run's one parameter
+file from the checked values, starts the sources first, then the plant, waits for the plant to
+end, stops the others with SIGINT (SIGKILL after a grace period; a source that saw the
+plant's run end says so and exits 0) and returns the plant's exit code (nonzero also if another
+node failed). launch/testbed.launch.py uses the same parser.
 
 SIGINT, SIGTERM or SIGHUP to the runner is forwarded to every node; the nodes finish their
 step, write their files and exit with 128 + the signal number, and so does the runner, after
@@ -27,12 +30,11 @@ import sys
 import tempfile
 import time
 
-import yaml
-
 from pentapod_sim import shutdown
 from pentapod_sim.errors import ConfigError, RunError
+from pentapod_sim.registry import RECORDER
 from pentapod_sim.scenario.domain import DOMAIN_VAR, isolated_env, RANGE_VAR
-from pentapod_sim.scenario.files import dump_params, read_scenario, resolve, Scenario, ScenarioNode
+from pentapod_sim.scenario.files import read_scenario, resolve, Scenario, ScenarioNode
 from pentapod_sim.scenario.warm_start import WarmRun, WarmStarter
 
 LOG = logging.getLogger(__name__)
@@ -42,22 +44,32 @@ Proc = subprocess.Popen | WarmRun
 
 #: Wall time [s] the plant gets to end by itself after another node died.
 EARLY_EXIT_GRACE = 10.0
-
-def node_command(node: ScenarioNode, params_files: list[Path]) -> list[str]:
-    """Command line of one node process (``python -m module --ros-args ...``)."""
-    if node.name == 'composition':              # all nodes in one process
-        return [sys.executable, '-m', node.module, str(params_files[0])]
-    cmd = [sys.executable, '-m', node.module, '--ros-args', '-r', f'__node:={node.name}']
-    for path in params_files:       # a later file wins (a -p rule would lose to the file)
-        cmd += ['--params-file', str(path)]
-    return cmd
+#: Module of a composed run (every node in one process).
+COMPOSED_MODULE = 'pentapod_sim.nodes.composed'
 
 
-def stop(procs: dict[str, Proc], grace: float = 5.0) -> None:
-    """SIGINT every running process, SIGKILL (named) those still alive after ``grace`` s."""
-    for proc in procs.values():
-        if proc.poll() is None:
-            proc.send_signal(signal.SIGINT)
+def node_command(node: ScenarioNode, params_file: Path) -> list[str]:
+    """Command line of one node's process (``python -m module ... --ros-args ...``)."""
+    cmd = [sys.executable, '-m', node.module]
+    if node.kind is None:                       # a user's class, run by the component host
+        cmd.append(node.node_class)
+    return cmd + ['--ros-args', '-r', f'__node:={node.name}', '--params-file', str(params_file)]
+
+
+def composed_command(params_file: Path) -> list[str]:
+    """Command line of a composed run: every node in one process."""
+    return [sys.executable, '-m', COMPOSED_MODULE, str(params_file)]
+
+
+def stop(procs: dict[str, Proc], grace: float = 5.0) -> dict[str, int | None]:
+    """
+    SIGINT every running process, SIGKILL (named) those still alive after ``grace`` s.
+
+    Returns the exit codes of the processes it stopped.
+    """
+    running = [name for name, proc in procs.items() if proc.poll() is None]
+    for name in running:
+        procs[name].send_signal(signal.SIGINT)
     end = time.monotonic() + grace
     for name, proc in procs.items():
         try:
@@ -66,6 +78,7 @@ def stop(procs: dict[str, Proc], grace: float = 5.0) -> None:
             LOG.error('node %s did not stop within %.0f s of SIGINT; killing it', name, grace)
             proc.kill()
             proc.wait()
+    return {name: procs[name].poll() for name in running}
 
 
 def drain_recorders(scenario: Scenario, procs: dict[str, Proc],
@@ -80,22 +93,28 @@ def drain_recorders(scenario: Scenario, procs: dict[str, Proc],
     (at least the recorder's ``drain_timeout`` + 10 s) it is stopped like the others (its bag
     is complete then; it holds what arrived).
     """
-    waiting = [n.name for n in scenario.of_kind('recorder')
-               if scenario.sections[n.name].get('stop_at_run_end', True)]
-    timeouts = [float(scenario.sections[n].get('drain_timeout', 30.0)) for n in waiting]
-    end = time.monotonic() + max([limit] + [t + 10.0 for t in timeouts])
-    for name in waiting:
+    waiting = [n for n in scenario.of_role(RECORDER)
+               if getattr(n.params, 'stop_at_run_end', False)]
+    end = time.monotonic() + max([limit] + [n.params.drain_timeout + 10.0 for n in waiting])
+    for node in waiting:
         try:
-            procs[name].wait(timeout=max(0.1, end - time.monotonic()))
+            procs[node.name].wait(timeout=max(0.1, end - time.monotonic()))
         except subprocess.TimeoutExpired:
-            LOG.warning('recorder %s still busy after the plant ended; stopping it', name)
+            LOG.warning('recorder %s still busy after the plant ended; stopping it', node.name)
 
 
-def run_scenario(path: Path, plant_overrides: dict, timeout: float,
+def run_scenario(scenario: str | Path | Scenario, plant_overrides: dict, timeout: float,
                  env: dict | None = None, log_dir: Path | None = None,
-                 composed: bool = False, warm: WarmStarter | None = None) -> int:
+                 composed: bool = False, warm: WarmStarter | None = None,
+                 params_file: Path | None = None) -> int:
     """
     Start the nodes of a scenario, wait for the plant, stop the rest; return exit code.
+
+    ``scenario`` is a file, a shipped scenario's name or a :class:`Scenario` (typed values,
+    e.g. the study's); ``plant_overrides`` change plant parameters (checked). The run's one
+    parameter file is written from the typed values to ``params_file`` (default: a temporary
+    file): every node process reads its section of it, a composed run reads it once and hands
+    each node its values as parameter overrides.
 
     The nodes run isolated (:mod:`pentapod_sim.scenario.domain`): with localhost-only
     discovery and on a free ROS domain reserved until they have been stopped, unless ``env``
@@ -105,10 +124,13 @@ def run_scenario(path: Path, plant_overrides: dict, timeout: float,
     (:mod:`pentapod_sim.nodes.composed`), forked from ``warm`` if given
     (:mod:`pentapod_sim.scenario.warm_start`).
     """
+    checked = read_scenario(scenario)             # a mistake is named before anything starts
+    if plant_overrides:
+        checked = checked.with_params(checked.plant.name, **plant_overrides)
     with isolated_env(env) as run_env:
         LOG.info('%s=%s, %s=%s', DOMAIN_VAR, run_env.get(DOMAIN_VAR),
                  RANGE_VAR, run_env.get(RANGE_VAR, '(unset)'))
-        return _run_nodes(path, plant_overrides, timeout, run_env, log_dir, composed, warm)
+        return _run_nodes(checked, timeout, run_env, log_dir, composed, warm, params_file)
 
 
 def describe_exit(code: int | None) -> str:
@@ -123,53 +145,45 @@ def describe_exit(code: int | None) -> str:
     return f'exited with code {code}'
 
 
-def _plant_grace(scenario: Scenario, plant_overrides: dict) -> float:
+def _plant_grace(scenario: Scenario) -> float:
     """Wall time [s] a plant may need to notice a dead source and end by itself."""
-    params = {**scenario.sections[scenario.of_kind('plant')[0].name], **plant_overrides}
-    return (float(params.get('source_timeout', 5.0)) + float(params.get('ack_timeout', 10.0))
-            + EARLY_EXIT_GRACE)
+    params = scenario.plant.params
+    return float(params.source_timeout + params.ack_timeout + EARLY_EXIT_GRACE)
 
 
-def _start(node: ScenarioNode, files: list[Path], env: dict, out) -> subprocess.Popen:
+def _start(command: list[str], env: dict, out) -> subprocess.Popen:
     """Start one node; it gets SIGTERM if this process dies (no orphans)."""
-    return subprocess.Popen(node_command(node, files), env=env, stdout=out,
+    return subprocess.Popen(command, env=env, stdout=out,
                             stderr=subprocess.STDOUT if out else None,
                             preexec_fn=shutdown.die_with_parent)
 
 
-def _run_nodes(path: Path, plant_overrides: dict, timeout: float,
-               env: dict, log_dir: Path | None, composed: bool = False,
-               warm: WarmStarter | None = None) -> int:
+def _run_nodes(scenario: Scenario, timeout: float, env: dict, log_dir: Path | None,
+               composed: bool = False, warm: WarmStarter | None = None,
+               params_file: Path | None = None) -> int:
     """Body of :func:`run_scenario`, in the environment ``env``."""
-    scenario = read_scenario(path)
-    nodes = scenario.nodes
     procs: dict[str, Proc] = {}
     logs: list = []
     forwarded = False
     code: int | None = None
     tmp = tempfile.TemporaryDirectory(prefix='pentapod_scenario_')
     try:
-        if composed:
-            path, nodes = _composition(path, scenario, plant_overrides, Path(tmp.name))
-            plant_overrides = {}
-        for node in nodes:
-            files = [path]
-            if node.executable == 'plant' and plant_overrides:
-                files.append(Path(tmp.name) / 'plant_overrides.yaml')
-                files[-1].write_text(dump_params(
-                    {node.name: {'ros__parameters': plant_overrides}}))
-            LOG.info('starting %s (%s)', node.name, node.module)
-            log = None if log_dir is None else Path(log_dir) / f'{node.name}.log'
+        path = scenario.write(params_file or Path(tmp.name) / 'parameters.yaml')
+        commands = ({'composition': composed_command(path)} if composed else
+                    {n.name: node_command(n, path) for n in scenario.nodes})
+        for name, command in commands.items():     # the plant (or composition) last
+            LOG.info('starting %s (%s)', name, ' '.join(command[1:4]))
+            log = None if log_dir is None else Path(log_dir) / f'{name}.log'
             if log is not None:
                 log.parent.mkdir(parents=True, exist_ok=True)
             if composed and warm is not None:
-                procs[node.name] = warm.start(node_command(node, files)[1:], env, log)
+                procs[name] = warm.start(command[1:], env, log)
                 continue
             out = None if log is None else open(log, 'w')  # noqa: SIM115
             if out is not None:
                 logs.append(out)
-            procs[node.name] = _start(node, files, env, out)
-        plant = procs[nodes[-1].name]
+            procs[name] = _start(command, env, out)
+        plant = procs[list(commands)[-1]]
         end = time.monotonic() + timeout
         reported: set = set()
         while plant.poll() is None:
@@ -177,12 +191,12 @@ def _run_nodes(path: Path, plant_overrides: dict, timeout: float,
                 # the nodes finish their step, write their files and exit by themselves
                 _forward(procs, shutdown.signal_name())
                 forwarded = True
-                end = min(end, time.monotonic() + _plant_grace(scenario, plant_overrides))
+                end = min(end, time.monotonic() + _plant_grace(scenario))
             dead = {n for n, p in procs.items() if p.poll() not in (None, 0)} - reported
             for name in sorted(dead):
                 # a dead source stops a lockstep plant with a named error; give it the time
                 LOG.error('node %s %s', name, describe_exit(procs[name].poll()))
-                end = min(end, time.monotonic() + _plant_grace(scenario, plant_overrides))
+                end = min(end, time.monotonic() + _plant_grace(scenario))
             reported |= dead
             if time.monotonic() > end:
                 LOG.error('plant did not end in time (timeout %.0f s, or the grace after a '
@@ -196,10 +210,13 @@ def _run_nodes(path: Path, plant_overrides: dict, timeout: float,
         failed = {n: p.poll() for n, p in procs.items() if p.poll() not in (0, None)
                   and not (forwarded and p.poll() == shutdown.exit_code())}
     finally:
-        stop(procs)
+        stopped = stop(procs)
         tmp.cleanup()
         for stream in logs:
             stream.close()
+    if code is not None and stopped and not forwarded:   # the plant ended by itself
+        LOG.info('stopped after the plant ended: %s', ', '.join(
+            f'{name} ({describe_exit(rc)})' for name, rc in stopped.items()))
     for name, rc in failed.items():
         if name not in reported:
             LOG.error('node %s %s', name, describe_exit(rc))
@@ -210,17 +227,6 @@ def _run_nodes(path: Path, plant_overrides: dict, timeout: float,
     if code == 0 and failed:
         return 1
     return code
-
-
-def _composition(path: Path, scenario: Scenario, plant_overrides: dict,
-                 folder: Path) -> tuple[Path, list[ScenarioNode]]:
-    """The scenario with the plant overrides merged in, run as one composed process."""
-    doc = yaml.safe_load(Path(path).read_text(encoding='utf-8'))
-    plant = scenario.of_kind('plant')[0].name
-    doc[plant]['ros__parameters'].update(plant_overrides)
-    merged = folder / 'composed.yaml'
-    merged.write_text(dump_params(doc))
-    return merged, [ScenarioNode('composition', 'pentapod_sim.nodes.composed', 'plant')]
 
 
 def _forward(procs: dict[str, Proc], name: str) -> None:
@@ -255,7 +261,7 @@ def main(argv=None) -> int:
         path = resolve(args.scenario)
         if args.list:
             for node in read_scenario(path).nodes:
-                print(f'{node.name}: {node.executable} ({node.module})')
+                print(f'{node.name}: {node.executable} ({node.node_class})')
             return 0
         overrides = {key: value for key, value in (
             ('steps', args.steps), ('duration', args.duration), ('timing', args.timing),

@@ -30,12 +30,10 @@ import subprocess
 import sys
 import threading
 
-from pentapod_sim import shutdown
-from pentapod_sim.executables import COMPONENTS
+from pentapod_sim import registry, shutdown
 
 #: Modules the forkserver imports once: the composition and every node kind's module.
-PRELOAD = ['pentapod_sim.nodes.composed'] + sorted(
-    {target.split(':')[0] for target in COMPONENTS.values()})
+PRELOAD = ['pentapod_sim.nodes.composed'] + sorted({kind.module for kind in registry.NODES})
 
 
 def _die_with(pid: int) -> None:

@@ -19,6 +19,7 @@ from typing import NamedTuple, Protocol, Sequence
 
 import numpy as np
 import numpy.typing as npt
+import scipy.linalg
 
 from pentapod_sim.errors import ConfigError, PortError
 
@@ -220,3 +221,11 @@ def loop_matrix(a: np.ndarray, b: np.ndarray, c: np.ndarray, d: np.ndarray,
                 controllers: Sequence[DiscreteController]) -> np.ndarray:
     """State matrix of :func:`loop_system`."""
     return loop_system(a, b, c, d, input_names, output_names, controllers).a
+
+
+def parallel(controllers: Sequence[DiscreteController]) -> DiscreteController:
+    """The laws side by side (one node's laws): one controller, ports and states concatenated."""
+    return DiscreteController(
+        [p for k in controllers for p in k.sensor_ports],
+        [p for k in controllers for p in k.actuator_ports],
+        *(scipy.linalg.block_diag(*(getattr(k, m) for k in controllers)) for m in 'abcd'))

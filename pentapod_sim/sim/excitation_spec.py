@@ -19,6 +19,7 @@ import numpy as np
 import numpy.typing as npt
 
 from pentapod_sim.errors import ConfigError
+from pentapod_sim.parameters import sample_time
 
 KINDS = ('impulse', 'step', 'sine', 'chirp', 'random', 'multisine', 'periodic_chirp',
          'stepped_sine', 'none')
@@ -262,4 +263,4 @@ def parse_spec_message(text: str) -> tuple[ExcitationSpec, float, str]:
         raise ConfigError(f'excitation message lacks {err}') from None
     if not 0 < rate < math.inf:
         raise ConfigError(f'excitation message: sample_rate {rate!r} Hz is not > 0')
-    return spec, 1.0 / rate, source
+    return spec, sample_time(rate), source

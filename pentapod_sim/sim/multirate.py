@@ -34,6 +34,7 @@ import numpy as np
 import numpy.typing as npt
 
 from pentapod_sim.errors import ConfigError
+from pentapod_sim.parameters import sample_time
 from pentapod_sim.sim.stepping import DEFAULT_MAX_STATE_NORM, DiscretePlant, modal_blocks
 
 if TYPE_CHECKING:
@@ -157,7 +158,7 @@ class MultiRatePlant(DiscretePlant):
         substeps = check_substeps(substeps)
         if not np.isfinite(sample_rate) or sample_rate <= 0:
             raise ConfigError(f'sample_rate must be > 0 Hz, got {sample_rate!r}')
-        return cls(model.discretize(1.0 / (sample_rate * substeps)), substeps, max_state_norm)
+        return cls(model.discretize(sample_time(sample_rate * substeps)), substeps, max_state_norm)
 
     def fine_outputs(self, u: npt.NDArray[np.float64], y: npt.NDArray[np.float64],
                      out: npt.NDArray[np.float64] | None = None) -> npt.NDArray[np.float64]:

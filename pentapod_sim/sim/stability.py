@@ -29,11 +29,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 import logging
-from typing import Sequence
+import threading
+import time
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
 from pentapod_sim.errors import ConfigError
+from pentapod_sim.parameters import sample_time
 from pentapod_sim.plant.check_model import (
     check_f_max,
     DEFAULT_CHECK_F_MIN,
@@ -52,6 +55,8 @@ STABLE = 'stable'
 UNSTABLE = 'unstable'
 TRUNCATION = 'stable only thanks to truncation'
 UNCHECKED = 'stable on the plant (no check model)'
+#: Wall time [s] after which a long eigenvalue problem reports, and then between reports.
+PROGRESS_FIRST, PROGRESS_PERIOD = 1.0, 5.0
 #: What a verdict other than ``stable`` does.
 POLICIES = ('refuse', 'warn')
 DEFAULT_POLICY = 'refuse'
@@ -61,9 +66,37 @@ class UnstableLoopError(ConfigError):
     """A sampled loop is unstable on the plant or on the check model (policy ``refuse``)."""
 
 
-def spectral_radius(matrix: np.ndarray, dt: float) -> tuple[float, float]:
+def _eigenvalues(matrix: np.ndarray, progress: Callable[[str], None] | None) -> np.ndarray:
+    """``np.linalg.eigvals``; with ``progress``, told the elapsed time past a second."""
+    if progress is None:
+        return np.linalg.eigvals(matrix)
+    out: dict[str, Any] = {}
+
+    def solve() -> None:
+        try:
+            out['value'] = np.linalg.eigvals(matrix)
+        except BaseException as err:        # handed to the caller
+            out['error'] = err
+    worker = threading.Thread(target=solve, name='loop eigenvalues', daemon=True)
+    start = time.monotonic()
+    worker.start()
+    worker.join(PROGRESS_FIRST)
+    while worker.is_alive():
+        progress(f'eigenvalues of the sampled loop ({matrix.shape[0]} states): '
+                 f'{time.monotonic() - start:.0f} s so far')
+        worker.join(PROGRESS_PERIOD)
+    if 'error' in out:
+        raise out['error']
+    return out['value']
+
+
+def spectral_radius(matrix: np.ndarray, dt: float,
+                    progress: Callable[[str], None] | None = None) -> tuple[float, float]:
     """
     Largest |eigenvalue| of a discrete state matrix and the frequency of that eigenvalue.
+
+    ``progress`` (optional) is told the elapsed time of an eigenvalue problem that takes longer
+    than a second, every few seconds.
 
     Returns
     -------
@@ -77,13 +110,14 @@ def spectral_radius(matrix: np.ndarray, dt: float) -> tuple[float, float]:
     # numpy's eigvals, not scipy's: it releases the GIL during LAPACK (scipy's held it for the
     # whole 1.3 s of a 1500 x 1500 matrix here), so a plant node's main thread notices a stop
     # signal while the seconds of a check model's loop are solved (shutdown.unless_requested)
-    lam = np.linalg.eigvals(matrix)
+    lam = _eigenvalues(matrix, progress)
     top = lam[np.argmax(np.abs(lam))]
     return float(abs(top)), float(abs(np.angle(top)) / (2 * np.pi * dt))
 
 
 def plant_radius(plant: PlantModel, controllers: Sequence[DiscreteController],
-                 dt: float) -> tuple[float, float]:
+                 dt: float, progress: Callable[[str], None] | None = None
+                 ) -> tuple[float, float]:
     """Spectral radius (and its frequency [Hz]) of the sampled loop of a modal plant."""
     if not controllers:      # open loop: the eigenvalues of the 2x2 ZOH blocks of the modes
         if plant.n_modes == 0:
@@ -93,7 +127,7 @@ def plant_radius(plant: PlantModel, controllers: Sequence[DiscreteController],
         return float(abs(top)), float(abs(np.angle(top)) / (2 * np.pi * dt))
     a, b, c, d = plant.discrete_matrices(dt)
     return spectral_radius(loop_matrix(a, b, c, d, plant.input_names, plant.output_names,
-                                       controllers), dt)
+                                       controllers), dt, progress)
 
 
 @dataclass(frozen=True)
@@ -193,7 +227,8 @@ def apply_policy(check: LoopCheck, policy: str = DEFAULT_POLICY) -> LoopCheck:
 
 def check_loop(plant: PlantModel, check_plant: PlantModel | None,
                controllers: Sequence[DiscreteController], dt: float,
-               policy: str = DEFAULT_POLICY, label: str = 'loop') -> LoopCheck:
+               policy: str = DEFAULT_POLICY, label: str = 'loop',
+               progress: Callable[[str], None] | None = None) -> LoopCheck:
     """
     Spectral radius of the sampled loop on the plant and on the check model; apply a policy.
 
@@ -212,16 +247,18 @@ def check_loop(plant: PlantModel, check_plant: PlantModel | None,
         ``refuse`` or ``warn`` (:func:`apply_policy`).
     label : str
         Names the loop in messages.
+    progress : callable, optional
+        Told the elapsed time of an eigenvalue problem that takes more than a second.
     """
     if not np.isfinite(dt) or dt <= 0:
         raise ConfigError(f'sample time dt must be > 0 s, got {dt!r}')
-    rho_p, f_p = plant_radius(plant, controllers, dt)
+    rho_p, f_p = plant_radius(plant, controllers, dt, progress)
     if check_plant is None:
         result = LoopCheck(label, float(dt), rho_p, float('nan'), f_p, float('nan'),
                            plant.n_modes, 0, float('nan'))
         return apply_policy(result, policy)
     check_plant = check_plant.select(plant.input_names, plant.output_names)
-    rho_c, f_c = plant_radius(check_plant, controllers, dt)
+    rho_c, f_c = plant_radius(check_plant, controllers, dt, progress)
     f_max = float(check_plant.meta.get('check_f_max_hz', check_plant.frequencies_hz.max(
         initial=0.0)))
     result = LoopCheck(label, float(dt), rho_p, rho_c, f_p, f_c, plant.n_modes,
@@ -255,5 +292,6 @@ def startup_check(plant: PlantModel, controllers: Sequence[DiscreteController],
     f_max = check_f_max(sample_rate, check_f_min)
     check_plant, origin = load_or_build_check_model(position, f_max, cache_dir)
     LOG.info('check model %s: %d modes', origin, check_plant.n_modes)
-    return check_loop(plant, check_plant, controllers, 1.0 / sample_rate, policy,
-                      label=f'plant at {position}')
+    return check_loop(plant, check_plant, controllers, sample_time(sample_rate), policy,
+                      label=f'plant at {position}',
+                      progress=lambda msg: LOG.info('truncation check: %s', msg))

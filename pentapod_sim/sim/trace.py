@@ -29,7 +29,7 @@ class Trace:
     ----------
     full : (n_steps, N, n_out) ndarray or None
         Full-rate outputs per exchange, or None (disabled or N = 1): the plant node fills
-        ``full[k]`` through ``fine_outputs`` before it advances.
+        :meth:`fine_rows` through ``fine_outputs`` before it advances.
     """
 
     def __init__(self, n_steps: int, core: DiscretePlant, enabled: bool):
@@ -45,6 +45,14 @@ class Trace:
         """Store step k."""
         if self.enabled:
             self.y[k], self.u[k] = y, u
+
+    def fine_rows(self, k: int) -> np.ndarray | None:
+        """The full-rate rows of exchange k to fill (N, n_out), or None if none are kept."""
+        return None if self.full is None else self.full[k]
+
+    def buffers(self) -> list[np.ndarray | None]:
+        """The arrays written step by step (a paced run writes every page before step 0)."""
+        return [self.y, self.u, self.full]
 
     def save(self, path: str, core: DiscretePlant, mixer: ForceMixer, n_planned: int,
              extra: dict[str, Any]) -> None:

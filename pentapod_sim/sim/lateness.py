@@ -1,15 +1,17 @@
-"""Timing statistics of a wall-clock paced run (ROS-free; used by the plant node and bench)."""
+"""
+Timing statistics of a wall-clock paced run: lateness of each step, missed deadlines, reports.
+
+Kept by :class:`pentapod_sim.sim.realtime.RealTime` (the plant node's ``timing: realtime``).
+"""
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
-
-#: realtime: the plant sleeps in its executor until this long before a period starts, then polls
-#: the clock [s]; the executor's wake-up came 50-100 us late here (bench/bench_plant.py rows
-#: ``realtime 1 kHz exchange, ...``)
-POLL_AHEAD = 150e-6
+import numpy.typing as npt
 
 
-def fault_in(*arrays) -> None:
+def fault_in(*arrays: npt.NDArray[Any] | None) -> None:
     """
     Write every page of the arrays (None: skipped) before a paced run.
 
@@ -35,8 +37,8 @@ class LatenessStats:
     """
 
     def __init__(self, n_steps: int, dt: float):
-        self.lateness = np.zeros(n_steps)
-        self.misses = np.zeros(n_steps, dtype=np.int64)
+        self.lateness: npt.NDArray[np.float64] = np.zeros(n_steps)
+        self.misses: npt.NDArray[np.int64] = np.zeros(n_steps, dtype=np.int64)
         self.dt = dt
         self.elapsed = 0.0
         self._reported: tuple[int, float] | None = None   # (first step, its start) of a report
@@ -76,7 +78,7 @@ class LatenessStats:
         return self.summary(n, now - since, first)
 
     def as_dict(self, n: int | None = None, elapsed: float | None = None,
-                first: int = 0) -> dict:
+                first: int = 0) -> dict[str, Any]:
         """Figures of steps ``first`` to ``n - 1`` as a dict (rates in Hz, lateness in s)."""
         n = self.lateness.size if n is None else n
         elapsed = self.elapsed if elapsed is None else elapsed

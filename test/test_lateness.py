@@ -1,7 +1,7 @@
 """Timing statistics of a paced run: periodic reports cover the steps since the last one."""
 import numpy as np
 
-from pentapod_sim.nodes.realtime_stats import fault_in, LatenessStats
+from pentapod_sim.sim.lateness import fault_in, LatenessStats
 
 
 def test_reports_cover_the_steps_since_the_previous_report():
