@@ -8,7 +8,9 @@ modes), ``dampers_<position>_<machine>_d<delay>.png`` and ``tables.pkl`` (the re
 redraw) to ``--out``::
 
     python -m pentapod_damper.design [--positions P1,P2] [--machine locked|drives|both]
-                                     [--sample-rate 5000] [--quick] [--out out/design]
+                                     [--sample-rate 5000] [--delay 1] [--grid 3]
+                                     [--gain-points 8] [--refine 25] [--quick]
+                                     [--out out/design]
 
 The full run tunes six families at two positions with the check model (about an hour on two
 busy cores); ``--quick`` uses small grids and no check model (a few minutes).
@@ -58,9 +60,9 @@ def _tables(args: argparse.Namespace) -> list:
         for machine in machines:
             settings = TuneSettings(sample_rate=args.sample_rate, machine=machine,
                                     dynamics=Dynamics(delay_steps=args.delay),
-                                    grid_points=2 if args.quick else 3,
-                                    gain_points=4 if args.quick else 8,
-                                    refine_iterations=2 if args.quick else 25)
+                                    grid_points=2 if args.quick else args.grid,
+                                    gain_points=4 if args.quick else args.gain_points,
+                                    refine_iterations=2 if args.quick else args.refine)
             tables.append(damper_table(model, settings,
                                        progress=lambda msg: LOG.info('%s', msg)))
     return tables
@@ -112,6 +114,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--sample-rate', type=float, default=5000.0, metavar='HZ')
     parser.add_argument('--delay', type=int, default=1, metavar='SAMPLES',
                         help="the laws' computational delay (default 1)")
+    parser.add_argument('--grid', type=int, default=3, metavar='N',
+                        help="grid points of each family's secondary parameters (default 3)")
+    parser.add_argument('--gain-points', type=int, default=8, metavar='N',
+                        help='grid points of the main gain (default 8)')
+    parser.add_argument('--refine', type=int, default=25, metavar='N',
+                        help='Nelder-Mead iterations after the grid (default 25, 0: none)')
     parser.add_argument('--quick', action='store_true',
                         help='small grids and no check model (a smoke run)')
     parser.add_argument('--out', type=Path, default=Path('out') / 'design')

@@ -14,6 +14,7 @@ import numpy as np
 
 from pentapod_damper.design.table import DamperRow, DamperTable
 from pentapod_sim.figures import save_figure
+from pentapod_sim.sim.tuning import TuneSettings
 
 #: The issue's target: TCP peak reduction of a strut-only law, and the static limit.
 TARGET_REDUCTION, STATIC_LIMIT = 3.0, 1.1
@@ -23,12 +24,18 @@ COLUMNS = ('position', 'machine', 'law', 'sensors', 'actuators', 'gains', 'dynam
            'struts12_share_peak', 'struts12_share_rms', 'feasible', 'strut_law', 'uses_drives',
            'note',
            'baseline_peak_um_per_n', 'baseline_peak_hz', 'direction', 'band_hz', 'sample_rate_hz',
-           'delay_steps', 'check_modes', 'check_f_max_hz')
+           'delay_steps', 'check_modes', 'check_f_max_hz', 'tuning_grid')
 Record = dict[str, str]
 
 
 def _gains(row: DamperRow) -> str:
     return '; '.join(f'{k} {v:.6g}' for k, v in row.gains.items()) or '-'
+
+
+def _grid(s: TuneSettings) -> str:
+    """How the tuner searched: grid of the main gain x each other parameter, refinement."""
+    return (f'{s.gain_points} gains x {s.grid_points} per other parameter, '
+            f'{s.refine_iterations} Nelder-Mead iterations')
 
 
 def records(table: DamperTable) -> list[Record]:
@@ -45,7 +52,7 @@ def records(table: DamperTable) -> list[Record]:
                   table.baseline_peak * 1e6,
                   table.baseline_peak_hz, s.direction, f'{s.band[0]:g}-{s.band[1]:g}',
                   s.sample_rate, s.dynamics.delay_steps, table.check_modes,
-                  table.check_f_max_hz]
+                  table.check_f_max_hz, _grid(s)]
         out.append({k: str(v) for k, v in zip(COLUMNS, values)})
     return out
 
@@ -93,7 +100,8 @@ def markdown_records(rows: Sequence[Record]) -> str:
                  f'{_num(h["baseline_peak_hz"], ".1f")} Hz; laws sampled at '
                  f'{_num(h["sample_rate_hz"], "g")} Hz with {h["delay_steps"]} sample(s) of '
                  f'delay; check model: {h["check_modes"]} modes below '
-                 f'{_num(h["check_f_max_hz"], "g")} Hz)', '',
+                 f'{_num(h["check_f_max_hz"], "g")} Hz; tuning: '
+                 f'{h.get("tuning_grid") or "not recorded"})', '',
                  '| law | sensors / actuators | gains | own dynamics in the numbers | peak / '
                  'RMS reduction | static (below f1/2) compliance | check margin (+1 sample) | '
                  'force RMS [N/N] | struts 1+2 share peak / RMS | meets limits |',
