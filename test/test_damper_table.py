@@ -23,7 +23,7 @@ from pentapod_damper.scenario_laws import scenario_laws
 from pentapod_damper.study.analytic import SampledPairFrf
 from pentapod_sim.plant import ports
 from pentapod_sim.plant.build import from_modal_data
-from pentapod_sim.plant.drives import DriveParams
+from pentapod_sim.plant.drives import DriveParams, link_stiffness
 from pentapod_sim.plant.frf_peaks import maximise_near_poles
 from pentapod_sim.plant.ports import INPUT_NAMES, OUTPUT_NAMES
 from pentapod_sim.scenario.files import read_scenario
@@ -31,8 +31,9 @@ from pentapod_sim.sim.controllers import controller_of
 from pentapod_sim.sim.design_models import collocated_statics, DesignModel
 from pentapod_sim.sim.law_families import StrutStiffness
 from pentapod_sim.sim.law_models import Dynamics
+from pentapod_sim.sim.loop_frf import SampledLoop
 from pentapod_sim.sim.stability import check_loop
-from pentapod_sim.sim.tuning import TuneSettings
+from pentapod_sim.sim.tuning import Judge, TuneSettings
 
 RATE = 5000.0
 
@@ -105,3 +106,31 @@ def test_files_say_what_the_rows_say(table, tmp_path):
         assert f'| {row.law} |' in text
     assert 'small' in verdict(lines)
     assert plot(tab, tmp_path / 'dampers.png').stat().st_size > 10_000
+
+
+def test_stroke_of_the_series_actuator_is_its_extension(table):
+    """
+    A series actuator's stroke is its extension, a parallel one's its port's motion.
+
+    IFF's actuator sits in series with the nut: its extension is the strut's motion against
+    the gimbal plus the link's deformation, ``delta + F / k_a`` (F the load cell force), which
+    the row's stroke (force over k_a) must equal; a moment pair strokes by its port's rotation.
+    """
+    model, tab = table
+    spec = next(s for s in default_rows() if s.name == 'IFF')
+    judge = Judge(model, spec.family, tab.settings)
+    row = tab.row('IFF')
+    loop = SampledLoop(judge.machine(), judge.controllers(row.gains), judge.settings.dt)
+    out, inp = judge.settings.pair
+    freq = np.geomspace(*judge.settings.band, 20000)
+    rms = []
+    for i in range(1, 6):
+        k_a = link_stiffness(model.plant, i)
+        extension = (loop.output(f'strut{i}_drive_displacement', inp)(freq)
+                     + loop.output(f'strut{i}_force', inp)(freq) / k_a)
+        rms.append(np.sqrt(np.trapezoid(np.abs(extension) ** 2, freq) / np.ptp(freq)))
+    assert row.stroke_unit == 'm/N'
+    assert row.stroke_rms_per_n == pytest.approx(max(rms), rel=2e-2)
+    lag = tab.row('lag displacement, bending')
+    assert lag.stroke_unit == 'rad/N' and lag.stroke_rms_per_n > 0
+    assert np.isnan(tab.row('PMA 5 kg, 5 Hz high-pass').stroke_rms_per_n)

@@ -21,6 +21,7 @@ TARGET_REDUCTION, STATIC_LIMIT = 3.0, 1.1
 COLUMNS = ('position', 'machine', 'law', 'sensors', 'actuators', 'gains', 'dynamics_included',
            'peak_reduction', 'rms_reduction', 'peak_hz', 'static_ratio', 'lowband_ratio',
            'check_margin', 'check_margin_extra_delay', 'effort_rms_n_per_n',
+           'stroke_rms_per_n', 'stroke_unit',
            'struts12_share_peak', 'struts12_share_rms', 'feasible', 'strut_law', 'uses_drives',
            'note',
            'baseline_peak_um_per_n', 'baseline_peak_hz', 'direction', 'band_hz', 'sample_rate_hz',
@@ -46,7 +47,8 @@ def records(table: DamperTable) -> list[Record]:
         values = [table.position, table.machine, r.law, r.sensors, r.actuators, _gains(r),
                   r.dynamics_included, r.peak_reduction, r.rms_reduction, r.peak_hz,
                   r.static_ratio, r.lowband_ratio, r.check_margin, r.check_margin_extra,
-                  r.effort_rms_per_n, r.share12_peak, r.share12_rms,
+                  r.effort_rms_per_n, r.stroke_rms_per_n, r.stroke_unit,
+                  r.share12_peak, r.share12_rms,
                   r.feasible and r.stable_on_check, r.strut_law, getattr(r, 'uses_drives', False),
                   r.note,
                   table.baseline_peak * 1e6,
@@ -104,8 +106,9 @@ def markdown_records(rows: Sequence[Record]) -> str:
                  f'{h.get("tuning_grid") or "not recorded"})', '',
                  '| law | sensors / actuators | gains | own dynamics in the numbers | peak / '
                  'RMS reduction | static (below f1/2) compliance | check margin (+1 sample) | '
-                 'force RMS [N/N] | struts 1+2 share peak / RMS | meets limits |',
-                 '|---|---|---|---|---|---|---|---|---|---|']
+                 'force RMS [N/N] | stroke RMS per N | struts 1+2 share peak / RMS | '
+                 'meets limits |',
+                 '|---|---|---|---|---|---|---|---|---|---|---|']
         for r in block:
             own = 'yes' if r['dynamics_included'] == 'True' else 'no (continuous, ideal)'
             text.append(
@@ -113,12 +116,20 @@ def markdown_records(rows: Sequence[Record]) -> str:
                 f'{_num(r["peak_reduction"])} / {_num(r["rms_reduction"])} | '
                 f'x{_num(r["static_ratio"], ".3f")} (x{_num(r["lowband_ratio"])}) | '
                 f'{_num(r["check_margin"], ".1e")} ({_num(r["check_margin_extra_delay"], ".1e")})'
-                f' | {_num(r["effort_rms_n_per_n"], ".3g")} | '
+                f' | {_num(r["effort_rms_n_per_n"], ".3g")} | {_stroke(r)} | '
                 f'{_num(r["struts12_share_peak"], ".0f", 100)} / '
                 f'{_num(r["struts12_share_rms"], ".0f", 100)} % | '
                 f'{"yes" if r["feasible"] == "True" else "no"} |')
         text.append('')
     return '\n'.join(text).rstrip() + '\n'
+
+
+def _stroke(r: Record) -> str:
+    """Stroke RMS per N with its unit (um/N, urad/N), '-' where none."""
+    unit = r.get('stroke_unit', '')
+    if not unit or not math.isfinite(float(r.get('stroke_rms_per_n', 'nan'))):
+        return '-'
+    return f'{_num(r["stroke_rms_per_n"], ".3g", 1e6)} u{unit}'
 
 
 def markdown(table: DamperTable) -> str:
@@ -140,14 +151,26 @@ def best_strut_law(rows: Sequence[Record], drives: bool = True) -> Record | None
     return max(ok, key=lambda r: float(r['peak_reduction']), default=None)
 
 
-def _sentence(best: Record) -> str:
+def ideal_row(rows: Sequence[Record]) -> Record | None:
+    """The paper's ideal damper's record (continuous, without the law's dynamics)."""
+    return next((r for r in rows if r['strut_law'] == 'True'
+                 and r['dynamics_included'] != 'True'), None)
+
+
+def _sentence(best: Record, ideal: Record | None = None) -> str:
     reduction = float(best['peak_reduction'])
     hit = 'reaches' if reduction >= TARGET_REDUCTION else 'misses'
+    keeps = ''
+    if ideal is not None:
+        keeps = (f' ({reduction / float(ideal["peak_reduction"]) * 100:.0f} % of the ideal '
+                 f'bending damper\'s {_num(ideal["peak_reduction"])}x)')
     return (f'{best["law"]} ({best["gains"]}) {hit} the {TARGET_REDUCTION:g}x target with '
-            f'{reduction:.2f}x (RMS {_num(best["rms_reduction"])}x) at static compliance '
+            f'{reduction:.2f}x{keeps} (RMS {_num(best["rms_reduction"])}x) at static compliance '
             f'x{_num(best["static_ratio"], ".3f")} (x{_num(best["lowband_ratio"])} below f1/2), '
             f'check-model margin {_num(best["check_margin"], ".1e")} and '
             f'{_num(best["check_margin_extra_delay"], ".1e")} with one more sample of delay; '
+            f'actuator force {_num(best["effort_rms_n_per_n"], ".3g")} N RMS and stroke '
+            f'{_stroke(best)} RMS per N of TCP force; '
             f'struts 1+2 alone give {_num(best["struts12_share_peak"], ".0f", 100)} % of its '
             f'peak and {_num(best["struts12_share_rms"], ".0f", 100)} % of its RMS improvement')
 
@@ -161,9 +184,10 @@ def verdict(rows: Sequence[Record]) -> str:
         if best is None:
             out.append(f'* {where}: no strut-only law meets the limits.')
             continue
-        text = f'* {where}: the best strut-only law, {_sentence(best)}.'
+        ideal = ideal_row(block)
+        text = f'* {where}: the best strut-only law, {_sentence(best, ideal)}.'
         if own is not None and own is not best:
-            text += f" Without the feed drives' loops: {_sentence(own)}."
+            text += f" Without the feed drives' loops: {_sentence(own, ideal)}."
         elif own is None:
             text += " No law without the feed drives' loops meets the limits."
         out.append(text)

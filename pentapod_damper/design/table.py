@@ -25,8 +25,10 @@ from typing import Callable, Sequence
 import numpy as np
 
 from pentapod_damper.design.rows import default_rows, RowSpec
-from pentapod_sim.errors import ConfigError
+from pentapod_sim.errors import ConfigError, PortError
+from pentapod_sim.plant.drives import link_stiffness
 from pentapod_sim.plant.frf_peaks import exact_peak, PoleResidueFrf
+from pentapod_sim.plant.ports import collocated_output
 from pentapod_sim.sim.design_models import DesignModel
 from pentapod_sim.sim.drives import FeedDrives
 from pentapod_sim.sim.loop_frf import band_mean_square, SampledLoop
@@ -61,6 +63,10 @@ class DamperRow:
     note: str = ''
     lowband_ratio: float = float('nan')
     uses_drives: bool = False
+    #: Largest actuator stroke RMS over the band per N of TCP force (m/N or rad/N, see
+    #: :func:`stroke`), and its unit.
+    stroke_rms_per_n: float = float('nan')
+    stroke_unit: str = ''
 
     @property
     def stable_on_check(self) -> bool:
@@ -227,6 +233,8 @@ def damper_table(model: DesignModel, settings: TuneSettings = TuneSettings(),
         out_rows.append(replace(row, lowband_ratio=_lowband(magnitudes, spec.name,
                                                            base.peak_hz, settings),
                                 uses_drives=spec.family.machine == 'drives'))
+        value, unit = stroke(judge, values)
+        out_rows[-1] = replace(out_rows[-1], stroke_rms_per_n=value, stroke_unit=unit)
         radii = None
     check = model.check
     return DamperTable(model.position, reference.settings.machine, settings, base.peak,
@@ -279,3 +287,59 @@ def _energy(model: DesignModel, settings: TuneSettings) -> dict[str, dict[str, f
         shares[f'mode {mode + 1}, {model.energy_freq_hz[mode]:.1f} Hz'] = {
             g: float(v[mode]) for g, v in model.energy.items()}
     return shares
+
+
+def stroke(judge: Judge, values: dict) -> tuple[float, str]:
+    """
+    The largest actuator stroke of a design: RMS over the band per newton of TCP force.
+
+    A force actuator in series with the nut (``strut<i>_drive_force``: IFF's piezo) extends
+    by ``u / k_a`` (the load cell force is ``k_a`` times extension minus link deformation),
+    so its stroke is its force over the link stiffness [m/N]; an actuator in parallel with
+    the structure (moment pair, chord force, TCP damper) strokes by its port's collocated
+    displacement [rad/N for the moment pairs, m/N otherwise]. Measured on the design plant's
+    sampled loop (the ideal row too); NaN where the port has no collocated displacement (the
+    PMA's proof mass, the drives' motors: HAC-LAC's and the drives' actuator is the motor,
+    whose travel is the strut's positioning itself). Returns the stroke and its unit
+    ('m/N', 'rad/N', '' for none).
+    """
+    s, plant = judge.settings, judge.machine()
+    out, inp = s.pair
+    ctrls = judge.controllers(values)
+    try:
+        loop = SampledLoop(plant, ctrls, s.dt)
+    except ConfigError:
+        return float('nan'), ''
+    worst, unit = float('nan'), ''
+    for port in dict.fromkeys(p for c in ctrls for p in c.actuator_ports):
+        if port.endswith('_drive_force') and port.startswith('strut'):
+            k_a = link_stiffness(judge.model.plant, int(port[5]))
+            value, kind = loop.effort(port, inp).rms(*s.band) / k_a, 'm'
+        else:
+            try:
+                sensor = collocated_output(port, 'displacement')
+            except PortError:
+                continue
+            if sensor not in plant.output_names:
+                continue
+            value = loop.output(sensor, inp).rms(*s.band)
+            kind = 'rad' if 'moment' in port else 'm'
+        if not value <= worst:
+            worst, unit = value, kind
+    return worst, (f'{unit}/N' if unit else '')
+
+
+def add_strokes(table: DamperTable, model: DesignModel, rows: Sequence[RowSpec] | None = None
+                ) -> DamperTable:
+    """``table`` with the strokes of rows that have none (tables of an older run)."""
+    specs = {spec.name: spec for spec in (default_rows() if rows is None else rows)}
+    out = []
+    for row in table.rows:
+        if np.isfinite(row.stroke_rms_per_n) or row.law not in specs:
+            out.append(row)
+            continue
+        judge = Judge(model, specs[row.law].family,
+                      replace(table.settings, refine_iterations=0))
+        value, unit = stroke(judge, dict(row.gains))
+        out.append(replace(row, stroke_rms_per_n=value, stroke_unit=unit))
+    return replace(table, rows=tuple(out))
