@@ -35,7 +35,7 @@ from pentapod_damper.design.report import (
 )
 from pentapod_damper.design.report import records as table_records
 from pentapod_damper.design.scenarios import write_scenarios
-from pentapod_damper.design.table import damper_table
+from pentapod_damper.design.table import add_strokes, damper_table, DamperTable
 from pentapod_sim.cli import CommandParser, configure_logging, run_command
 from pentapod_sim.sim.design_models import load_design_model
 from pentapod_sim.sim.law_models import Dynamics
@@ -51,7 +51,7 @@ def _tables(args: argparse.Namespace) -> list:
         for path in args.from_tables.split(','):
             with open(path, 'rb') as stream:
                 tables += list(pickle.load(stream))
-        return tables
+        return [_with_strokes(table) for table in tables]
     machines = ('locked', 'drives') if args.machine == 'both' else (args.machine,)
     tables = []
     for position in [p for p in args.positions.split(',') if p]:
@@ -66,6 +66,15 @@ def _tables(args: argparse.Namespace) -> list:
             tables.append(damper_table(model, settings,
                                        progress=lambda msg: LOG.info('%s', msg)))
     return tables
+
+
+def _with_strokes(table: DamperTable) -> DamperTable:
+    """A table of a run before the strokes were measured, with them (design plant only)."""
+    if all(row.stroke_unit is not None for row in table.rows):
+        return table
+    model = load_design_model(table.position, table.settings.sample_rate, check=False,
+                              corners=False)
+    return add_strokes(table, model)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -47,7 +47,7 @@ def records(table: DamperTable) -> list[Record]:
         values = [table.position, table.machine, r.law, r.sensors, r.actuators, _gains(r),
                   r.dynamics_included, r.peak_reduction, r.rms_reduction, r.peak_hz,
                   r.static_ratio, r.lowband_ratio, r.check_margin, r.check_margin_extra,
-                  r.effort_rms_per_n, r.stroke_rms_per_n, r.stroke_unit,
+                  r.effort_rms_per_n, r.stroke_rms_per_n, r.stroke_unit or '',
                   r.share12_peak, r.share12_rms,
                   r.feasible and r.stable_on_check, r.strut_law, getattr(r, 'uses_drives', False),
                   r.note,

@@ -64,9 +64,9 @@ class DamperRow:
     lowband_ratio: float = float('nan')
     uses_drives: bool = False
     #: Largest actuator stroke RMS over the band per N of TCP force (m/N or rad/N, see
-    #: :func:`stroke`), and its unit.
+    #: :func:`stroke`), and its unit ('' for none, None: not measured, a table of an older run).
     stroke_rms_per_n: float = float('nan')
-    stroke_unit: str = ''
+    stroke_unit: str | None = None
 
     @property
     def stable_on_check(self) -> bool:
@@ -335,7 +335,7 @@ def add_strokes(table: DamperTable, model: DesignModel, rows: Sequence[RowSpec] 
     specs = {spec.name: spec for spec in (default_rows() if rows is None else rows)}
     out = []
     for row in table.rows:
-        if np.isfinite(row.stroke_rms_per_n) or row.law not in specs:
+        if row.stroke_unit is not None or row.law not in specs:
             out.append(row)
             continue
         judge = Judge(model, specs[row.law].family,
