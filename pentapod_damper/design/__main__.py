@@ -9,7 +9,8 @@ redraw) to ``--out``::
 
     python -m pentapod_damper.design [--positions P1,P2] [--machine locked|drives|both]
                                      [--sample-rate 5000] [--delay 1] [--grid 3]
-                                     [--gain-points 8] [--refine 25] [--quick]
+                                     [--gain-points 8] [--refine 25] [--check-below HZ]
+                                     [--quick]
                                      [--out out/design]
 
 The full run tunes six families at two positions with the check model (about an hour on two
@@ -36,6 +37,7 @@ from pentapod_damper.design.report import (
 from pentapod_damper.design.report import records as table_records
 from pentapod_damper.design.scenarios import write_scenarios
 from pentapod_damper.design.table import add_strokes, damper_table, DamperTable
+from pentapod_damper.design.verify import verify_best
 from pentapod_sim.cli import CommandParser, configure_logging, run_command
 from pentapod_sim.sim.design_models import load_design_model
 from pentapod_sim.sim.law_models import Dynamics
@@ -56,15 +58,16 @@ def _tables(args: argparse.Namespace) -> list:
     tables = []
     for position in [p for p in args.positions.split(',') if p]:
         model = load_design_model(position, args.sample_rate, check=not args.quick,
-                                  progress=lambda msg: LOG.info('%s', msg))
+                                  progress=lambda msg: LOG.info('%s', msg),
+                                  check_subset_hz=args.check_below or None)
         for machine in machines:
             settings = TuneSettings(sample_rate=args.sample_rate, machine=machine,
                                     dynamics=Dynamics(delay_steps=args.delay),
                                     grid_points=2 if args.quick else args.grid,
                                     gain_points=4 if args.quick else args.gain_points,
                                     refine_iterations=2 if args.quick else args.refine)
-            tables.append(damper_table(model, settings,
-                                       progress=lambda msg: LOG.info('%s', msg)))
+            table = damper_table(model, settings, progress=lambda msg: LOG.info('%s', msg))
+            tables.append(verify_best(table, model, progress=lambda msg: LOG.info('%s', msg)))
     return tables
 
 
@@ -129,6 +132,10 @@ def main(argv: list[str] | None = None) -> int:
                         help='grid points of the main gain (default 8)')
     parser.add_argument('--refine', type=int, default=25, metavar='N',
                         help='Nelder-Mead iterations after the grid (default 25, 0: none)')
+    parser.add_argument('--check-below', type=float, default=0.0, metavar='HZ',
+                        help='the tuner checks on the check modes below HZ (static correction '
+                             'of the others); the laws the verdict names are then checked on '
+                             'the full check model (default 0: the full one throughout)')
     parser.add_argument('--quick', action='store_true',
                         help='small grids and no check model (a smoke run)')
     parser.add_argument('--out', type=Path, default=Path('out') / 'design')

@@ -25,7 +25,9 @@ COLUMNS = ('position', 'machine', 'law', 'sensors', 'actuators', 'gains', 'dynam
            'struts12_share_peak', 'struts12_share_rms', 'feasible', 'strut_law', 'uses_drives',
            'note',
            'baseline_peak_um_per_n', 'baseline_peak_hz', 'direction', 'band_hz', 'sample_rate_hz',
-           'delay_steps', 'check_modes', 'check_f_max_hz', 'tuning_grid')
+           'delay_steps', 'check_modes', 'check_f_max_hz', 'tuning_grid',
+           'full_check_margin', 'full_check_margin_extra_delay', 'full_check_modes',
+           'full_check_f_max_hz')
 Record = dict[str, str]
 
 
@@ -54,7 +56,8 @@ def records(table: DamperTable) -> list[Record]:
                   table.baseline_peak * 1e6,
                   table.baseline_peak_hz, s.direction, f'{s.band[0]:g}-{s.band[1]:g}',
                   s.sample_rate, s.dynamics.delay_steps, table.check_modes,
-                  table.check_f_max_hz, _grid(s)]
+                  table.check_f_max_hz, _grid(s), r.full_check_margin,
+                  r.full_check_margin_extra, table.full_check_modes, table.full_check_f_max_hz]
         out.append({k: str(v) for k, v in zip(COLUMNS, values)})
     return out
 
@@ -147,7 +150,7 @@ def best_strut_law(rows: Sequence[Record], drives: bool = True) -> Record | None
     ok = [r for r in rows if r['strut_law'] == 'True' and r['feasible'] == 'True'
           and r['dynamics_included'] == 'True'
           and float(r['static_ratio']) <= STATIC_LIMIT * (1 + 1e-9)
-          and (drives or r['uses_drives'] != 'True')]
+          and (drives or r['uses_drives'] != 'True') and not _failed_full_check(r)]
     return max(ok, key=lambda r: float(r['peak_reduction']), default=None)
 
 
@@ -155,6 +158,23 @@ def ideal_row(rows: Sequence[Record]) -> Record | None:
     """The paper's ideal damper's record (continuous, without the law's dynamics)."""
     return next((r for r in rows if r['strut_law'] == 'True'
                  and r['dynamics_included'] != 'True'), None)
+
+
+def _failed_full_check(r: Record) -> bool:
+    """Checked on the full check model (:mod:`pentapod_damper.design.verify`) and unstable."""
+    margins = [float(r.get(k, 'nan')) for k in ('full_check_margin',
+                                                 'full_check_margin_extra_delay')]
+    return any(math.isfinite(m) and m <= 0 for m in margins)
+
+
+def _full_check(r: Record) -> str:
+    """What the full check model says of a record ('' when it was not run)."""
+    if not math.isfinite(float(r.get('full_check_margin', 'nan'))):
+        return ''
+    return (f'; on the full check model ({r["full_check_modes"]} modes below '
+            f'{_num(r["full_check_f_max_hz"], "g")} Hz) margin '
+            f'{_num(r["full_check_margin"], ".1e")} and '
+            f'{_num(r["full_check_margin_extra_delay"], ".1e")} with one more sample')
 
 
 def _sentence(best: Record, ideal: Record | None = None) -> str:
@@ -168,8 +188,9 @@ def _sentence(best: Record, ideal: Record | None = None) -> str:
             f'{reduction:.2f}x{keeps} (RMS {_num(best["rms_reduction"])}x) at static compliance '
             f'x{_num(best["static_ratio"], ".3f")} (x{_num(best["lowband_ratio"])} below f1/2), '
             f'check-model margin {_num(best["check_margin"], ".1e")} and '
-            f'{_num(best["check_margin_extra_delay"], ".1e")} with one more sample of delay; '
-            f'actuator force {_num(best["effort_rms_n_per_n"], ".3g")} N RMS and stroke '
+            f'{_num(best["check_margin_extra_delay"], ".1e")} with one more sample of delay'
+            f'{_full_check(best)}; actuator force '
+            f'{_num(best["effort_rms_n_per_n"], ".3g")} N RMS and stroke '
             f'{_stroke(best)} RMS per N of TCP force; '
             f'struts 1+2 alone give {_num(best["struts12_share_peak"], ".0f", 100)} % of its '
             f'peak and {_num(best["struts12_share_rms"], ".0f", 100)} % of its RMS improvement')

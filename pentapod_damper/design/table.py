@@ -67,6 +67,10 @@ class DamperRow:
     #: :func:`stroke`), and its unit ('' for none, None: not measured, a table of an older run).
     stroke_rms_per_n: float = float('nan')
     stroke_unit: str | None = None
+    #: Margins on the full check model when the table's check model is a subset of it
+    #: (:mod:`pentapod_damper.design.verify`; NaN: not verified).
+    full_check_margin: float = float('nan')
+    full_check_margin_extra: float = float('nan')
 
     @property
     def stable_on_check(self) -> bool:
@@ -91,6 +95,9 @@ class DamperTable:
     trade_offs: dict[str, list[tuple[float, float]]] = field(default_factory=dict)
     energy: dict[str, dict[str, float]] = field(default_factory=dict)
     magnitudes: dict[str, np.ndarray] = field(default_factory=dict)
+    #: The full check model of the verified rows (0, NaN: none).
+    full_check_modes: int = 0
+    full_check_f_max_hz: float = float('nan')
 
     @property
     def frequencies_hz(self) -> np.ndarray:

@@ -68,6 +68,9 @@ class DesignModel:
     stiffness: StrutStiffness
     energy: dict[str, np.ndarray] = field(default_factory=dict)
     energy_freq_hz: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    #: The full check model when ``check`` keeps only its modes below a frequency
+    #: (:func:`load_design_model`'s ``check_subset_hz``), for the final verification.
+    full_check: PlantModel | None = None
     #: The models with the drives' rotors, built once per model (key: '', corner, 'check'):
     #: the check model's exact discretisation is an eigenvalue problem of thousands of states.
     driven: dict[str, DrivenPlant] = field(default_factory=dict, repr=False)
@@ -137,13 +140,17 @@ def load_design_model(position: str, sample_rate: float = 5000.0,
                       check: bool = True, corners: bool = True,
                       cache_dir: str | Path = 'out/models',
                       reduction_cfg: ReductionConfig | None = None,
-                      progress: Callable[[str], None] | None = None) -> DesignModel:
+                      progress: Callable[[str], None] | None = None,
+                      check_subset_hz: float | None = None) -> DesignModel:
     """
     Build the :class:`DesignModel` of a position of config/positions.yaml.
 
     The check model (every FE mode below ``max(5 kHz, 2 x sample_rate)``) is cached like the
     plant node's (with the package's config files); the design plant and the corners take
-    about a second each.
+    about a second each. ``check_subset_hz``: the check model the tuner uses keeps only the
+    check model's modes below this frequency, with the static correction of the others (its
+    eigenvalue problems cost about the cube of its states: the 1423 modes below 10 kHz at P1
+    cost about 30 s each); the full one stays as ``full_check`` for the final verification.
     """
     say = progress or (lambda msg: LOG.info('%s', msg))
     machine = load_machine()
@@ -158,13 +165,21 @@ def load_design_model(position: str, sample_rate: float = 5000.0,
         say(f'{position}: check model (every mode below {f_max:g} Hz)')
         check_model, origin = load_or_build_check_model(position, f_max, cache_dir)
         LOG.info('%s', origin)
+    full_check = check_model
+    if check_model is not None and check_subset_hz:
+        keep = np.flatnonzero(check_model.omega < 2 * np.pi * check_subset_hz)
+        say(f'{position}: the tuner checks on the {keep.size} of {check_model.n_modes} '
+            f'check modes below {check_subset_hz:g} Hz (static correction of the others)')
+        check_model = reduce_plant(check_model, keep, True)
+        check_model.meta['check_f_max_hz'] = float(check_subset_hz)
     corner_plants = {}
     if corners:
         for name, factors in CORNERS.items():
             say(f'{position}: stiffness corner {name}')
             corner_plants[name] = design_plant(scaled(fe, factors), cfg)
     model = DesignModel(position, plant, check_model, corner_plants, load_drives(),
-                        strut_stiffness(machine, fe, plant, cfg.chord_position))
+                        strut_stiffness(machine, fe, plant, cfg.chord_position),
+                        full_check=full_check)
     modes = solve_modes(fe.K, fe.M, f_max=cfg.modes_f_max)
     shares = strain_energy_shares(fe.stiffness_groups, modes)
     model.energy = {g: shares[:, k] for k, g in enumerate(fe.stiffness_groups)}
