@@ -5,20 +5,25 @@ A row's peak reduction is checked against the study's own sampled-loop FRF code,
 model margins against the truncation check of :mod:`pentapod_sim.sim.stability`, and the
 table's files (CSV, Markdown, figure) against its rows.
 """
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from statespace_fixtures import all_modes, small_model
 
 from pentapod_damper.design.report import (
+    best_strut_law,
     markdown,
     markdown_records,
     plot,
     read_csv,
+    records,
     verdict,
     write_csv,
 )
 from pentapod_damper.design.rows import default_rows
 from pentapod_damper.design.table import damper_table
+from pentapod_damper.design.verify import verify_best
 from pentapod_damper.scenario_laws import scenario_laws
 from pentapod_damper.study.analytic import SampledPairFrf
 from pentapod_sim.plant import ports
@@ -134,3 +139,22 @@ def test_stroke_of_the_series_actuator_is_its_extension(table):
     lag = tab.row('lag displacement, bending')
     assert lag.stroke_unit == 'rad/N' and lag.stroke_rms_per_n > 0
     assert np.isnan(tab.row('PMA 5 kg, 5 Hz high-pass').stroke_rms_per_n)
+
+
+def test_verified_law_margins_are_the_full_truncation_check(table):
+    """The verdict's law, checked on the full check model: the truncation check's margins."""
+    model, tab = table
+    full = replace(model, full_check=model.check, driven={})
+    verified = verify_best(tab, full)
+    best = best_strut_law(records(verified))
+    assert best is not None
+    row = verified.row(best['law'])
+    spec = next(s for s in default_rows() if s.name == row.law)
+    judge = Judge(model, spec.family, tab.settings)
+    for extra, margin in ((0, row.full_check_margin), (1, row.full_check_margin_extra)):
+        check = check_loop(model.plant, model.check, judge.controllers(row.gains, extra),
+                           judge.settings.dt, 'warn')
+        assert margin == pytest.approx(check.check_margin, abs=1e-9)
+    assert verified.full_check_modes == model.check.n_modes
+    assert 'on the full check model' in verdict(records(verified))
+    assert np.isnan(verified.row('TCP damper').full_check_margin)     # not a strut law
