@@ -12,6 +12,7 @@ from typing import Sequence
 
 import numpy as np
 
+from pentapod_damper.design.rows import DRIVES_ROW
 from pentapod_damper.design.table import DamperRow, DamperTable
 from pentapod_sim.figures import save_figure
 from pentapod_sim.sim.tuning import TuneSettings
@@ -142,12 +143,16 @@ def markdown(table: DamperTable) -> str:
 
 def best_strut_law(rows: Sequence[Record], drives: bool = True) -> Record | None:
     """
-    The strut-only record with the largest peak reduction that meets every limit.
+    The strut-only law's record with the largest peak reduction that meets every limit.
+
+    The feed drives alone (:data:`~pentapod_damper.design.rows.DRIVES_ROW`) are the machine
+    with its position loops, not a law: never chosen.
 
     ``drives`` False leaves out the laws that need the feed drives' loops (their damping rests
     on the drives' estimated parameters).
     """
     ok = [r for r in rows if r['strut_law'] == 'True' and r['feasible'] == 'True'
+          and r['law'] != DRIVES_ROW                   # the machine's own loops, not a law
           and r['dynamics_included'] == 'True'
           and float(r['static_ratio']) <= STATIC_LIMIT * (1 + 1e-9)
           and (drives or r['uses_drives'] != 'True') and not _failed_full_check(r)]
@@ -158,6 +163,15 @@ def ideal_row(rows: Sequence[Record]) -> Record | None:
     """The paper's ideal damper's record (continuous, without the law's dynamics)."""
     return next((r for r in rows if r['strut_law'] == 'True'
                  and r['dynamics_included'] != 'True'), None)
+
+
+def _over_drives(best: Record, drives: Record | None) -> str:
+    """For a law in the drives' loops: what the drives alone give and what the law adds."""
+    if drives is None or best['uses_drives'] != 'True' or best is drives:
+        return ''
+    alone = float(drives['peak_reduction'])
+    return (f', of which the feed drives alone give {alone:.2f}x (the law adds '
+            f'{float(best["peak_reduction"]) / alone:.2f}x on the machine with its drives)')
 
 
 def _failed_full_check(r: Record) -> bool:
@@ -177,7 +191,8 @@ def _full_check(r: Record) -> str:
             f'{_num(r["full_check_margin_extra_delay"], ".1e")} with one more sample')
 
 
-def _sentence(best: Record, ideal: Record | None = None) -> str:
+def _sentence(best: Record, ideal: Record | None = None,
+              drives: Record | None = None) -> str:
     reduction = float(best['peak_reduction'])
     hit = 'reaches' if reduction >= TARGET_REDUCTION else 'misses'
     keeps = ''
@@ -185,7 +200,8 @@ def _sentence(best: Record, ideal: Record | None = None) -> str:
         keeps = (f' ({reduction / float(ideal["peak_reduction"]) * 100:.0f} % of the ideal '
                  f'bending damper\'s {_num(ideal["peak_reduction"])}x)')
     return (f'{best["law"]} ({best["gains"]}) {hit} the {TARGET_REDUCTION:g}x target with '
-            f'{reduction:.2f}x{keeps} (RMS {_num(best["rms_reduction"])}x) at static compliance '
+            f'{reduction:.2f}x{keeps}{_over_drives(best, drives)} '
+            f'(RMS {_num(best["rms_reduction"])}x) at static compliance '
             f'x{_num(best["static_ratio"], ".3f")} (x{_num(best["lowband_ratio"])} below f1/2), '
             f'check-model margin {_num(best["check_margin"], ".1e")} and '
             f'{_num(best["check_margin_extra_delay"], ".1e")} with one more sample of delay'
@@ -206,7 +222,8 @@ def verdict(rows: Sequence[Record]) -> str:
             out.append(f'* {where}: no strut-only law meets the limits.')
             continue
         ideal = ideal_row(block)
-        text = f'* {where}: the best strut-only law, {_sentence(best, ideal)}.'
+        drives = next((r for r in block if r['law'] == DRIVES_ROW), None)
+        text = f'* {where}: the best strut-only law, {_sentence(best, ideal, drives)}.'
         if own is not None and own is not best:
             text += f" Without the feed drives' loops: {_sentence(own, ideal)}."
         elif own is None:

@@ -94,6 +94,8 @@ def _pma(mass: float, gain: float, highpass_hz: float) -> Callable[[Sequence[int
     return make
 
 
+#: The row of the feed drives' position loops without a law (the drives' own damping).
+DRIVES_ROW = 'feed drives alone (position loops)'
 #: The paper's strut bending damper as the damper node's default (N m s/rad per port).
 IDEAL_BENDING_GAIN = 1000.0
 
@@ -109,7 +111,7 @@ def default_rows() -> tuple[RowSpec, ...]:
         RowSpec('velocity feedback (buildable today)', 'fixed', fixed_family(
             'strut_damping_all', bending, moment, _scenario_dampers('strut_damping_all')),
             True, 'scenario strut_damping_all'),
-        RowSpec('feed drives alone (position loops)', 'tuned', family('hac-lac'), True,
+        RowSpec(DRIVES_ROW, 'tuned', family('hac-lac'), True,
                 'config/drives.yaml, IFF gain 0'),
         RowSpec('IFF', 'tuned', family('iff'), True),
         RowSpec('IFF + position loop (HAC-LAC)', 'tuned', family('hac-lac'), True),
