@@ -36,7 +36,7 @@ from pentapod_damper.design.report import (
 )
 from pentapod_damper.design.report import records as table_records
 from pentapod_damper.design.scenarios import write_scenarios
-from pentapod_damper.design.table import add_strokes, damper_table, DamperTable
+from pentapod_damper.design.table import add_strokes, damper_table, DamperTable, with_lowband
 from pentapod_damper.design.verify import verify_best
 from pentapod_sim.cli import CommandParser, configure_logging, run_command
 from pentapod_sim.sim.design_models import load_design_model
@@ -53,7 +53,7 @@ def _tables(args: argparse.Namespace) -> list:
         for path in args.from_tables.split(','):
             with open(path, 'rb') as stream:
                 tables += list(pickle.load(stream))
-        return [_with_strokes(table) for table in tables]
+        return [_with_strokes(with_lowband(table)) for table in tables]
     machines = ('locked', 'drives') if args.machine == 'both' else (args.machine,)
     tables = []
     for position in [p for p in args.positions.split(',') if p]:

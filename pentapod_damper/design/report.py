@@ -141,7 +141,8 @@ def markdown(table: DamperTable) -> str:
     return markdown_records(records(table))
 
 
-def best_strut_law(rows: Sequence[Record], drives: bool = True) -> Record | None:
+def best_strut_law(rows: Sequence[Record], drives: bool = True,
+                   low_band: bool = False) -> Record | None:
     """
     The strut-only law's record with the largest peak reduction that meets every limit.
 
@@ -149,13 +150,16 @@ def best_strut_law(rows: Sequence[Record], drives: bool = True) -> Record | None
     with its position loops, not a law: never chosen.
 
     ``drives`` False leaves out the laws that need the feed drives' loops (their damping rests
-    on the drives' estimated parameters).
+    on the drives' estimated parameters). ``low_band`` also asks the compliance below half the
+    first resonance to stay within the static limit (a position loop around a law can keep
+    the static compliance and still soften the machine there; unknown counts as failed).
     """
     ok = [r for r in rows if r['strut_law'] == 'True' and r['feasible'] == 'True'
           and r['law'] != DRIVES_ROW                   # the machine's own loops, not a law
           and r['dynamics_included'] == 'True'
           and float(r['static_ratio']) <= STATIC_LIMIT * (1 + 1e-9)
-          and (drives or r['uses_drives'] != 'True') and not _failed_full_check(r)]
+          and (drives or r['uses_drives'] != 'True') and not _failed_full_check(r)
+          and (not low_band or float(r['lowband_ratio']) <= STATIC_LIMIT * (1 + 1e-9))]
     return max(ok, key=lambda r: float(r['peak_reduction']), default=None)
 
 
@@ -228,6 +232,16 @@ def verdict(rows: Sequence[Record]) -> str:
             text += f" Without the feed drives' loops: {_sentence(own, ideal)}."
         elif own is None:
             text += " No law without the feed drives' loops meets the limits."
+        build = best_strut_law(block, low_band=True)
+        if build is None:
+            text += (' No strut-only law keeps the compliance below half the first resonance '
+                     'within the static limit too.')
+        else:
+            text += (f' **To build: {build["law"]}**, the best strut-only law that also keeps '
+                     f'the compliance below half the first resonance within '
+                     f"x{STATIC_LIMIT:g} of the machine's"
+                     + ('.' if build is best or build is own
+                        else f': {_sentence(build, ideal)}.'))
         out.append(text)
     return '\n'.join(out)
 

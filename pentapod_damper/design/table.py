@@ -262,8 +262,9 @@ def _lowband(magnitudes: dict[str, np.ndarray], name: str, peak_hz: float,
     """
     freq = frf_grid(settings)
     band = freq <= 0.5 * peak_hz
-    return float(np.max(magnitudes[name][band] / magnitudes['baseline'][band],
-                        initial=np.nan))
+    ratio = magnitudes[name][band] / magnitudes['baseline'][band]
+    # NaN for an unstable loop (its magnitudes are NaN) or an empty band
+    return float(np.max(ratio)) if ratio.size else float('nan')
 
 
 def _closest(evaluations: Sequence[Evaluation]) -> Evaluation:
@@ -334,6 +335,14 @@ def stroke(judge: Judge, values: dict) -> tuple[float, str]:
         if not value <= worst:
             worst, unit = value, kind
     return worst, (f'{unit}/N' if unit else '')
+
+
+def with_lowband(table: DamperTable) -> DamperTable:
+    """``table`` with every row's low-band ratio recomputed from its stored magnitudes."""
+    return replace(table, rows=tuple(
+        replace(row, lowband_ratio=_lowband(table.magnitudes, row.law, table.baseline_peak_hz,
+                                            table.settings))
+        for row in table.rows))
 
 
 def add_strokes(table: DamperTable, model: DesignModel, rows: Sequence[RowSpec] | None = None
