@@ -32,3 +32,8 @@ from pentapod_damper.laws.viscous import (  # noqa: F401
     ViscousDamper,
 )
 from pentapod_sim.sim.law_models import Dynamics, FILTER_ORDERS, HOLDS  # noqa: F401
+
+__all__ = ['band_pass_velocity', 'chord_damper', 'Dynamics', 'FILTER_ORDERS', 'HOLDS',
+           'integral_force_feedback', 'lag_displacement_feedback', 'positive_position_feedback',
+           'ProofMassActuator', 'SteppedLaw', 'strut_axial_damper', 'strut_bending_damper',
+           'tcp_damper', 'ViscousDamper']

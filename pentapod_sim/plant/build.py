@@ -18,11 +18,12 @@ import numpy.typing as npt
 
 from pentapod_sim import __version__
 from pentapod_sim.errors import ConfigError, ModelFileError
-from pentapod_sim.fe.assembly import build_model
 from pentapod_sim.fe.machine_data import load_machine, MachineParams
 from pentapod_sim.fe.model import FEModel
+from pentapod_sim.modes.causes import strain_energy_shares
+from pentapod_sim.modes.frame_reduction import build_model
 from pentapod_sim.modes.slicing import Progress
-from pentapod_sim.modes.solver import solve_modes
+from pentapod_sim.modes.solver import ModalResult, solve_modes
 from pentapod_sim.paths import config_dir
 from pentapod_sim.plant.config import (
     damping_file_path,
@@ -160,7 +161,8 @@ def keep_by_relevance(plant_all: PlantModel,
 
 def plant_from_fe(fe: FEModel, reduction_cfg: ReductionConfig,
                   progress: Callable[[str], None] | None = None,
-                  modes_progress: Progress | None = None
+                  modes: ModalResult | None = None,
+                  modes_progress: Progress | None = None,
                   ) -> tuple[PlantModel, npt.NDArray[np.intp]]:
     """
     Plant with every mode below ``modes_f_max`` of an FE model, and the relevant modes.
@@ -175,6 +177,9 @@ def plant_from_fe(fe: FEModel, reduction_cfg: ReductionConfig,
         Receives one message per stage.
     modes_progress : callable, optional
         The mode solver's progress callback (:func:`pentapod_sim.modes.solver.solve_modes`).
+    modes : ModalResult, optional
+        Modes of ``fe`` already solved up to at least ``modes_f_max`` (those above are left
+        out); default: solved here.
 
     Returns
     -------
@@ -187,8 +192,16 @@ def plant_from_fe(fe: FEModel, reduction_cfg: ReductionConfig,
     """
     say = progress or (lambda msg: LOG.info('%s', msg))
     cfg = reduction_cfg
-    say(f'FE model: {fe.n_dof} DOF; solving modes below {cfg.modes_f_max} Hz')
-    modes = solve_modes(fe.K, fe.M, f_max=cfg.modes_f_max, progress=modes_progress)
+    if modes is None:
+        say(f'FE model: {fe.n_dof} DOF; solving modes below {cfg.modes_f_max} Hz')
+        modes = solve_modes(fe.K, fe.M, f_max=cfg.modes_f_max, progress=modes_progress)
+    elif modes.f_max is None or modes.f_max < cfg.modes_f_max:
+        raise ConfigError(f'modes solved up to {modes.f_max} Hz; the plant needs every mode '
+                          f'below modes_f_max = {cfg.modes_f_max} Hz')
+    else:
+        n = modes.count_below(cfg.modes_f_max)
+        modes = ModalResult(modes.frequencies[:n], modes.shapes[:, :n], n,
+                            cfg.modes_f_max, modes.stats)
     say(f'{modes.n_modes} modes, {modes.frequencies[0]:.2f} .. {modes.frequencies[-1]:.2f} Hz')
     inputs, outputs = list(cfg.inputs), list(cfg.outputs)
     chord = cfg.chord_position
@@ -207,8 +220,24 @@ def plant_from_fe(fe: FEModel, reduction_cfg: ReductionConfig,
     plant_all.meta.update({
         'pose': [float(v) for v in fe.pose], 'params_sha256': fe.meta.get('params_sha256'),
         'package_version': __version__, 'n_dof': fe.n_dof, 'n_modes_computed': modes.n_modes,
-        'modes_f_max_hz': float(cfg.modes_f_max), 'static_compliance_full': g_full.tolist()})
+        'modes_f_max_hz': float(cfg.modes_f_max), 'static_compliance_full': g_full.tolist(),
+        'mode_causes': mode_causes(fe, modes)})
     return plant_all, keep
+
+
+def mode_causes(fe: FEModel, modes: ModalResult) -> list[str]:
+    """
+    Each mode's cause: the stiffness group with the largest share of its strain energy.
+
+    The same rule as :func:`pentapod_sim.modes.causes.analyse_causes`' ``cause`` column (names
+    of ``fe.stiffness_groups``: struts, joints, frame, ...); empty strings for a model without
+    stiffness groups. :meth:`PlantModel.fe_mode` reads them back per plant mode.
+    """
+    if not fe.stiffness_groups:
+        return [''] * modes.n_modes
+    names = list(fe.stiffness_groups)
+    shares = strain_energy_shares(fe.stiffness_groups, modes)
+    return [names[k] for k in np.argmax(shares, axis=1)]
 
 
 def reduce_plant(plant_all: PlantModel, keep: npt.ArrayLike,
@@ -271,16 +300,21 @@ def build_plant(position: str | npt.ArrayLike, machine: MachineParams | None = N
     return plant
 
 
+#: What a built plant records beyond the matrices; a new item gives older cache files a new key.
+CACHE_CONTENT = 'kept_modes,mode_causes'
+
+
 def model_cache_key(position: str) -> str:
     """
     SHA-256 (hex, 16 chars) over the configuration a built model depends on.
 
     Covers machine.yaml, positions.yaml and reduction.yaml of
     :func:`pentapod_sim.paths.config_dir` (and the damping file reduction.yaml names), the
-    position name, the package version and the port names (a model built before a port was
-    added lacks it), so any edit gives a new cache file.
+    position name, the package version, :data:`CACHE_CONTENT` and the port names (a model
+    built before a port was added lacks it), so any edit gives a new cache file.
     """
-    digest = hashlib.sha256(f'{position}|{__version__}|{INPUT_NAMES}|{OUTPUT_NAMES}'.encode())
+    digest = hashlib.sha256(
+        f'{position}|{__version__}|{CACHE_CONTENT}|{INPUT_NAMES}|{OUTPUT_NAMES}'.encode())
     for name in ('machine.yaml', 'positions.yaml', 'reduction.yaml'):
         path = config_dir() / name
         digest.update(path.read_bytes() if path.exists() else b'')

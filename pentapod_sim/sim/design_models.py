@@ -27,12 +27,12 @@ import numpy as np
 import scipy.sparse as sp
 
 from pentapod_sim.errors import ConfigError
-from pentapod_sim.fe.assembly import build_model
 from pentapod_sim.fe.beam import rhs_section
 from pentapod_sim.fe.geometry import layout_from_params, solve_pose
 from pentapod_sim.fe.machine_data import load_machine, MachineParams
 from pentapod_sim.fe.model import FEModel
 from pentapod_sim.modes.causes import strain_energy_shares
+from pentapod_sim.modes.frame_reduction import build_model
 from pentapod_sim.modes.solver import solve_modes
 from pentapod_sim.plant.build import keep_by_relevance, plant_from_fe, reduce_plant
 from pentapod_sim.plant.check_model import check_f_max, load_or_build_check_model
