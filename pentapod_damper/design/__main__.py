@@ -46,7 +46,7 @@ from pentapod_sim.sim.tuning import TuneSettings
 LOG = logging.getLogger('design')
 
 
-def _tables(args: argparse.Namespace) -> list:
+def _tables(args: argparse.Namespace) -> list[DamperTable]:
     """The tables: computed, or read from a ``tables.pkl`` of an earlier run."""
     if args.from_tables:
         tables = []

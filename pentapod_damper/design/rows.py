@@ -43,30 +43,30 @@ class RowSpec:
 class _FixedModels:
     """Adapter: fixed laws as an object with ``discrete(dt)`` (a list of controllers)."""
 
-    make: Callable[[float], list]
+    make: Callable[[float], list[Any]]
     extra: int
 
-    def discrete(self, dt: float) -> list:
+    def discrete(self, dt: float) -> list[Any]:
         return [delay_output(law.discrete_model(), self.extra) for law in self.make(dt)]
 
-    def continuous(self) -> list:
+    def continuous(self) -> list[Any]:
         return [law.continuous_model() for law in self.make(1.0)]
 
 
 def fixed_family(name: str, sensors: str, actuators: str,
-                 make: Callable[[Sequence[int], float], list]) -> Family:
+                 make: Callable[[Sequence[int], float], list[Any]]) -> Family:
     """A family without parameters that runs ``make(struts, dt)``."""
     def build(values: Mapping[str, float], struts: Sequence[int],
-              context: Mapping[str, Any]) -> list:
+              context: Mapping[str, Any]) -> list[Any]:
         return [_FixedModels(lambda dt: make(struts, dt), int(context.get('extra', 0)))]
     return Family(name, 'locked', sensors, actuators, (), build)
 
 
-def _scenario_dampers(scenario: str) -> Callable[[Sequence[int], float], list]:
+def _scenario_dampers(scenario: str) -> Callable[[Sequence[int], float], list[Any]]:
     """The scenario's viscous dampers, on the given struts only (strut ports)."""
     sections = read_scenario(scenario).sections
 
-    def make(struts: Sequence[int], dt: float) -> list:
+    def make(struts: Sequence[int], dt: float) -> list[Any]:
         out = []
         for law in scenario_laws(sections, dt):
             if not isinstance(law, ViscousDamper):
@@ -75,21 +75,22 @@ def _scenario_dampers(scenario: str) -> Callable[[Sequence[int], float], list]:
                     if not port.startswith('strut') or int(port[5]) in struts]
             if keep:
                 out.append(ViscousDamper([law.actuator_ports[k] for k in keep],
-                                         law.gains[keep], law.dynamics, dt))
+                                         [float(g) for g in law.gains[keep]], law.dynamics,
+                                         dt))
         return out
     return make
 
 
-def _ideal_bending(gain: float) -> Callable[[Sequence[int], float], list]:
-    def make(struts: Sequence[int], dt: float) -> list:
+def _ideal_bending(gain: float) -> Callable[[Sequence[int], float], list[Any]]:
+    def make(struts: Sequence[int], dt: float) -> list[Any]:
         return [ViscousDamper([f'strut{i}_bending_moment_{k}' for i in struts for k in (2, 3)],
                               gain, Dynamics(), dt)]
     return make
 
 
 def _pma(mass: float, gain: float, highpass_hz: float) -> Callable[[Sequence[int], float],
-                                                                     list]:
-    def make(struts: Sequence[int], dt: float) -> list:
+                                                                     list[Any]]:
+    def make(struts: Sequence[int], dt: float) -> list[Any]:
         return [ProofMassActuator(['x'], mass, gain, dt, highpass_hz=highpass_hz)]
     return make
 

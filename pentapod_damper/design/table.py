@@ -117,7 +117,8 @@ def _share(base: float, partial: float, full: float) -> float:
     return float((base - partial) / gained) if gained > 0 else float('nan')
 
 
-def _continuous_frf(judge: Judge, values: dict, struts: Sequence[int]) -> PoleResidueFrf:
+def _continuous_frf(judge: Judge, values: dict[str, float],
+                    struts: Sequence[int]) -> PoleResidueFrf:
     """The TCP FRF of the continuous loop (no sampling, no delay)."""
     s = judge.settings
     out, inp = s.pair
@@ -133,7 +134,7 @@ def _continuous_frf(judge: Judge, values: dict, struts: Sequence[int]) -> PoleRe
     return PoleResidueFrf.from_state_space(a, b[:, j], c_y[o], plant.state_matrices()[3][o, j])
 
 
-def _continuous_metrics(judge: Judge, values: dict, struts: Sequence[int]
+def _continuous_metrics(judge: Judge, values: dict[str, float], struts: Sequence[int]
                         ) -> tuple[float, float, float]:
     """Peak, its frequency and RMS of the TCP FRF of the continuous loop."""
     frf = _continuous_frf(judge, values, struts)
@@ -147,7 +148,7 @@ def frf_grid(settings: TuneSettings, points: int = 4000) -> np.ndarray:
     return np.geomspace(*settings.band, points)
 
 
-def _magnitude(judge: Judge, values: dict, ideal: bool) -> np.ndarray:
+def _magnitude(judge: Judge, values: dict[str, float], ideal: bool) -> np.ndarray:
     """|TCP FRF| [m/N] of a row on :func:`frf_grid` (NaN for an unstable loop)."""
     freq = frf_grid(judge.settings)
     if ideal:
@@ -162,7 +163,7 @@ def _magnitude(judge: Judge, values: dict, ideal: bool) -> np.ndarray:
     return np.abs(loop.output(out, inp)(freq))
 
 
-def _row(spec: RowSpec, judge: Judge, values: dict, best: Evaluation, base: Evaluation,
+def _row(spec: RowSpec, judge: Judge, values: dict[str, float], best: Evaluation, base: Evaluation,
          radii: tuple[float, float] | None, say: Callable[[str], None]) -> DamperRow:
     """Measure one row (its check-model margins and the struts 1+2 share)."""
     ideal = spec.kind == 'ideal'
@@ -297,7 +298,7 @@ def _energy(model: DesignModel, settings: TuneSettings) -> dict[str, dict[str, f
     return shares
 
 
-def stroke(judge: Judge, values: dict) -> tuple[float, str]:
+def stroke(judge: Judge, values: dict[str, float]) -> tuple[float, str]:
     """
     The largest actuator stroke of a design: RMS over the band per newton of TCP force.
 
