@@ -51,9 +51,16 @@ def _values(gains: str) -> dict[str, float]:
 
 @pytest.mark.slow
 def test_best_strut_law_at_p1_is_what_the_code_computes(tmp_path):
+    """
+    The law the verdict names at P1, recomputed: its peak, statics and full-check margins.
+
+    The verdict's law keeps the compliance below half the first resonance (``low_band``); a
+    law in the feed drives' loops is measured against the locked machine in the table but
+    against the machine with its drives by the tuner's judge, so it is not compared here.
+    """
     records = [r for r in read_csv(CSV) if (r['position'], r['machine'], r['delay_steps'])
                == ('P1', 'locked', '0')]
-    best = best_strut_law(records)
+    best = best_strut_law(records, low_band=True)
     assert best is not None
     spec = next(s for s in default_rows() if s.name == best['law'])
     model = load_design_model('P1', float(best['sample_rate_hz']), cache_dir=tmp_path)
