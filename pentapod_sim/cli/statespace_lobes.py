@@ -12,11 +12,14 @@ it writes ``lobes_<position>_<operation>.png`` (one curve per scenario), ``.csv`
 best pocket and the stable depth gain over the first scenario). ``--depth-table FILE`` puts
 the table of minimum stable depths between the ``machining-depths`` markers of FILE
 (docs/machining.md). ``--check`` also prints the cutting runs that check each limit in the
-time domain (speed, depths at 0.8x and 1.2x, durations). Examples::
+time domain (speed, depths at 0.8x and 1.2x, durations); ``--record DIR`` runs them on the
+testbed (composed, recorded to DIR) and prints each verdict of ``analyze chatter`` next to the
+prediction, also into DIR/checks.csv. Examples::
 
     statespace lobes --position P1,P2 --scenario baseline,tcp_damping
     statespace lobes --scenario all --operation aluminium_half_down,steel_half_down \
         --depth-table docs/machining.md
+    statespace lobes --position P1,P2 --scenario baseline,tcp_damping --record out/cutting
 """
 from __future__ import annotations
 
@@ -80,6 +83,9 @@ def add_lobes_parser(sub: Any) -> None:
     p.add_argument('--check', action='store_true',
                    help='also print the time-domain check of each limit: speed, depths at '
                         '0.8x and 1.2x of the limit, run durations')
+    p.add_argument('--record', type=Path, default=None, metavar='DIR',
+                   help='run the checks on the testbed (composed, recorded to DIR) and print '
+                        'the verdict of each recording (implies --check)')
 
 
 def scenario_names(text: str) -> list[str]:
@@ -130,10 +136,9 @@ def depth_rows(records: Sequence[LoopLobes], operations: Sequence[str]) -> list[
     return rows
 
 
-def depth_table(records: Sequence[LoopLobes], operations: Sequence[str],
-                table: MachiningTable) -> str:
+def depth_table(records: Sequence[LoopLobes], operations: Sequence[str]) -> str:
     """Markdown: minimum stable depth [mm] and its gain over the first scenario, per row."""
-    heads = [f'{table.operation(op).material}, {op} [mm]' for op in operations]
+    heads = [f'{op} [mm]' for op in operations]
     lines = ['| position | scenario | ' + ' | '.join(heads) + ' | stable depth gain |',
              '|---|---|' + '---|' * len(heads) + '---|']
     for rec in records:
@@ -159,7 +164,8 @@ def cmd_lobes(args: argparse.Namespace) -> int:
                           f'{args.n_speeds} >= 2')
     speeds = np.linspace(low, high, args.n_speeds)
     positions = [p for p in (args.position or ','.join(args.cfg.positions)).split(',') if p]
-    records = []
+    records: list[LoopLobes] = []
+    checks: list[list[Any]] = []
     for position in positions:
         plant = build_plant(position, reduction_cfg=args.cfg)
         found = position_lobes(plant, position, scenarios, table, operations, speeds,
@@ -176,21 +182,28 @@ def cmd_lobes(args: argparse.Namespace) -> int:
                       f'Hz); best pocket {summ.pocket_depth * 1e3:.4g} mm at '
                       f'{summ.pocket_speed:.0f} rpm')
             print(f'wrote {diagram.png}')
-            if args.check:
+            if args.check or args.record:
                 for rec in found:
-                    _print_check(plant, rec, op, table)
+                    checks += _check(plant, rec, op, table, args.record)
     path = args.out / 'min_depths.csv'
     with open(path, 'w', newline='', encoding='utf-8') as stream:
         writer = csv.writer(stream)
         writer.writerow(MIN_DEPTH_COLUMNS)
         writer.writerows(depth_rows(records, operations))
     print(f'wrote {path}')
+    if args.record:
+        path = args.record / 'checks.csv'
+        with open(path, 'w', newline='', encoding='utf-8') as stream:
+            writer = csv.writer(stream)
+            writer.writerow(CHECK_COLUMNS)
+            writer.writerows(checks)
+        print(f'wrote {path}')
     if args.depth_table is not None:
         doc = Path(args.depth_table)
         text = doc.read_text(encoding='utf-8')
         try:
             doc.write_text(replace_section(text, DEPTH_SECTION,
-                                           depth_table(records, operations, table)),
+                                           depth_table(records, operations)),
                            encoding='utf-8')
         except ValueError as err:
             raise ConfigError(f'{doc}: {err}') from None
@@ -198,8 +211,16 @@ def cmd_lobes(args: argparse.Namespace) -> int:
     return 0
 
 
-def _print_check(plant: Any, rec: LoopLobes, op: str, table: MachiningTable) -> None:
-    """The cutting runs that check one limit (speed, depths, durations, predicted rates)."""
+#: Columns of checks.csv (``--record``).
+CHECK_COLUMNS = ('position', 'scenario', 'operation', 'speed_rpm', 'limit_m', 'chatter_Hz',
+                 'factor', 'depth_m', 'duration_s', 'predicted_rate_per_s', 'expected',
+                 'verdict', 'measured_chatter_Hz', 'growth_rate_per_s', 'off_harmonic_share',
+                 'left_cut_share', 'wall_time_s', 'bag')
+
+
+def _check(plant: Any, rec: LoopLobes, op: str, table: MachiningTable,
+           record: Path | None) -> list[list[Any]]:
+    """Print the cutting runs that check one limit; with ``record`` run and judge them."""
     from pentapod_sim.scenario.laws import scenario_loop_laws
     laws = scenario_loop_laws(rec.label, rec.loop.dt)
     point = check_runs(plant, laws, rec.loop.dt, table, rec.operations[op])
@@ -208,3 +229,24 @@ def _print_check(plant: Any, rec: LoopLobes, op: str, table: MachiningTable) -> 
                      for r in point.runs)
     print(f'  check {rec.position} {rec.label} {op}: at {point.speed:.1f} rpm the limit is '
           f'{point.depth * 1e3:.4g} mm (chatter {point.chatter_freq:.1f} Hz): {runs}')
+    if record is None:
+        return []
+    from pentapod_sim.scenario.cutting import record_cut
+    model = record / f'plant_{rec.position}.npz'
+    if not model.is_file():
+        plant.save(model)
+    rows = []
+    for run in point.runs:
+        name = f'{rec.position}_{rec.label}_{op}_{run.factor:g}x'.replace('.', '_')
+        done = record_cut(rec.label, run, record / name, model_file=str(model))
+        v = done.verdict
+        print(f'    {run.factor:g}x: {v.verdict} (expected {run.expected}'
+              f'{"" if done.as_expected else ", NOT AS PREDICTED"}); chatter '
+              f'{v.chatter_freq:.2f} Hz, growth {v.growth_rate:+.3g} 1/s, '
+              f'{v.off_harmonic_share:.1%} off the harmonics, {v.left_cut_share:.2%} without '
+              f'chip; {done.wall_time:.0f} s wall; bag {done.bag}')
+        rows.append([rec.position, rec.label, op, point.speed, point.depth, point.chatter_freq,
+                     run.factor, run.params['axial_depth'], run.duration, run.growth_rate,
+                     run.expected, v.verdict, v.chatter_freq, v.growth_rate,
+                     v.off_harmonic_share, v.left_cut_share, done.wall_time, str(done.bag)])
+    return rows

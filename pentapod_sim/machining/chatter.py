@@ -23,11 +23,12 @@ The verdict: 'chatter' if the spread grows by more than a factor ``growth_factor
 window, or if more than ``share_limit`` of the power is off the harmonics and the spread is not
 decaying by that factor; else 'tool left the cut' if more than ``left_cut_limit`` of the engaged
 samples had no chip (a cut without chatter whose forced vibration exceeds the chip); else
-'stable'. Chatter that has saturated leaves the cut too (that bounds it); it is called chatter. The share catches saturated chatter: when the entry
-transient is as large as the limit cycle (a cut just above the limit on a well-damped mode),
-the spread stops growing within a few tooth periods, while 5-30 % of the power stays off the
-harmonics; stable cuts leave 0.1-1 % there (the cutting runs of test/test_cutting_runs.py and
-docs/machining.md). A spread below ``1e-6`` of the vibration's RMS (numeric
+'stable'. Chatter that has saturated leaves the cut too (that bounds it); it is called
+chatter. The share catches saturated chatter: when the entry transient is as large as the
+limit cycle (a cut just above the limit on a well-damped mode), the spread stops growing within
+a few tooth periods while 10-30 % of the power stays off the harmonics; stable cuts leave
+0.1-1 % there (the cutting runs of test/test_cutting_node.py and docs/machining.md). A spread
+below ``1e-6`` of the vibration's RMS (numeric
 noise on a settled cut) is left out of the growth rate.
 """
 from __future__ import annotations
