@@ -44,6 +44,8 @@ DEFAULT_SCENARIOS = 'baseline,tcp_damping'
 DEFAULT_OPERATIONS = 'aluminium_half_down'
 #: Marker name of the table of minimum stable depths in docs/machining.md.
 DEPTH_SECTION = 'machining-depths'
+#: Marker name of the table of recorded check runs in docs/machining.md.
+RUNS_SECTION = 'machining-runs'
 MIN_DEPTH_COLUMNS = ('position', 'scenario', 'operation', 'sample_rate_Hz', 'min_depth_m',
                      'min_depth_chatter_Hz', 'min_depth_resolved', 'best_pocket_m',
                      'best_pocket_rpm', 'stable_depth_gain')
@@ -86,6 +88,9 @@ def add_lobes_parser(sub: Any) -> None:
     p.add_argument('--record', type=Path, default=None, metavar='DIR',
                    help='run the checks on the testbed (composed, recorded to DIR) and print '
                         'the verdict of each recording (implies --check)')
+    p.add_argument('--runs-table', type=Path, default=None, metavar='FILE',
+                   help=f'write the recorded checks (needs --record) between the {RUNS_SECTION} '
+                        'markers of FILE')
 
 
 def scenario_names(text: str) -> list[str]:
@@ -163,6 +168,8 @@ def cmd_lobes(args: argparse.Namespace) -> int:
         raise ConfigError(f'--speeds {low} {high} must satisfy 0 < MIN < MAX and --n-speeds '
                           f'{args.n_speeds} >= 2')
     speeds = np.linspace(low, high, args.n_speeds)
+    if args.runs_table is not None and args.record is None:
+        raise ConfigError('--runs-table needs --record DIR (the runs it tabulates)')
     positions = [p for p in (args.position or ','.join(args.cfg.positions)).split(',') if p]
     records: list[LoopLobes] = []
     checks: list[list[Any]] = []
@@ -199,16 +206,37 @@ def cmd_lobes(args: argparse.Namespace) -> int:
             writer.writerows(checks)
         print(f'wrote {path}')
     if args.depth_table is not None:
-        doc = Path(args.depth_table)
-        text = doc.read_text(encoding='utf-8')
-        try:
-            doc.write_text(replace_section(text, DEPTH_SECTION,
-                                           depth_table(records, operations)),
-                           encoding='utf-8')
-        except ValueError as err:
-            raise ConfigError(f'{doc}: {err}') from None
-        print(f'wrote the table of minimum stable depths into {doc}')
+        _write_section(args.depth_table, DEPTH_SECTION, depth_table(records, operations))
+        print(f'wrote the table of minimum stable depths into {args.depth_table}')
+    if args.runs_table is not None:
+        _write_section(args.runs_table, RUNS_SECTION, runs_table(checks))
+        print(f'wrote the table of recorded checks into {args.runs_table}')
     return 0
+
+
+def _write_section(doc: Path, name: str, body: str) -> None:
+    text = doc.read_text(encoding='utf-8')
+    try:
+        doc.write_text(replace_section(text, name, body), encoding='utf-8')
+    except ValueError as err:
+        raise ConfigError(f'{doc}: {err}') from None
+
+
+def runs_table(checks: Sequence[Sequence[Any]]) -> str:
+    """Markdown of the recorded checks (rows of :data:`CHECK_COLUMNS`)."""
+    lines = ['| position | scenario | operation | speed [rpm] | limit [mm] | predicted chatter '
+             '[Hz] | run | depth [mm] | simulated [s] | expected | verdict of the recording | '
+             'chatter [Hz] | growth [1/s] | off harmonics | wall [s] |',
+             '|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|']
+    for row in checks:
+        r = dict(zip(CHECK_COLUMNS, row))
+        lines.append(f"| {r['position']} | {r['scenario']} | {r['operation']} | "
+                     f"{r['speed_rpm']:.1f} | {r['limit_m'] * 1e3:.4g} | {r['chatter_Hz']:.1f} | "
+                     f"{r['factor']:g}x | {r['depth_m'] * 1e3:.4g} | {r['duration_s']:.3g} | "
+                     f"{r['expected']} | {r['verdict']} | {r['measured_chatter_Hz']:.1f} | "
+                     f"{r['growth_rate_per_s']:+.3g} | {r['off_harmonic_share']:.1%} | "
+                     f"{r['wall_time_s']:.0f} |")
+    return '\n'.join(lines)
 
 
 #: Columns of checks.csv (``--record``).
@@ -232,6 +260,7 @@ def _check(plant: Any, rec: LoopLobes, op: str, table: MachiningTable,
     if record is None:
         return []
     from pentapod_sim.scenario.cutting import record_cut
+    record.mkdir(parents=True, exist_ok=True)
     model = record / f'plant_{rec.position}.npz'
     if not model.is_file():
         plant.save(model)
