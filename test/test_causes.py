@@ -8,12 +8,11 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 
 from pentapod_sim.fe.model import FEModel
+from pentapod_sim.modes.cause_plots import plot_energy_shares, plot_mode_distribution
 from pentapod_sim.modes.causes import (
     analyse_causes,
     mass_mac,
     neuber_frequencies,
-    plot_energy_shares,
-    plot_mode_distribution,
     rigidified_stiffness,
     strain_energy_shares,
     tcp_directions,

@@ -175,8 +175,11 @@ def _expect_machine(obj, raw: dict, where: str = '') -> int:
         got = getattr(obj, key)
         if isinstance(got, tuple) and not isinstance(value, list):
             value = [value] * len(got)               # one number for all struts
-        assert got == pytest.approx(tuple(value) if isinstance(value, list) else value,
-                                    rel=1e-15), f'{where}{key}'
+        if isinstance(value, str):                   # a choice (frame.model)
+            assert got == value, f'{where}{key}'
+        else:
+            assert got == pytest.approx(tuple(value) if isinstance(value, list) else value,
+                                        rel=1e-15), f'{where}{key}'
         seen += 1
     return seen
 

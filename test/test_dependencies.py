@@ -23,6 +23,8 @@ IMPORT_KEYS = {
     'primme': 'python3-primme-pip',
     'diagnostic_msgs': 'diagnostic_msgs',
     'geometry_msgs': 'geometry_msgs',
+    'gmsh': 'python3-gmsh-pip',
+    'skfem': 'python3-scikit-fem-pip',
     'lz4': 'python3-lz4-pip',
     'matplotlib': 'python3-matplotlib',
     'mcap': 'python3-mcap-pip',

@@ -143,10 +143,8 @@ def model_from_args(args: argparse.Namespace) -> FEModel:
     if getattr(args, 'fe_model_file', None):
         from pentapod_sim.fe.imported.build import load_fe_model
         return load_fe_model(args.fe_model_file)
-    from pentapod_sim.fe import (
-        assembly,
-        machine_data,  # heavy imports only when a model is built
-    )
+    from pentapod_sim.fe import machine_data  # heavy imports only when a model is built
+    from pentapod_sim.modes import frame_reduction
     from pentapod_sim.schema import closest
 
     machine = machine_data.load_machine(args.machine)
@@ -163,8 +161,8 @@ def model_from_args(args: argparse.Namespace) -> FEModel:
             raise ConfigError(f'--refine must be > 0, got {args.refine}')
         element_size = machine.mesh.element_size / args.refine
     try:
-        return assembly.build_model(machine, positions[args.position],
-                                    element_size=element_size)
+        return frame_reduction.build_model(machine, positions[args.position],
+                                           element_size=element_size)
     except UnreachablePoseError as err:
         raise ConfigError(f'{path}: position {args.position!r} cannot be reached with '
                           f'{machine.source}: {err}') from None

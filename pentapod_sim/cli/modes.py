@@ -34,12 +34,11 @@ from pentapod_sim.cli import (
 )
 from pentapod_sim.errors import ModalError
 from pentapod_sim.fe.model import FEModel
+from pentapod_sim.modes.cause_plots import plot_energy_shares, plot_mode_distribution
 from pentapod_sim.modes.causes import (
     analyse_causes,
     DEFAULT_ALPHA,
     DEFAULT_ROTATION_LENGTH,
-    plot_energy_shares,
-    plot_mode_distribution,
 )
 from pentapod_sim.modes.solver import ModalResult, solve_modes
 from pentapod_sim.modes.sturm import sturm_count

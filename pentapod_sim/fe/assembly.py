@@ -4,7 +4,9 @@ Build the sparse FE model (:class:`pentapod_sim.fe.model.FEModel`) of the pentap
 Model (all SI units):
 
 * Frame: five columns, base and top ring, five spokes to the lumped bed/table, five brackets
-  carrying the BP joints; Timoshenko beams (:mod:`pentapod_sim.fe.beam`).
+  carrying the BP joints; Timoshenko beams (:mod:`pentapod_sim.fe.beam`), or with
+  ``frame.model: shells`` the plate frame's Craig-Bampton superelement
+  (:mod:`pentapod_sim.fe.frame_model`) coupled at its feet, BP joint seats and bed.
 * Installation: one translational spring triple (x, y, z) per foot to the ground.
 * Struts: beams re-meshed per pose with nodes at the WP joint, at the BP joint and at the free
   rear end (overhang = tube length - active length), plus the ball-screw mass per length.
@@ -34,12 +36,15 @@ from pentapod_sim.fe import beam
 from pentapod_sim.fe.geometry import layout_from_params, N_STRUTS, solve_pose, StrutState
 from pentapod_sim.fe.machine_data import load_positions, MachineParams, RhsSection
 from pentapod_sim.fe.model import DofMap, FEModel
+from pentapod_sim.fe.rigid import node_dofs, rigid_elimination
 
 LOG = logging.getLogger(__name__)
 Array = npt.NDArray[np.float64]
 #: COO rows, columns and values of element blocks
 Triplet = tuple[Array, Array, Array]
 GROUPS = ('frame', 'installation', 'struts', 'feed_drives', 'bp_joints', 'wp_joints')
+#: Extra stiffness group of the plate frame (frame.model: shells): its walls.
+WALL_GROUP = 'frame_walls'
 
 
 class _Mesh:
@@ -58,6 +63,10 @@ class _Mesh:
         self.masses: list[tuple[int, float, Array]] = []
         self.slaves: dict[int, int] = {}
         self.mass_parts: dict[str, float] = {}
+        #: nodes of the machine frame (to tell local frame modes), and a superelement:
+        #: its node per interface DOF block, dense K per group, dense M (modal DOFs appended)
+        self.frame_nodes: set[int] = set()
+        self.superelement: tuple[list[int], dict[str, Array], Array] | None = None
 
     def node(self, xyz: npt.ArrayLike, name: str | None = None) -> int:
         self.xyz.append(np.asarray(xyz, dtype=float).reshape(1, 3))
@@ -86,6 +95,8 @@ class _Mesh:
                                               + added_mass * length)
         self.beams.append({'n1': ids[:-1], 'n2': ids[1:], 'sec': sec, 'orient': orientation,
                                'group': group, 'nsm': added_mass})
+        if group == 'frame':
+            self.frame_nodes.update(int(n) for n in ids)
 
     def spring(self, a: int, b: int | None, frame: Array, k_diag: npt.ArrayLike,
                group: str) -> None:
@@ -132,11 +143,18 @@ def _column_and_frame(mesh: _Mesh) -> tuple[list[int], dict[int, int], int]:
     mesh.mass(bed, fr.bed_mass, np.diag(fr.bed_inertia), 'bed')
     for node in ring_base:
         mesh.member(bed, node, fr.spoke, vertical, 'frame', 'frame')
+    mesh.frame_nodes.discard(bed)               # the bed's mass is not the frame's
     return feet, bracket_col, bed
 
 
-def _struts_and_joints(mesh: _Mesh, state: StrutState, bracket_col: dict[int, int]) -> None:
-    """Struts, gimbals, BP and WP joints (springs) and the platform's slave points."""
+def _struts_and_joints(mesh: _Mesh, state: StrutState, bracket_col: dict[int, int],
+                       seats: dict[int, int] | None = None) -> None:
+    """
+    Struts, gimbals, BP and WP joints (springs) and the platform's slave points.
+
+    ``seats``: the frame's node of each BP joint's outer ring (plate frame); without it the
+    ring node is made here and tied to ``bracket_col`` by a bracket beam.
+    """
     m = mesh.machine
     layout = layout_from_params(m)
     bp, fd, wp = m.bp_joints, m.feed_drives, m.wp_joints
@@ -147,8 +165,11 @@ def _struts_and_joints(mesh: _Mesh, state: StrutState, bracket_col: dict[int, in
         e1 = frame[0]
         b_pt, w_pt = layout.bp_joints[i], state.wp_joints[i]
         overhang = m.struts.tube_length[i] - state.lengths[i]
-        ring = mesh.node(b_pt, f'bp_ring{s}')
-        mesh.member(bracket_col[i], ring, m.frame.bp_bracket, vertical, 'frame', 'frame')
+        if seats is not None:
+            ring = seats[i]
+        else:
+            ring = mesh.node(b_pt, f'bp_ring{s}')
+            mesh.member(bracket_col[i], ring, m.frame.bp_bracket, vertical, 'frame', 'frame')
         gimbal = mesh.node(b_pt, f'gimbal{s}')
         at_bp = mesh.node(b_pt, f'strut{s}_at_bp')
         wp_end = mesh.node(w_pt, f'strut{s}_wp_end')
@@ -188,15 +209,19 @@ def _platform(mesh: _Mesh, state: StrutState) -> None:
         mesh.slaves[mesh.named[name]] = master
 
 
-def _dofs(nodes: npt.ArrayLike) -> Array:
-    """(n,) node ids -> (n, 6) global DOF indices."""
-    return (6 * np.asarray(nodes, dtype=np.int64)[:, None] + np.arange(6)).astype(np.int32)
+_dofs = node_dofs
 
 
-def _triplets(blocks: Array, dofs: Array) -> Triplet:
+def _triplets(blocks: Array, dofs: npt.NDArray[Any]) -> Triplet:
     """Element blocks (e, d, d) at DOF indices (e, d) -> COO rows, cols, values."""
     d = dofs.shape[1]
     return (np.repeat(dofs, d, axis=1).ravel(), np.tile(dofs, (1, d)).ravel(), blocks.ravel())
+
+
+def _super_triplets(blk: Any, dofs: npt.NDArray[Any]) -> Triplet:
+    """Triplets of a superelement matrix (dense, or sparse for an unreduced frame)."""
+    coo = sp.coo_matrix(blk)
+    return dofs[coo.row], dofs[coo.col], coo.data
 
 
 def _to_csr(parts: list[Triplet], n: int) -> sp.csr_matrix:
@@ -248,46 +273,31 @@ def _lumped_mass_triplets(mesh: _Mesh, m_parts: list[Triplet]) -> None:
         m_parts.append(_triplets(blk[None], _dofs([a])))
 
 
-def _rigid_elimination(mesh: _Mesh) -> sp.csr_matrix:
-    """Return T (n_full, n_free) with u = T q; slave node = rigid offset of its master."""
-    n_full = 6 * mesh.n_nodes
-    is_slave = np.zeros(mesh.n_nodes, bool)
-    is_slave[list(mesh.slaves)] = True
-    free_nodes = np.flatnonzero(~is_slave)
-    col_of_node = -np.ones(mesh.n_nodes, int)
-    col_of_node[free_nodes] = np.arange(len(free_nodes))
-    rows: list[np.ndarray] = [_dofs(free_nodes).ravel()]
-    cols: list[np.ndarray] = [np.arange(6 * len(free_nodes))]
-    vals: list[np.ndarray] = [np.ones(6 * len(free_nodes))]
-    xyz = mesh.positions()
-    for s, m in mesh.slaves.items():
-        r = xyz[s] - xyz[m]
-        blk = np.eye(6)
-        blk[:3, 3:] = -np.array([[0, -r[2], r[1]], [r[2], 0, -r[0]], [-r[1], r[0], 0]])
-        ii, jj = np.nonzero(blk)
-        rows.append(6 * s + ii)
-        cols.append(6 * col_of_node[m] + jj)
-        vals.append(blk[ii, jj])
-    return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-                         shape=(n_full, 6 * len(free_nodes)))
-
-
 def _assemble(mesh: _Mesh) -> tuple[sp.csr_matrix, dict[str, sp.csr_matrix], sp.csr_matrix]:
     """Return T, the reduced stiffness groups and the reduced mass matrix of a mesh."""
-    n_full = 6 * mesh.n_nodes
+    n_modal = 0
     k_parts: dict[str, list[Triplet]] = {}
     m_parts: list[Triplet] = []
     _beam_triplets(mesh, k_parts, m_parts)
     _spring_triplets(mesh, k_parts)
     _lumped_mass_triplets(mesh, m_parts)
+    if mesh.superelement is not None:
+        nodes, k_super, m_super = mesh.superelement
+        n_modal = m_super.shape[0] - 6 * len(nodes)
+        dofs = np.concatenate([_dofs(nodes).ravel(), 6 * mesh.n_nodes + np.arange(n_modal)])
+        for g, blk in k_super.items():
+            k_parts.setdefault(g, []).append(_super_triplets(blk, dofs))
+        m_parts.append(_super_triplets(m_super, dofs))
+    n_full = 6 * mesh.n_nodes + n_modal
     k_full = {g: _to_csr(parts, n_full) for g, parts in k_parts.items()}
     m_full = _to_csr(m_parts, n_full)
     LOG.debug('full matrices assembled (%d DOF); eliminating the rigid platform', n_full)
-    t_mat = _rigid_elimination(mesh)
+    t_mat = rigid_elimination(mesh.positions(), mesh.slaves, n_modal)
     t_t = t_mat.T.tocsr()
     n_free = t_mat.shape[1]
+    names = GROUPS + ((WALL_GROUP,) if WALL_GROUP in k_full else ())
     groups = {g: (t_t @ k_full[g] @ t_mat).tocsr() if g in k_full
-              else sp.csr_matrix((n_free, n_free)) for g in GROUPS}
+              else sp.csr_matrix((n_free, n_free)) for g in names}
     return t_mat, groups, (t_t @ m_full @ t_mat).tocsr()
 
 
@@ -301,7 +311,8 @@ def _resolve_pose(pose: npt.ArrayLike | str) -> Array:
 
 
 def build_model(machine: MachineParams, pose: npt.ArrayLike | str,
-                element_size: float | None = None, installed: bool = True) -> FEModel:
+                element_size: float | None = None, installed: bool = True,
+                frame_cache: Any = None) -> FEModel:
     """
     Assemble the FE model of the machine at a pose.
 
@@ -316,6 +327,10 @@ def build_model(machine: MachineParams, pose: npt.ArrayLike | str,
         paper's ~800,000 DOF.
     installed : bool
         If False, the foundation springs are left out (free structure, six rigid-body modes).
+    frame_cache : str or ReducedFrame, optional
+        Folder of reduced plate frames (``frame.model: shells``; default
+        ``$PENTAPOD_FRAME_CACHE`` or ``out/frames``), or the frame superelement itself. The frame
+        must have been reduced (``pentapod_sim.modes.frame_reduction.build_model`` does both).
 
     Returns
     -------
@@ -333,14 +348,20 @@ def build_model(machine: MachineParams, pose: npt.ArrayLike | str,
         raise ConfigError(f'element_size must be > 0 m, got {h!r}')
     state = solve_pose(layout_from_params(machine), pose)
     mesh = _Mesh(machine, h)
-    feet, bracket_col, _ = _column_and_frame(mesh)
+    seats = None
+    if machine.frame.model == 'shells':
+        from pentapod_sim.fe.frame_model import couple_frame  # needs scikit-fem, gmsh
+        feet, seats, _ = couple_frame(mesh, frame_cache)
+        bracket_col: dict[int, int] = {}
+    else:
+        feet, bracket_col, _ = _column_and_frame(mesh)
     inst = machine.installation
-    if installed:
-        for foot in feet:
-            mesh.spring(foot, None, np.eye(3), [inst.foot_stiffness_x, inst.foot_stiffness_y,
-                                                inst.foot_stiffness_z, 0.0, 0.0, 0.0],
-                        'installation')
-    _struts_and_joints(mesh, state, bracket_col)
+    k_feet = [inst.foot_stiffness_x, inst.foot_stiffness_y, inst.foot_stiffness_z]
+    if seats is not None and machine.shell_frame and machine.shell_frame.foot_stiffness:
+        k_feet = list(machine.shell_frame.foot_stiffness)
+    for foot in feet if installed else []:
+        mesh.spring(foot, None, np.eye(3), k_feet + [0.0, 0.0, 0.0], 'installation')
+    _struts_and_joints(mesh, state, bracket_col, seats)
     _platform(mesh, state)
     LOG.debug('mesh: %d nodes, %d beam members; assembling', mesh.n_nodes, len(mesh.beams))
     t_mat, groups, mass = _assemble(mesh)
@@ -348,16 +369,21 @@ def build_model(machine: MachineParams, pose: npt.ArrayLike | str,
     xyz = mesh.positions()
     points = {name: t_mat[_dofs([node])[0]].tocsr() for name, node in mesh.named.items()}
     meta = {'parameter_file': machine.source, 'element_size': h, 'installed': installed,
-                'params_sha256': hashlib.sha256(repr(machine).encode()).hexdigest(),
-                'n_nodes': mesh.n_nodes, 'n_beam_elements': int(sum(len(b['n1'])
-                                                              for b in mesh.beams)),
-                'build_seconds': time.perf_counter() - t0}
+            'params_sha256': hashlib.sha256(repr(machine).encode()).hexdigest(),
+            'n_nodes': mesh.n_nodes, 'n_beam_elements': int(sum(len(b['n1']) for b in mesh.beams)),
+            'build_seconds': time.perf_counter() - t0, 'frame_model': machine.frame.model}
     LOG.info('built FE model: %d DOF, %d beam elements in %.2f s', stiffness.shape[0],
              meta['n_beam_elements'], meta['build_seconds'])
     free = np.setdiff1d(np.arange(mesh.n_nodes), list(mesh.slaves))  # T's column order
-    dofs = DofMap(np.repeat(free + 1, 6), np.tile(np.arange(6), free.size),
-                  np.arange(1, mesh.n_nodes + 1), xyz.copy())       # labels: node index + 1
+    n_modal = stiffness.shape[0] - 6 * free.size       # plate frame's modal coordinates
+    # labels: node index + 1; a modal coordinate: a label of its own, no component
+    dofs = DofMap(np.concatenate([np.repeat(free + 1, 6), mesh.n_nodes + 1 + np.arange(n_modal)]),
+                  np.concatenate([np.tile(np.arange(6), free.size), np.full(n_modal, -1)]),
+                  np.arange(1, mesh.n_nodes + 1), xyz.copy())
+    frame_rows = _dofs(sorted(mesh.frame_nodes)).ravel()
+    frame_dofs = np.union1d(t_mat[frame_rows].indices, 6 * free.size + np.arange(n_modal))
     return FEModel(K=stiffness, M=mass, stiffness_groups=groups, points=points,
                    point_positions={n: xyz[i].copy() for n, i in mesh.named.items()},
                    strut_frames=state.frames.copy(), mass_parts=dict(mesh.mass_parts),
-                   pose=pose.copy(), meta=meta, dofs=dofs)
+                   pose=pose.copy(), meta=meta, dofs=dofs,
+                   frame_dofs=frame_dofs.astype(np.int64))

@@ -95,6 +95,35 @@ class FrameParams:
     bed_mass: float = _f('kg')
     bed_z: float = _f('m')
     bed_inertia: tuple[float, ...] = _f('kg m^2', length=3)
+    model: str = spec(default='beams', choices=('beams', 'shells'),
+                      description='frame model: beams (fast) or shells (plate frame)')
+
+
+@_schema
+class ShellFrameParams:
+    """
+    Plate frame (``frame.model: shells``): mesh, walls, hub, seats and its reduction.
+
+    The frame's boxes take their sizes from the ``frame`` section (columns, rings, spokes);
+    this section adds what beams do not have (pentapod_sim.fe.frame_mesh).
+    """
+
+    element_size: float = _f('m')
+    wall_thickness: float = _f('m')
+    walls: tuple[bool, ...] = spec('-', length=5,
+                                   description='wall in the bay from column i to the next '
+                                               'column counter-clockwise (columns 1..5)')
+    hub_width: float = _f('m')
+    seat_height: float = _f('m')
+    poisson_ratio: float = spec('-', bounds=(0.0, 0.5), closed=(True, False),
+                                description='Poisson ratio of the plates')
+    f_interest: float = _f('Hz')
+    mode_multiple: float = spec('-', bounds=(1.0, 10.0),
+                                description='fixed-interface modes up to this multiple of '
+                                            'f_interest')
+    foot_stiffness: tuple[float, ...] | None = spec(
+        'N/m', POSITIVE, length=3, default=None,
+        description='x, y, z stiffness of each foot with this frame (default: installation)')
 
 
 @_schema
@@ -215,6 +244,8 @@ class MachineParams:
     wp_joints: WpJointParams
     platform: PlatformParams
     home_pose: Pose
+    shell_frame: ShellFrameParams | None = spec(default=None,
+                                                description='plate frame (frame.model: shells)')
     source: str = internal()
 
     def __post_init__(self) -> None:
@@ -241,6 +272,8 @@ def _check_consistency(m: MachineParams) -> None:
         if not m.frame.base_ring_z < z < m.frame.column_height:
             raise ConfigError(f'bp_joints.z[{i}] {z!r} must lie between frame.base_ring_z and '
                               f'frame.column_height')
+    if m.frame.model == 'shells' and m.shell_frame is None:
+        raise ConfigError('frame.model is shells: the shell_frame section is missing')
     if m.bp_joints.radius >= m.frame.column_radius:
         raise ConfigError(f'bp_joints.radius {m.bp_joints.radius!r} must be < '
                           f'frame.column_radius {m.frame.column_radius!r}')

@@ -56,7 +56,8 @@ class FEModel:
         Mass matrix [kg, kg m, kg m^2]; symmetric positive definite.
     stiffness_groups : dict of str to (n, n) csr_matrix
         Contribution of each subassembly's elasticity; ``K == sum(stiffness_groups.values())``.
-        Names: 'frame', 'installation', 'struts', 'feed_drives', 'bp_joints', 'wp_joints'.
+        Names: 'frame', 'installation', 'struts', 'feed_drives', 'bp_joints', 'wp_joints';
+        the plate frame (``frame.model: shells``) adds 'frame_walls'.
     points : dict of str to (6, n) csr_matrix
         Observation matrix of each named physical point: ``T @ u`` gives its displacements
         ux, uy, uz [m] and rotations rx, ry, rz [rad] in the global frame; ``T.T @ f`` maps a
@@ -75,6 +76,10 @@ class FEModel:
     dofs : DofMap or None
         Node and component of every DOF, and the node coordinates (what a matrix file
         exchanged with another FE code needs); None where the builder does not know them.
+    frame_dofs : (f,) ndarray of int or None
+        DOFs of the machine frame (its nodes, or the plate frame's interface points and modal
+        coordinates), to tell local frame modes (:mod:`pentapod_sim.modes.causes`); None
+        where unknown.
     """
 
     K: sp.csr_matrix
@@ -87,6 +92,7 @@ class FEModel:
     pose: npt.NDArray[np.float64] = field(default_factory=lambda: np.zeros(5))
     meta: dict[str, Any] = field(default_factory=dict)
     dofs: DofMap | None = None
+    frame_dofs: npt.NDArray[np.int64] | None = None
 
     @property
     def n_dof(self) -> int:

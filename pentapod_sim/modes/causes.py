@@ -14,6 +14,11 @@ Two views, both on the stiffness groups of :class:`pentapod_sim.fe.model.FEModel
   other values to check the sensitivity.
 * **Modal strain energy**: ``E_g = phi^T K_g phi / omega^2`` for mass-normalised ``phi``; the
   shares of one mode sum to one because the groups sum to K.
+* **Local frame modes**: a mode whose strain energy lies mostly in the frame's groups
+  (``frame``, and ``frame_walls`` of the plate frame) and whose kinetic energy stays in the
+  frame (share ``phi_F^T (M phi)_F`` of the frame DOFs ``FEModel.frame_dofs`` at least
+  :data:`DEFAULT_LOCAL_SHARE`) is a local frame mode: a wall or ring vibrating on its own,
+  which moves neither struts nor platform (the paper's "local frame vibrations").
 
 Units: frequencies [Hz], omega [rad/s], stiffness [N/m, N m/rad], mass [kg, kg m^2].
 """
@@ -43,6 +48,10 @@ DEFAULT_MAC_MIN = 0.5
 #: Lever arm [m] that makes a rotation [rad] comparable with a translation [m] when naming a
 #: mode's TCP direction: a tool-length scale (the TCP is 0.15 m below the spindle nose).
 DEFAULT_ROTATION_LENGTH = 0.1
+#: Least kinetic-energy share of the frame DOFs for a frame-caused mode to count as local.
+DEFAULT_LOCAL_SHARE = 0.99
+#: Stiffness groups of the machine frame.
+FRAME_GROUPS = ('frame', 'frame_walls')
 #: Names of the six components of a point's observation matrix.
 DIRECTIONS = ('x', 'y', 'z', 'rx', 'ry', 'rz')
 
@@ -75,6 +84,11 @@ class CauseTable:
         full model's ('-' if none matches).
     alpha : float
         Stiffness factor of the rigidified groups [-].
+    frame_kinetic_share : (m,) ndarray or None
+        Share of each mode's kinetic energy in the frame DOFs [-] (None if the model does
+        not say which DOFs are the frame's).
+    local_frame : tuple of bool or None
+        Whether each mode is a local frame mode (see the module docstring).
     """
 
     frequencies: npt.NDArray[np.float64]
@@ -86,6 +100,8 @@ class CauseTable:
     neuber_mac: npt.NDArray[np.float64] | None = None
     neuber_cause: tuple[str, ...] | None = None
     alpha: float = DEFAULT_ALPHA
+    frame_kinetic_share: npt.NDArray[np.float64] | None = None
+    local_frame: tuple[bool, ...] | None = None
 
     def rows(self) -> list[dict[str, float | str]]:
         """Return one dict per mode (the CSV columns)."""
@@ -96,6 +112,9 @@ class CauseTable:
                 'cause': self.cause[j]}
             if self.neuber_cause is not None:
                 row['neuber_cause'] = self.neuber_cause[j]
+            if self.local_frame is not None and self.frame_kinetic_share is not None:
+                row['local_frame'] = int(self.local_frame[j])
+                row['frame_kinetic_share'] = float(self.frame_kinetic_share[j])
             for g, name in enumerate(self.group_names):
                 row[f'share_{name}'] = float(self.energy_shares[j, g])
             if self.neuber_frequency is not None and self.neuber_mac is not None:
@@ -124,12 +143,16 @@ class CauseTable:
         for j in range(self.frequencies.size if n_rows is None else n_rows):
             if j >= self.frequencies.size:
                 break
+            local = self.local_frame is not None and self.local_frame[j]
             line = (f'{j + 1:>4} {self.frequencies[j]:>9.2f} {self.tcp_direction[j]:>4} '
-                    f'{self.cause[j]:>12} ')
+                    f'{self.cause[j] + ("*" if local else ""):>12} ')
             if self.neuber_cause is not None:
                 line += f'{self.neuber_cause[j]:>12} '
             line += ' '.join(f'{100 * s:>7.1f}%' for s in self.energy_shares[j])
             lines.append(line)
+        if self.local_frame is not None and any(self.local_frame):
+            lines.append(f'* local frame mode ({sum(self.local_frame)} of '
+                         f'{len(self.local_frame)}): its kinetic energy stays in the frame')
         return '\n'.join(lines)
 
 
@@ -266,6 +289,19 @@ def tcp_directions(modes: ModalResult, T: sp.spmatrix | npt.ArrayLike,
     return tuple(DIRECTIONS[i] for i in amp.argmax(axis=0))
 
 
+def frame_kinetic_shares(M: sp.spmatrix, modes: ModalResult,
+                         frame_dofs: npt.ArrayLike) -> npt.NDArray[np.float64]:
+    """
+    Share of each mode's kinetic energy in the DOFs ``frame_dofs``: ``phi_F^T (M phi)_F``.
+
+    For mass-normalised modes the shares of the frame and of the rest sum to one; the cross
+    terms of M between the two are split evenly, so a share may leave [0, 1] by a little.
+    """
+    dofs = np.asarray(frame_dofs, dtype=np.int64)
+    phi = modes.shapes
+    return np.einsum('ij,ij->j', phi[dofs], (M @ phi)[dofs])
+
+
 def _neuber_cause(freq: np.ndarray, f_full: np.ndarray,
                   names: tuple[str, ...]) -> tuple[str, ...]:
     """Group whose matched one-elasticity frequency is closest (in ratio) to the full one."""
@@ -281,6 +317,7 @@ def _neuber_cause(freq: np.ndarray, f_full: np.ndarray,
 def analyse_causes(model: FEModel, modes: ModalResult, *, neuber: bool = True,
                    alpha: float = DEFAULT_ALPHA, mac_min: float = DEFAULT_MAC_MIN,
                    rotation_length: float = DEFAULT_ROTATION_LENGTH,
+                   local_share: float = DEFAULT_LOCAL_SHARE,
                    progress: Callable[[str], None] | None = None) -> CauseTable:
     """
     Build the cause table of a model's modes.
@@ -295,6 +332,9 @@ def analyse_causes(model: FEModel, modes: ModalResult, *, neuber: bool = True,
         Also solve the one-elasticity-at-a-time models (one modal solve per group).
     alpha, mac_min, rotation_length, progress
         See :func:`neuber_frequencies` and :func:`tcp_directions`.
+    local_share : float
+        Least frame kinetic-energy share of a local frame mode (used if ``model.frame_dofs``
+        is known).
     """
     names = tuple(model.stiffness_groups)
     shares = strain_energy_shares(model.stiffness_groups, modes)
@@ -308,86 +348,12 @@ def analyse_causes(model: FEModel, modes: ModalResult, *, neuber: bool = True,
         freq, mac = neuber_frequencies(model.stiffness_groups, model.M, modes, alpha=alpha,
                                        mac_min=mac_min, progress=progress)
         ncause = _neuber_cause(freq, modes.frequencies, names)
+    kinetic = local = None
+    frame_dofs = getattr(model, 'frame_dofs', None)
+    if frame_dofs is not None:
+        kinetic = frame_kinetic_shares(model.M, modes, frame_dofs)
+        in_frame = shares[:, [g for g, n in enumerate(names) if n in FRAME_GROUPS]].sum(axis=1)
+        local = tuple(bool(v) for v in (in_frame > 0.5) & (kinetic >= local_share))
     return CauseTable(modes.frequencies, names, shares, cause, direction, freq, mac, ncause,
-                      alpha)
+                      alpha, kinetic, local)
 
-
-def plot_energy_shares(table: CauseTable, path: str | os.PathLike[str],
-                       n_modes: int | None = None, title: str = '') -> None:
-    """
-    Save a stacked-bar PNG of each mode's strain-energy shares per group.
-
-    Parameters
-    ----------
-    table : CauseTable
-        The cause table.
-    path : path-like
-        PNG file to write.
-    n_modes : int, optional
-        Plot only the first ``n_modes`` modes.
-    title : str
-        Figure title.
-    """
-    import matplotlib.pyplot as plt  # only the plots need matplotlib
-
-    m = table.frequencies.size if n_modes is None else min(n_modes, table.frequencies.size)
-    x = np.arange(1, m + 1)
-    fig, ax = plt.subplots(figsize=(max(6.0, 0.14 * m + 2), 4.0))
-    bottom = np.zeros(m)
-    for g, name in enumerate(table.group_names):
-        share = 100.0 * table.energy_shares[:m, g]
-        ax.bar(x, share, bottom=bottom, width=0.85, label=name)
-        bottom += share
-    step = max(1, m // 15)
-    ax.set_xticks(x[::step], [f'{j}\n{f:.0f}' for j, f in
-                              zip(x[::step], table.frequencies[:m:step])], fontsize=7)
-    ax.set_xlabel('mode no. / frequency [Hz]')
-    ax.set_ylabel('modal strain energy share [%]')
-    ax.set_ylim(0, 100)
-    ax.set_title(title or 'strain energy per stiffness group')
-    ax.legend(fontsize=7, ncol=3, loc='upper center', bbox_to_anchor=(0.5, -0.2))
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-
-
-def plot_mode_distribution(frequencies: npt.ArrayLike, path: str | os.PathLike[str],
-                           f_max: float | None = None, bin_width: float = 25.0,
-                           title: str = '') -> None:
-    """
-    Save a PNG of the mode distribution: modes per frequency band and count below f.
-
-    Parameters
-    ----------
-    frequencies : (m,) array_like
-        Natural frequencies [Hz].
-    path : path-like
-        PNG file to write.
-    f_max : float, optional
-        Upper end of the frequency axis [Hz]; default the highest frequency.
-    bin_width : float
-        Width of the histogram bands [Hz].
-    title : str
-        Figure title.
-    """
-    import matplotlib.pyplot as plt  # only the plots need matplotlib
-
-    f = np.sort(np.asarray(frequencies, dtype=float))
-    top = float(f_max if f_max is not None else (f[-1] if f.size else 1.0))
-    f = f[f <= top]
-    fig, ax = plt.subplots(figsize=(7.0, 3.8))
-    bins = np.arange(0.0, top + bin_width, bin_width).tolist()
-    ax.hist(f, bins=bins, color='tab:blue', alpha=0.7)
-    ax.set_xlabel('frequency [Hz]')
-    ax.set_ylabel(f'modes per {bin_width:g} Hz band')
-    ax.set_xlim(0.0, top)
-    ax2 = ax.twinx()
-    ax2.step(np.concatenate([[0.0], f, [top]]), np.concatenate([[0], np.arange(1, f.size + 1),
-                                                               [f.size]]),
-             where='post', color='tab:red')
-    ax2.set_ylabel('number of modes below f', color='tab:red')
-    ax2.set_ylim(0, max(f.size, 1) * 1.05)
-    ax.set_title(title or f'{f.size} modes below {top:g} Hz')
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)

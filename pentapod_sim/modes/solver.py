@@ -35,6 +35,11 @@ _LOG = logging.getLogger(__name__)
 
 #: Problems up to this size are solved densely with ``scipy.linalg.eigh`` (exact, all modes).
 DENSE_LIMIT = 400
+#: Up to this size, a problem whose matrices are this dense (nnz / n^2) is solved densely too:
+#: a pose's model with the plate frame's superelement (dense blocks of 66 + ~500 DOF in about
+#: 1,300) factorises like a dense matrix in every window, while one LAPACK call costs
+#: O(n^3) once.
+DENSE_FILL_LIMIT = (3000, 0.05)
 Array = npt.NDArray[np.float64]
 
 
@@ -118,7 +123,7 @@ def _check_inputs(K: sp.spmatrix, M: sp.spmatrix, n_modes: int | None,
 def _solve_dense(K: sp.spmatrix, M: sp.spmatrix, n_modes: int | None, f_max: float | None
                  ) -> tuple[Array, Array, int | None]:
     """All modes of a small problem with LAPACK (exact reference, no Lanczos)."""
-    lam, phi = sla.eigh(K.toarray(), M.toarray())
+    lam, phi = sla.eigh(K.toarray(), M.toarray(), driver='gvd')
     below = None
     if f_max is not None:
         below = int(np.count_nonzero(lam < (2 * np.pi * f_max) ** 2))
@@ -217,7 +222,8 @@ def solve_modes(K: sp.spmatrix, M: sp.spmatrix, *, n_modes: int | None = None,
     t0 = time.perf_counter()
     sturm = None
     stats: dict[str, Any]
-    if n <= DENSE_LIMIT:
+    dense_n, dense_fill = DENSE_FILL_LIMIT
+    if n <= DENSE_LIMIT or (n <= dense_n and max(K.nnz, M.nnz) >= dense_fill * n * n):
         lam, phi, sturm = _solve_dense(K, M, n_modes, f_max)
         blocks, stats = [(0, lam.size)], {'method': 'dense eigh', 'windows': 1}
         residual = mass_normalise(K, M, lam, phi)

@@ -18,11 +18,11 @@ import numpy.typing as npt
 
 from pentapod_sim import __version__
 from pentapod_sim.errors import ConfigError, ModelFileError
-from pentapod_sim.fe.assembly import build_model
 from pentapod_sim.fe.machine_data import load_machine, MachineParams
 from pentapod_sim.fe.model import FEModel
+from pentapod_sim.modes.frame_reduction import build_model
 from pentapod_sim.modes.slicing import Progress
-from pentapod_sim.modes.solver import solve_modes
+from pentapod_sim.modes.solver import ModalResult, solve_modes
 from pentapod_sim.paths import config_dir
 from pentapod_sim.plant.config import (
     damping_file_path,
@@ -155,7 +155,8 @@ def keep_by_relevance(plant_all: PlantModel,
 
 def plant_from_fe(fe: FEModel, reduction_cfg: ReductionConfig,
                   progress: Callable[[str], None] | None = None,
-                  modes_progress: Progress | None = None
+                  modes: ModalResult | None = None,
+                  modes_progress: Progress | None = None,
                   ) -> tuple[PlantModel, npt.NDArray[np.intp]]:
     """
     Plant with every mode below ``modes_f_max`` of an FE model, and the relevant modes.
@@ -170,6 +171,9 @@ def plant_from_fe(fe: FEModel, reduction_cfg: ReductionConfig,
         Receives one message per stage.
     modes_progress : callable, optional
         The mode solver's progress callback (:func:`pentapod_sim.modes.solver.solve_modes`).
+    modes : ModalResult, optional
+        Modes of ``fe`` already solved up to at least ``modes_f_max`` (those above are left
+        out); default: solved here.
 
     Returns
     -------
@@ -182,8 +186,16 @@ def plant_from_fe(fe: FEModel, reduction_cfg: ReductionConfig,
     """
     say = progress or (lambda msg: LOG.info('%s', msg))
     cfg = reduction_cfg
-    say(f'FE model: {fe.n_dof} DOF; solving modes below {cfg.modes_f_max} Hz')
-    modes = solve_modes(fe.K, fe.M, f_max=cfg.modes_f_max, progress=modes_progress)
+    if modes is None:
+        say(f'FE model: {fe.n_dof} DOF; solving modes below {cfg.modes_f_max} Hz')
+        modes = solve_modes(fe.K, fe.M, f_max=cfg.modes_f_max, progress=modes_progress)
+    elif modes.f_max is None or modes.f_max < cfg.modes_f_max:
+        raise ConfigError(f'modes solved up to {modes.f_max} Hz; the plant needs every mode '
+                          f'below modes_f_max = {cfg.modes_f_max} Hz')
+    else:
+        n = modes.count_below(cfg.modes_f_max)
+        modes = ModalResult(modes.frequencies[:n], modes.shapes[:, :n], n,
+                            cfg.modes_f_max, modes.stats)
     say(f'{modes.n_modes} modes, {modes.frequencies[0]:.2f} .. {modes.frequencies[-1]:.2f} Hz')
     inputs, outputs = list(cfg.inputs), list(cfg.outputs)
     chord = cfg.chord_position

@@ -27,9 +27,9 @@ import numpy as np
 import numpy.typing as npt
 
 from pentapod_sim.errors import ConfigError, ModelFileError
-from pentapod_sim.fe.assembly import build_model
 from pentapod_sim.fe.machine_data import load_machine, MachineParams
 from pentapod_sim.fe.model import FEModel
+from pentapod_sim.modes.frame_reduction import build_model
 from pentapod_sim.modes.slicing import Progress
 from pentapod_sim.modes.sturm import sturm_count
 from pentapod_sim.plant.build import model_cache_key, plant_from_fe
@@ -114,7 +114,8 @@ def check_model_from_fe(fe: FEModel, reduction_cfg: ReductionConfig, f_max: floa
     """
     count = check_mode_count(fe, f_max)
     cfg = dataclasses.replace(reduction_cfg, modes_f_max=float(f_max))
-    plant, _ = plant_from_fe(fe, cfg, progress, _slice_progress(f_max, count, progress, stop))
+    plant, _ = plant_from_fe(fe, cfg, progress,
+                             modes_progress=_slice_progress(f_max, count, progress, stop))
     plant.meta.update(check_model=True, check_f_max_hz=float(f_max))
     return plant
 
