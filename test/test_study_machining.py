@@ -5,6 +5,7 @@ Two TCP modes (150 and 170 Hz, 4 and 5 % damping) so that a cut settles or chatt
 second; the study's own settings (sample rate 3 kHz, its operations). The stages are the
 functions the study's graph calls (pentapod_damper.study.machining).
 """
+from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
@@ -15,6 +16,7 @@ from pentapod_damper.laws import tcp_damper
 from pentapod_damper.study import machining
 from pentapod_damper.study.config import load_study_config
 from pentapod_damper.study.records import PositionModel, StudyResults
+from pentapod_damper.study.schedule import study_graph
 from pentapod_damper.study.tables import _depth_gain
 from pentapod_sim.errors import ConfigError
 from pentapod_sim.machining.lobes import milling_limit
@@ -81,7 +83,11 @@ def test_cutting_stage_records_a_stable_and_a_chattering_cut(tmp_path):
 def test_the_study_file_names_real_operations_and_study_scenarios():
     with pytest.raises(ConfigError, match="machining.operations.0.*'aluminium_half_down'"):
         load_study_config(machining_operations=('aluminium_half_dwn',))
-    with pytest.raises(ConfigError, match=r'machining.cutting_runs\[0\]'):
-        load_study_config(scenarios=('baseline',), cutting_runs=('tcp_damping',))
-    cfg = load_study_config()
-    assert set(cfg.cutting_runs) <= set(cfg.scenarios) and cfg.machining_operations
+    with pytest.raises(ConfigError, match=r"machining.cutting_runs\[0\].*'tcp_damping'"):
+        load_study_config(cutting_runs=('tcp_dampng',))
+    # a study of fewer scenarios cuts those it has (as the damping runs)
+    cfg = load_study_config(scenarios=('baseline',), cutting_runs=('tcp_damping',))
+    graph = study_graph(cfg, Path('unused'), np.linspace(1.0, 10.0, 3))
+    assert not graph.cutting and list(graph.lobes) == [('P1', 'baseline'), ('P2', 'baseline')]
+    graph = study_graph(load_study_config(), Path('unused'), np.linspace(1.0, 10.0, 3))
+    assert sorted(graph.cutting) == [('P1', 'tcp_damping'), ('P2', 'tcp_damping')]

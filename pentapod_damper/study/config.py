@@ -107,7 +107,7 @@ class StudyConfig:
         sets the summary's stable depth gain and the cutting runs.
     cutting_runs : tuple of str
         Scenarios cut on the testbed at every position at 0.8x and 1.2x of the predicted
-        limiting depth (empty: none).
+        limiting depth (empty: none); those not among ``scenarios`` are not run.
     """
 
     positions: tuple[str, ...]
@@ -226,7 +226,8 @@ class MachiningStudy:
                                        'machining.yaml; the first sets the stable depth gain '
                                        'and the cutting runs')
     cutting_runs: tuple[str, ...] = spec(description='scenarios cut on the testbed at 0.8x and '
-                                         '1.2x of the predicted limit, at every position')
+                                         '1.2x of the predicted limit, at every position (those '
+                                         'not among scenarios are not run)')
 
 
 @dataclass(frozen=True)
@@ -322,8 +323,8 @@ def _check_names(study: StudyFile, source: str) -> None:
             check_choice(name, scenarios, f'damping.scenarios[{i}]',
                          'scenario of config/scenarios')
         for i, name in enumerate(study.machining.cutting_runs):
-            check_choice(name, list(study.scenarios), f'machining.cutting_runs[{i}]',
-                         'scenario of the study')
+            check_choice(name, scenarios, f'machining.cutting_runs[{i}]',
+                         'scenario of config/scenarios')
         table = load_machining()
         for i, name in enumerate(study.machining.operations):
             check_choice(name, sorted(table.operations), f'machining.operations[{i}]',
