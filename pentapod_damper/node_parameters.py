@@ -215,6 +215,10 @@ class DamperParams(Sampled, ActiveLawParams, DynamicsParams, SourceParams):
         laws.update(self.active_laws(dyn, step, source))
         return laws
 
+    def loop_laws(self, dt: float | None = None) -> list[ViscousDamper]:
+        """Every damper of the node (:meth:`laws`), for offline analyses of a scenario."""
+        return list(self.laws(dt=dt).values())
+
 
 @dataclass(frozen=True)
 class PmaParams(Sampled, SourceParams):
@@ -238,6 +242,10 @@ class PmaParams(Sampled, SourceParams):
                                  highpass_hz=self.highpass_hz, stroke_limit=self.stroke_limit,
                                  force_limit=self.force_limit)
 
+    def loop_laws(self, dt: float | None = None) -> list[ProofMassActuator]:
+        """The proof-mass actuator (:meth:`law`), for offline analyses of a scenario."""
+        return [self.law(dt)]
+
 
 @dataclass(frozen=True)
 class ExampleControllerParams(NodeParams):
@@ -245,6 +253,10 @@ class ExampleControllerParams(NodeParams):
 
     gain: float = param(1000.0, 'damping of the TCP in x', 'N s/m', bounds=(0.0, MAX_GAIN))
     source_name: str = param('example', 'answers on /pentapod/forces/<source_name>')
+
+    def loop_laws(self, dt: float | None = None) -> list[ViscousDamper]:
+        """The node's law u = -gain * v_x, for offline analyses of a scenario."""
+        return [tcp_damper(['x'], self.gain)]
 
 
 def damper_laws(params: Mapping[str, Any] | DamperParams, source: str = '',

@@ -58,6 +58,8 @@ NODES = (
              'pentapod_sim.nodes.parameter_tables:PlantParams', PLANT),
     NodeKind('exciter', 'pentapod_sim.nodes.exciter_node:ExciterNode',
              'pentapod_sim.nodes.parameter_tables:ExciterParams'),
+    NodeKind('cutting', 'pentapod_sim.nodes.cutting_node:CuttingNode',
+             'pentapod_sim.nodes.parameter_tables:CuttingParams'),
     NodeKind('recorder', 'pentapod_sim.nodes.recorder_node:RecorderNode',
              'pentapod_sim.nodes.parameter_tables:RecorderParams', RECORDER),
     NodeKind('live_view', 'pentapod_sim.nodes.live_view_node:LiveViewNode',

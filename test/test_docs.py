@@ -209,13 +209,14 @@ def _analytic_results(out_dir: Path) -> StudyResults:
     Fresh plants of both positions; the truncation check against the (slow to build) check
     models is left out: it flags loops but changes none of the tables' numbers.
     """
-    from pentapod_damper.study import pipeline, stages
+    from pentapod_damper.study import machining, pipeline, stages
     cfg = load_study_config()
     res = StudyResults(cfg, np.linspace(*cfg.freq_grid[:2], int(cfg.freq_grid[2])), out_dir)
     for pos in cfg.positions:
         res.models[pos] = model = pipeline.prepare_model(pos, out_dir, lambda msg: None)
         for scn in cfg.scenarios:
             res.analytic[(pos, scn)] = pipeline.scenario_analytic(model, scn, cfg, res.freq)
+            res.lobes[(pos, scn)] = machining.scenario_lobes(cfg, model, res.analytic[(pos, scn)])
     step = cfg.step_position
     res.pma = {scn: stages.pma_requirements(cfg, res.freq, res.models[step],
                                             res.analytic[(step, scn)])

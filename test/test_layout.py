@@ -10,7 +10,8 @@ ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ('pentapod_sim', 'pentapod_damper')
 #: Pipeline order: a module may import only from its own stage or earlier ones.
 STAGES = [
-    ('pentapod_sim.errors', 'pentapod_sim.shutdown', 'pentapod_sim.registry',
+    ('pentapod_sim.exits', 'pentapod_sim.errors', 'pentapod_sim.shutdown',
+     'pentapod_sim.registry',
      'pentapod_sim.figures', 'pentapod_sim.__init__', 'pentapod_sim.schema',
      'pentapod_sim.parameters', 'pentapod_sim.reference'),
     ('pentapod_sim.paths',),
@@ -33,7 +34,8 @@ ROS_MODULES = ('rclpy', 'rcl_interfaces', 'builtin_interfaces', 'sensor_msgs', '
 MAX_LINES = 400
 #: The force-source node modules; started by the dozen in a scenario, they must not load the FE
 #: model code or the eigen solver (seconds of imports and memory per process for nothing).
-SOURCE_NODES = ('pentapod_sim.nodes.exciter_node', 'pentapod_damper.nodes.damper_node',
+SOURCE_NODES = ('pentapod_sim.nodes.exciter_node', 'pentapod_sim.nodes.cutting_node',
+                'pentapod_damper.nodes.damper_node',
                 'pentapod_damper.nodes.pma_node', 'pentapod_damper.nodes.example_controller')
 FE_PACKAGES = ('pentapod_sim.fe', 'pentapod_sim.modes')
 
