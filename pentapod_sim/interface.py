@@ -75,11 +75,9 @@ FORCE_PREFIX = '/pentapod/forces/'
 #: open-loop source, or :data:`NO_LINEAR_MODEL` and the reason. The plant's truncation check at
 #: start-up closes the sampled loop with these models (:mod:`pentapod_sim.nodes.loop_check`).
 CONTROLLER_MODEL_PREFIX = '/pentapod/controller_models/'
-#: A force source ``<name>`` publishes each parameter change made during a run on
-#: ``PARAMETER_CHANGE_PREFIX + <name>`` (diagnostic_msgs/DiagnosticArray, reliable, transient
-#: local): one status named after the node with ``<parameter>.old``, ``<parameter>.new`` and
-#: ``step``, the first step computed with the new value; its header stamp is that step's t_k, so
-#: a bag holds the change at the simulated time it took effect.
+#: Source ``<name>`` publishes each parameter change during a run on ``PARAMETER_CHANGE_PREFIX +
+#: <name>`` (diagnostic_msgs/DiagnosticArray): keys ``<parameter>.old``, ``.new``, ``step`` (the
+#: first step computed with it); stamped t_k of that step, so a bag holds it at that time.
 PARAMETER_CHANGE_PREFIX = '/pentapod/parameter_changes/'
 #: Model text of a source that reads no plant output (an exciter): it closes no loop.
 NO_FEEDBACK = 'no feedback'
@@ -143,11 +141,6 @@ def force_topic(source: str) -> str:
 def controller_model_topic(source: str) -> str:
     """Topic of the linear model of the force source ``source``."""
     return CONTROLLER_MODEL_PREFIX + source
-
-
-def parameter_change_topic(source: str) -> str:
-    """Topic of the parameter changes of force source ``source`` during a run."""
-    return PARAMETER_CHANGE_PREFIX + source
 
 
 def excitation_spec_topic(source: str) -> str:

@@ -45,7 +45,7 @@ from pentapod_sim.errors import ConfigError, PlantStalledError, RunError
 from pentapod_sim.interface import (
     CLOCK,
     force_topic,
-    parameter_change_topic,
+    PARAMETER_CHANGE_PREFIX,
     port_location,
     stamp_ns,
     step_of,
@@ -126,7 +126,7 @@ class LockstepSource(TestbedNode):
             self.writers.watch(t)
         self.model_pub = publish_model(self, self.source_name, self.model_text())
         self.change_pub = self.create_publisher(
-            DiagnosticArray, parameter_change_topic(self.source_name), qos('change'))
+            DiagnosticArray, PARAMETER_CHANGE_PREFIX + self.source_name, qos('change'))
 
     def state_topics(self) -> list[str]:
         """The plant's topics this source answers: those of its sensors, else /clock."""
