@@ -10,7 +10,7 @@ config/study.yaml: the verdict and the spectral radius of the sampled loop on th
 Writes the table between the frame-convergence markers of docs/model.md; reduced frames are
 cached in out/frames.
 
-Usage: ``python bench/frame_convergence.py [--sizes 0.3,0.2,0.12]``.
+Usage: ``python bench/frame_convergence.py [--sizes 0.3,0.2,0.12] [--print-only]``.
 """
 from __future__ import annotations
 
@@ -121,6 +121,8 @@ def main() -> None:
     parser.add_argument('--positions', default='P1,P2')
     parser.add_argument('--doc', default=str(ROOT / 'docs' / 'model.md'),
                         help='markdown file with the frame-convergence markers')
+    parser.add_argument('--print-only', action='store_true',
+                        help='print the table, leave the markdown file alone (a partial run)')
     args = parser.parse_args()
     study, cfg = load_study_config(), load_reduction_config()
     sizes: list[float | None] = [None] + [float(s) for s in args.sizes.split(',')]
@@ -138,11 +140,13 @@ def main() -> None:
             'it through its Craig-Bampton basis: frame modes above shell_frame.mode_multiple '
             'x f_interest are there only statically (constraint modes).\n\n'
             + table(results, list(study.scenarios)) + '\n')
+    print(text)
+    if args.print_only:
+        return
     doc = Path(args.doc)
     head, rest = doc.read_text(encoding='utf-8').split(BEGIN)
     tail = rest.split(END)[1]
     doc.write_text(f'{head}{BEGIN}\n{text}{END}{tail}', encoding='utf-8')
-    print(text)
 
 
 if __name__ == '__main__':
