@@ -24,7 +24,8 @@ STAGES = [
     ('pentapod_sim.nodes', 'pentapod_sim.cli'),
     ('pentapod_damper.laws', 'pentapod_damper.node_parameters', 'pentapod_damper.scenario_laws',
      'pentapod_damper.__init__'),
-    ('pentapod_damper.nodes', 'pentapod_damper.study', 'pentapod_damper.sweep'),
+    ('pentapod_damper.nodes', 'pentapod_damper.study', 'pentapod_damper.sweep',
+     'pentapod_damper.design'),
 ]
 #: Packages that need a ROS installation; only node modules may import them.
 ROS_MODULES = ('rclpy', 'rcl_interfaces', 'builtin_interfaces', 'sensor_msgs', 'geometry_msgs',
