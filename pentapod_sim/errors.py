@@ -1,4 +1,5 @@
 """Errors raised by the pentapod testbed; each subclasses the matching built-in."""
+from pentapod_sim import exits
 
 
 class ConfigError(ValueError):
@@ -26,6 +27,21 @@ class BagError(ValueError):
 
 class RunError(RuntimeError):
     """A testbed run had to stop (silent force source, unstable loop, ...)."""
+
+    #: The exit code of a node that stops with this error (:mod:`pentapod_sim.exits`).
+    exit_code = exits.ERROR
+
+
+class RecordingError(RunError):
+    """A recording is incomplete or not trustworthy (missing steps, a foreign writer, ...)."""
+
+    exit_code = exits.RECORDING_FAILED
+
+
+class PlantStalledError(RunError):
+    """No message from the plant for ``plant_stall_timeout`` s of wall time during its run."""
+
+    exit_code = exits.PLANT_STALLED
 
 
 class ModalError(ArithmeticError):

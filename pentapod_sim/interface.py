@@ -75,6 +75,10 @@ FORCE_PREFIX = '/pentapod/forces/'
 #: open-loop source, or :data:`NO_LINEAR_MODEL` and the reason. The plant's truncation check at
 #: start-up closes the sampled loop with these models (:mod:`pentapod_sim.nodes.loop_check`).
 CONTROLLER_MODEL_PREFIX = '/pentapod/controller_models/'
+#: Source ``<name>`` publishes each parameter change during a run on ``PARAMETER_CHANGE_PREFIX +
+#: <name>`` (diagnostic_msgs/DiagnosticArray): keys ``<parameter>.old``, ``.new``, ``step`` (the
+#: first step computed with it); stamped t_k of that step, so a bag holds it at that time.
+PARAMETER_CHANGE_PREFIX = '/pentapod/parameter_changes/'
 #: Model text of a source that reads no plant output (an exciter): it closes no loop.
 NO_FEEDBACK = 'no feedback'
 #: Start of the model text of a source whose law has no linear model (limits, ...).
@@ -229,14 +233,16 @@ STREAM_DEPTH = int(math.ceil((RECORDER_STALL + REPAIR_TIME) * MAX_SHIPPED_RATE))
 #: ('force'; one message per step), diagnostics such as PMA state and excitation ('info'), the
 #: run status ('status': the last one kept for a late reader) and the sources' controller models
 #: ('model': published once, kept for a late reader), the exciters' signal parameters
-#: ('spec': published once, kept for a late reader) and the plant's display batches
+#: ('spec': published once, kept for a late reader), parameter changes during a run
+#: ('change': kept for a late reader) and the plant's display batches
 #: ('display': one message per ``display_batch_period``, read best effort by the live view).
 QOS = {'state': QosSpec(STREAM_DEPTH, durability=STREAM_DURABILITY),
        'force': QosSpec(STREAM_DEPTH, durability=STREAM_DURABILITY),
        'info': QosSpec(STREAM_DEPTH, durability=STREAM_DURABILITY),
        'status': QosSpec(4, durability='transient_local'),
        'model': QosSpec(1, durability='transient_local'),
-       'spec': QosSpec(1, durability='transient_local'), 'display': QosSpec(100)}
+       'spec': QosSpec(1, durability='transient_local'), 'display': QosSpec(100),
+       'change': QosSpec(100, durability='transient_local')}
 
 
 def qos_class(topic: str) -> str | None:
@@ -251,6 +257,8 @@ def qos_class(topic: str) -> str | None:
         return 'model'
     if topic.startswith(EXCITATION_SPEC_PREFIX) or topic == CUTTING_SPEC:
         return 'spec'
+    if topic.startswith(PARAMETER_CHANGE_PREFIX):
+        return 'change'
     if batched_topic(topic) is not None:
         return 'display'
     return 'status' if topic == RUN_STATUS else None

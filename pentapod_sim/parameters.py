@@ -372,6 +372,10 @@ class SourceParams(NodeParams):
     wait_for_subscribers: tuple[str, ...] = param(
         (), "node names (e.g. a recorder) that must be subscribed and matched to this node's "
         'information topics before it answers step 0 (the plant re-sends step 0 meanwhile)')
+    plant_stall_timeout: float = param(
+        5.0, 'wall time without a message from the plant, during its run, after which the '
+        'source stops the run naming the plant (exit code 4); 0: never', 's',
+        bounds=(0.0, 3600.0))
 
     def loop_laws(self, dt: float | None = None) -> list[Any]:
         """

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import ctypes
 import os
+from pathlib import Path
 import signal
 import threading
 from types import FrameType
@@ -106,3 +107,40 @@ def unless_requested(work: Callable[[], T], poll: float = 0.05) -> T | None:
     if 'error' in out:
         raise out['error']
     return out['value']
+
+
+def started_by_ros2_run(pid: int | None = None) -> bool:
+    """True if process ``pid`` (default: the parent) is ``ros2 run`` (``ros2 run ...``)."""
+    try:
+        argv = Path(f'/proc/{os.getppid() if pid is None else pid}/cmdline').read_bytes()
+    except OSError:
+        return False
+    words = [Path(a.decode(errors='replace')).name for a in argv.split(b'\0') if a]
+    # ``ros2 run`` or ``python .../ros2 run`` (the entry point run by an interpreter)
+    return any(w == 'ros2' and words[i + 1:i + 2] == ['run'] for i, w in enumerate(words[:3]))
+
+
+# the parent as it was when this module was imported: a node that takes seconds to start may
+# see its ``ros2 run`` die before :func:`follow_ros2_run` runs
+_PARENT = os.getppid()
+_PARENT_IS_ROS2_RUN = started_by_ros2_run(_PARENT)
+
+
+def follow_ros2_run() -> None:
+    """
+    Stop with the ``ros2 run`` that started this node.
+
+    ``ros2 run`` forwards Ctrl-C (SIGINT) to its node but not SIGTERM: a supervisor's SIGTERM
+    ends ``ros2 run`` alone and left the node running with parent 1. A node whose parent is
+    ``ros2 run`` therefore asks the kernel for SIGTERM when that parent dies, and sends it to
+    itself if the parent died while the node was starting: it stops cleanly with exit code 143.
+    """
+    if not _PARENT_IS_ROS2_RUN:
+        return
+    try:
+        libc = ctypes.CDLL('libc.so.6', use_errno=True)
+        libc.prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)
+    except OSError:        # not Linux: nothing to ask for
+        return
+    if os.getppid() != _PARENT:
+        os.kill(os.getpid(), signal.SIGTERM)

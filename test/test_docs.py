@@ -630,3 +630,16 @@ def test_examples_marked_as_run_do_run(doc, tmp_path, monkeypatch):
     assert blocks
     for code in blocks:
         exec(compile(code, doc, 'exec'), {})
+
+
+def test_the_exit_code_table_is_the_code_one():
+    """docs/interface.md lists every end of pentapod_sim.exits.TABLE, in its words and order."""
+    from pentapod_sim import exits
+    text = (ROOT / 'docs' / 'interface.md').read_text()
+    section = text.split('## Stopping and exit codes', 1)[1].split('\n## ', 1)[0]
+    rows = [line.split(' | ', 1) for line in section.splitlines()
+            if line.startswith('| ') and not line.startswith('| code')]
+    documented = [(code.strip('| '), meaning.rstrip(' |')) for code, meaning in rows]
+    assert documented == [('128 + N' if code == exits.SIGNAL_BASE else str(code), meaning)
+                          for code, meaning in exits.TABLE]
+    assert exits.of_returncode(-9) == 137 and exits.of_returncode(3) == exits.RECORDING_FAILED

@@ -10,7 +10,8 @@ ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ('pentapod_sim', 'pentapod_damper')
 #: Pipeline order: a module may import only from its own stage or earlier ones.
 STAGES = [
-    ('pentapod_sim.errors', 'pentapod_sim.shutdown', 'pentapod_sim.registry',
+    ('pentapod_sim.exits', 'pentapod_sim.errors', 'pentapod_sim.shutdown',
+     'pentapod_sim.registry',
      'pentapod_sim.figures', 'pentapod_sim.__init__', 'pentapod_sim.schema',
      'pentapod_sim.parameters', 'pentapod_sim.reference'),
     ('pentapod_sim.paths',),

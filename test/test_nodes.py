@@ -240,8 +240,9 @@ def test_bad_messages_rejected_and_counted(procs, ros_env, tmp_path):
                         *plant_params(model_file, steps, ['tester'], trace))
     ctx = rclpy.Context()
     rclpy.init(context=ctx, domain_id=int(ros_env['ROS_DOMAIN_ID']))
-    bad = [(['tcp_force_x'], [float('nan')]), (['tcp_force_x', 'tcp_force_y'], [1.0]),
-           (['tcp_force_q'], [1.0])]
+    # the source drives tcp_force_y (its first accepted answer); an empty answer is refused
+    bad = [(['tcp_force_y'], [float('nan')]), (['tcp_force_x', 'tcp_force_y'], [1.0]),
+           (['tcp_force_q'], [1.0]), ([], [])]
     try:
         node = Node('tester', context=ctx)
         pub = node.create_publisher(JointState, '/pentapod/forces/tester', FORCE_QOS)
@@ -268,7 +269,7 @@ def test_bad_messages_rejected_and_counted(procs, ros_env, tmp_path):
     counts = dict(item.split('=') for item in run['rejected'])
     sent = steps // 10
     # a re-published step may be answered twice; every bad message is counted at least once
-    for kind in ('nonfinite', 'length', 'unknown_port'):
+    for kind in ('nonfinite', 'length', 'unknown_port', 'ports'):
         assert sent <= int(counts[f'tester/{kind}']) <= 2 * sent, counts
     assert_allclose(run['u'][:, 1], np.arange(steps))     # every good answer applied
     assert "rejected message from source 'tester'" in procs.log('plant')

@@ -284,3 +284,20 @@ def test_a_source_that_left_is_zeroed_and_no_longer_counted_as_missing():
     assert figures['missed_steps'] == seen - leaves
     assert np.array_equal(np.flatnonzero(figures['missed_per_step']),
                           np.arange(leaves, seen))
+
+
+def test_answers_rejected_until_the_timeout_end_the_run_as_rejected_not_silent():
+    """Every answer of the damper above max_effort: the end names it rejected, with why."""
+    core = DiscretePlant(demo_model(4, seed=3).discretize(DT))
+    mixer = ForceMixer(core.input_names, [ForceSource('exciter'), ForceSource('damper')],
+                       max_effort=1e3)
+    clock = FakeClock()
+    exchange = Scripted(core, mixer, clock, True, latency={'exciter': 1e-4, 'damper': 1e-4})
+    exchange.answer = lambda source, k, y: (['tcp_force_x'],
+                                            [exciter_force(k) if source == 'exciter' else 1e5])
+    with pytest.raises(RunError) as err:
+        Lockstep(core, mixer, 5, WAITS, clock, lambda: False).run(exchange)
+    text = str(err.value)
+    assert 'force source damper rejected' in text and 'limit' in text, text
+    assert 'silent' not in text, text
+    assert core.k == 0 and mixer.rejected[('damper', 'limit')] == 1

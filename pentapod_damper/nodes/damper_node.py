@@ -47,7 +47,6 @@ class DamperNode(LockstepSource):
             self._slices.append((slice(start, start + len(law.sensor_ports)), law))
             start += len(law.sensor_ports)
         self.add_on_set_parameters_callback(self._on_set)
-        self.add_post_set_parameters_callback(lambda params: self.publish_model())
         self.get_logger().info(f'dampers on {self.actuator_ports}')
 
     def _on_set(self, params) -> SetParametersResult:

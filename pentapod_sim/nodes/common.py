@@ -26,7 +26,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rclpy.signals import SignalHandlerOptions
 from rclpy.utilities import remove_ros_args
 
-from pentapod_sim import interface, shutdown
+from pentapod_sim import exits, interface, shutdown
 from pentapod_sim.errors import ConfigError, RunError
 from pentapod_sim.nodes.testbed_node import usage
 from pentapod_sim.scenario import network
@@ -119,28 +119,6 @@ def subscribers_of(node, publisher) -> tuple[set, bool]:
     return {info.node_name for info in graph}, publisher.get_subscription_count() >= len(graph)
 
 
-#: Wall time [s] a second publisher on a force topic gets to be discovered by node name.
-NAME_DISCOVERY = 2.0
-_UNKNOWN_NAME = '_NODE_NAME_UNKNOWN_'
-
-
-def shared_topic_error(topic: str, infos, first_seen: dict) -> str | None:
-    """
-    The refusal of a force topic with several publishers, naming every publishing node.
-
-    None while a publisher's node name is still undiscovered, for at most
-    :data:`NAME_DISCOVERY` s after ``topic`` was first seen shared (``first_seen``: topic ->
-    monotonic time, kept by the caller): a later check then names them.
-    """
-    now = time.monotonic()
-    if (any(i.node_name == _UNKNOWN_NAME for i in infos)
-            and now - first_seen.setdefault(topic, now) < NAME_DISCOVERY):
-        return None
-    nodes = ', '.join(sorted(f'{i.node_namespace.rstrip("/")}/{i.node_name}' for i in infos))
-    return (f'force topic {topic} has {len(infos)} publishers ({nodes}); one source per '
-            'topic (parameter shared_source_topics allows more)')
-
-
 def spin_until(executor, done: Callable[[], bool], timeout: float,
                poll: float = 0.05) -> bool:
     """Spin until ``done()`` or ``timeout`` [s] of wall time; return ``done()``."""
@@ -184,7 +162,9 @@ def run_node(factory: Callable[..., object], argv=None, run: Callable | None = N
 
     For a node class ``factory``, ``--help`` prints its usage and parameters and starts
     nothing. Returns 0 on a clean end,
-    1 after printing one ``error: ...`` line on a ConfigError/RunError, and 128 + the signal
+    1 after printing one ``error: ...`` line on a ConfigError/RunError (a RunError subclass
+    gives its own ``exit_code``: 3 a failed recording, 4 a stalled plant;
+    :mod:`pentapod_sim.exits`), and 128 + the signal
     number after a clean stop on SIGINT, SIGTERM or SIGHUP (:mod:`pentapod_sim.shutdown`),
     unless the node's ``stopped_after_run_end()`` says (and logs) that the plant's run had
     ended before the signal: a source stopped after the run it served is a clean end, 0
@@ -207,6 +187,7 @@ def run_node(factory: Callable[..., object], argv=None, run: Callable | None = N
     # would invalidate the context at once, so a node could neither finish its step nor
     # publish, write its files or wait for acknowledgements.
     shutdown.install()
+    shutdown.follow_ros2_run()          # SIGTERM to `ros2 run` reaches the node too
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     node = None
     code = 0
@@ -225,11 +206,13 @@ def run_node(factory: Callable[..., object], argv=None, run: Callable | None = N
         else:
             while rclpy.ok() and not shutdown.requested():
                 spinner.spin_once(timeout_sec=0.1)
+                if getattr(node, 'failure', None) is not None:     # TestbedNode.fail
+                    raise node.failure
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except (ConfigError, RunError, ValueError, KeyError) as err:
         print(f'error: {err}', file=sys.stderr)
-        code = 1
+        code = getattr(err, 'exit_code', exits.ERROR)     # pentapod_sim.exits
     finally:
         if node is not None:
             after_end = getattr(node, 'stopped_after_run_end', None)

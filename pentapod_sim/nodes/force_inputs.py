@@ -4,9 +4,11 @@ The plant node's force inputs: one subscription per source, answers into the for
 Each source answers on /pentapod/forces/<source> (docs/interface.md). An answer's stamp gives
 the step it answers; :class:`~pentapod_sim.sim.stepping.ForceMixer` accepts or rejects it
 (counted per source and reason, warned about at most once a second; repeated and late
-answers are expected and dropped silently). The graph checks live here too: a force topic with
-more than one publisher is refused (unless ``shared_source_topics``), and a source whose
-publisher left is reported to the timing.
+answers are expected and dropped silently). The writer checks live here too
+(:mod:`pentapod_sim.nodes.writers`): a message on DDS is taken only while its force topic has one
+matched publisher, the one the graph showed before step 0; a second writer stops the run, named
+by DDS participant and host (unless ``shared_source_topics``), and a source whose publisher left
+is reported to the timing.
 """
 from __future__ import annotations
 
@@ -18,8 +20,9 @@ from sensor_msgs.msg import JointState
 from pentapod_sim import shutdown
 from pentapod_sim.errors import RunError
 from pentapod_sim.interface import force_topic, step_of
-from pentapod_sim.nodes.common import FORCE_SUB_QOS, shared_topic_error, spin_until, stamp_to_ns
+from pentapod_sim.nodes.common import FORCE_SUB_QOS, spin_until, stamp_to_ns
 from pentapod_sim.nodes.local_bus import LocalBus
+from pentapod_sim.nodes.writers import WriterCheck
 
 #: Wall time [s] between two warnings about rejected messages of one source and reason.
 WARN_PERIOD = 1.0
@@ -42,17 +45,27 @@ class ForceInputs:
         step up to the current one).
     shared_ok : bool
         Accept several publishers on one force topic (parameter ``shared_source_topics``).
+    writers : WriterCheck
+        The plant's writer check; the force topics are added to it.
     """
 
-    def __init__(self, node, core, mixer, exact: bool, shared_ok: bool):
+    def __init__(self, node, core, mixer, exact: bool, shared_ok: bool, writers: WriterCheck):
         self.node, self.core, self.mixer = node, core, mixer
-        self.exact, self.shared_ok = exact, shared_ok
+        self.exact, self.shared_ok, self.writers = exact, shared_ok, writers
         self.sources = list(mixer.sources)
         self.subs = {name: node.create_subscription(
-            JointState, force_topic(name), lambda msg, name=name: self.on_force(name, msg),
+            JointState, force_topic(name), lambda msg, name=name: self.on_wire(name, msg),
             FORCE_SUB_QOS) for name in self.sources}
-        self.shared_seen: dict[str, float] = {}     # force topic -> first seen shared [s]
+        for name in self.sources:
+            writers.watch(force_topic(name), shared=shared_ok)
         self.last_warn: dict[tuple[str, str], float] = {}
+
+    def on_wire(self, source: str, msg: JointState) -> None:
+        """An answer taken from DDS: offered to the mixer only if its writer is the one."""
+        if self.writers.message_ok(force_topic(source), self.subs[source]):
+            self.on_force(source, msg)
+        else:
+            self.mixer.rejected[(source, 'foreign')] += 1
 
     def on_force(self, source: str, msg: JointState) -> None:
         """Offer an answer to the mixer; warn (throttled) about a rejected one."""
@@ -92,7 +105,7 @@ class ForceInputs:
             with sub.handle:
                 taken = sub.handle.take_message(sub.msg_type, sub.raw)
             if taken is not None:
-                self.on_force(name, taken[0])
+                self.on_wire(name, taken[0])
         return not waiting
 
     def take_from(self, bus: LocalBus, names: Iterable[str]) -> None:
@@ -106,24 +119,17 @@ class ForceInputs:
 
     def gone(self) -> list[str]:
         """
-        Refuse shared force topics; return the sources whose publisher left the graph.
+        Check the writers of every watched topic; return the sources whose publisher left.
 
         Raises
         ------
         RunError
-            If a force topic has more than one publisher and ``shared_source_topics`` is
-            false; the message names the topic and every publishing node
-            (:func:`~pentapod_sim.nodes.common.shared_topic_error`).
+            A topic with a second writer (a force topic unless ``shared_source_topics``, an
+            output topic of the plant), named by participant and host
+            (:meth:`pentapod_sim.nodes.writers.WriterCheck.check`).
         """
-        gone = []
-        for name in self.sources:
-            infos = self.node.get_publishers_info_by_topic(force_topic(name))
-            if len(infos) > 1 and not self.shared_ok:
-                if error := shared_topic_error(force_topic(name), infos, self.shared_seen):
-                    raise RunError(error)
-            if not infos:
-                gone.append(name)
-        return gone
+        present = self.writers.check()
+        return [name for name in self.sources if not present.get(force_topic(name))]
 
     def wait_for_publishers(self, executor, timeout: float) -> None:
         """Wait until every source topic has a publisher (RunError names the missing)."""

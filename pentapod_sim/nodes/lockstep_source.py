@@ -7,8 +7,21 @@ none), waits until it holds every needed message of one stamp t_k, computes u_k 
 same stamp. It publishes the linear model of its law once on
 /pentapod/controller_models/<source_name> for the plant's truncation check
 (:meth:`LockstepSource.linear_model`, :mod:`pentapod_sim.nodes.source_model`). A re-published
-step (same stamp again) gets the cached answer, so stateful laws advance exactly once per step.
-Messages with NaN/Inf or a missing joint are rejected, counted and warned about. In a composed
+step (same stamp, same state again) gets the cached answer, so stateful laws advance exactly
+once per step; a message of the answered stamp with another state is refused ('conflict'): the
+cached answer belongs to the state it was computed from. Messages with NaN/Inf or a missing
+joint are rejected, counted and warned about.
+
+The state topics it reads have one writer, the plant (:mod:`pentapod_sim.nodes.writers`): a
+message is taken only while its subscription has one matched publisher, and the graph's
+publishers are checked at the first message and every ``CHECK_PERIOD`` s; a second writer stops
+the source (exit code 1) naming both by DDS participant and host. No message from the plant for
+``plant_stall_timeout`` s of wall time during its run stops the source with exit code 4, naming
+the plant (:class:`pentapod_sim.errors.PlantStalledError`). A parameter set during the run is
+logged with old and new value and the step from which it acts, and published stamped with that
+step on /pentapod/parameter_changes/<source_name>
+(:data:`pentapod_sim.interface.PARAMETER_CHANGE_PREFIX`) for the recorder; a law publishes its
+new linear model. In a composed
 run the plant's messages and the answers pass in-process (:meth:`LockstepSource.use_bus`,
 :mod:`pentapod_sim.nodes.local_bus`). Stopped after the plant's run ended, a source says so and
 exits 0 (:class:`pentapod_sim.nodes.run_status.PlantRunWatch`).
@@ -20,16 +33,27 @@ import math
 import time
 from typing import Sequence
 
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 import numpy as np
+from rclpy.clock import Clock as RosClock
+from rclpy.clock import ClockType
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
-from pentapod_sim.errors import ConfigError
-from pentapod_sim.interface import CLOCK, force_topic, port_location
+from pentapod_sim.errors import ConfigError, PlantStalledError, RunError
+from pentapod_sim.interface import (
+    CLOCK,
+    force_topic,
+    PARAMETER_CHANGE_PREFIX,
+    port_location,
+    stamp_ns,
+    step_of,
+)
 from pentapod_sim.nodes.common import (
     FORCE_QOS,
     INFO_QOS,
+    qos,
     set_stamp,
     stamp_to_ns,
     STATE_SUB_QOS,
@@ -39,6 +63,10 @@ from pentapod_sim.nodes.local_bus import LocalBus, Outlet
 from pentapod_sim.nodes.run_status import PlantRunWatch
 from pentapod_sim.nodes.source_model import model_text, publish_model
 from pentapod_sim.nodes.testbed_node import TestbedNode
+from pentapod_sim.nodes.writers import Writer, WriterCheck, writers_text
+
+#: Wall time [s] between two looks of a source at the time since the plant's last message.
+STALL_CHECK_PERIOD = 0.25
 
 
 class LockstepSource(TestbedNode):
@@ -59,6 +87,11 @@ class LockstepSource(TestbedNode):
         self.answered = 0
         self._last_warn = 0.0
         self.plant_run = PlantRunWatch(self)
+        self.writers = WriterCheck(self)
+        self.last_heard: float | None = None     # wall time of the plant's last message
+        self.create_timer(STALL_CHECK_PERIOD, self._check_stall,
+                          clock=RosClock(clock_type=ClockType.STEADY_TIME))
+        self.change_pub = None                   # parameter changes (created by setup)
 
     def param_defaults(self) -> dict:
         """``source_name`` defaults to the node's name."""
@@ -77,6 +110,7 @@ class LockstepSource(TestbedNode):
         # topic -> (joint names of the last message, [(slot, index in the message, field)])
         self._picks: dict[str, tuple[list, list]] = {}
         self._last = (-1, None)   # (stamp ns, published message)
+        self._answered: dict = {}   # topic -> the state message the cached answer is for
         self.force_pub = self.create_publisher(JointState, force_topic(self.source_name),
                                                FORCE_QOS)
         self.force_out = Outlet(self.force_pub, always_remote=True)
@@ -85,8 +119,14 @@ class LockstepSource(TestbedNode):
         self._answer = JointState(name=self.actuator_ports)
         self.subs = [self.create_subscription(
             Clock if t == CLOCK else JointState, t,
-            lambda msg, t=t: self._on_state(t, msg), STATE_SUB_QOS) for t in self.state_topics()]
+            lambda msg, t=t: self._on_dds_state(t, msg), STATE_SUB_QOS)
+            for t in self.state_topics()]
+        self._sub_of = dict(zip(self.state_topics(), self.subs))
+        for t in self.state_topics():
+            self.writers.watch(t)
         self.model_pub = publish_model(self, self.source_name, self.model_text())
+        self.change_pub = self.create_publisher(
+            DiagnosticArray, PARAMETER_CHANGE_PREFIX + self.source_name, qos('change'))
 
     def state_topics(self) -> list[str]:
         """The plant's topics this source answers: those of its sensors, else /clock."""
@@ -102,6 +142,7 @@ class LockstepSource(TestbedNode):
         for sub in self.subs:
             self.destroy_subscription(sub)
         self.subs = []
+        self.writers.topics.clear()     # in-process: nothing foreign reaches the bus
         for topic in self.state_topics():
             bus.subscribe(topic, lambda msg, t=topic: self._on_state(t, msg))
         self.force_out.attach(bus)
@@ -179,8 +220,14 @@ class LockstepSource(TestbedNode):
         """Collect the messages of one stamp; answer when all needed topics are in."""
         stamp = msg.clock if topic == CLOCK else msg.header.stamp
         ns = stamp_to_ns(stamp)
+        self.last_heard = time.monotonic()
         if ns == self._last[0]:
-            self.force_out.publish(self._last[1])   # a re-published step: same answer
+            answered = self._answered.get(topic)
+            if answered is None or answered == msg:
+                self.force_out.publish(self._last[1])   # a re-published step: same answer
+            else:       # not the state the answer was computed from: not the plant's step
+                self._reject(f'conflict: a second, different message on {topic} for the '
+                             f'answered stamp {ns} ns')
             return
         if ns < self._last[0]:
             # the plant only re-sends its current step, so time going back means a new run
@@ -200,6 +247,7 @@ class LockstepSource(TestbedNode):
                 del self._pending[old]
         else:
             pending = {topic: msg}
+        self._answered = pending if self.subs else {}    # bus messages are refilled objects
         sensors = np.empty(len(self.sensor_ports))
         for t, msg_t in pending.items():
             if t != CLOCK and not self._extract(t, msg_t, sensors):
@@ -212,6 +260,51 @@ class LockstepSource(TestbedNode):
         self._last = (ns, out)
         self.answered += 1
         self.after_publish(out.header.stamp, efforts)
+
+    def _on_dds_state(self, topic: str, msg) -> None:
+        """A state message from DDS: taken only from the topic's one writer (RunError else)."""
+        writers = self.writers
+        try:
+            if writers.due():
+                writers.check()
+            if writers.message_ok(topic, self._sub_of[topic]):
+                self._on_state(topic, msg)
+            elif writers.due():
+                writers.check()
+        except RunError as err:
+            self.fail(err)
+
+    def _check_stall(self) -> None:
+        """PlantStalledError once the plant, during its run, was silent plant_stall_timeout s."""
+        limit = self.params.plant_stall_timeout
+        if (limit <= 0 or self.last_heard is None or self.plant_run.ended is not None
+                or self.failure is not None or time.monotonic() - self.last_heard <= limit):
+            return
+        plant = writers_text(w for t in self.writers.topics
+                             for w in map(Writer.of, self.get_publishers_info_by_topic(t)))
+        self.fail(PlantStalledError(
+            f'the plant stalled: no message from it for {limit:g} s of wall time during its run '
+            f'(plant_stall_timeout; last answered stamp {self._last[0]} ns); its writer: '
+            f'{plant or "gone from the graph"}'))
+
+    def on_params_changed(self, old, new, names: Sequence[str]) -> None:
+        """Log each change with the step it acts from; publish it stamped; the new model."""
+        ns = self._last[0]
+        step = step_of(ns, self.params.dt) + 1 if ns >= 0 else 0
+        when = f'from step {step} (t = {step * self.params.dt:.6g} s)'
+        status = DiagnosticStatus(name=self.get_fully_qualified_name(), message='changed')
+        for name in names:
+            before, after = old.ros_values().get(name), new.ros_values().get(name)
+            self.get_logger().warning(f'parameter {name} changed during the run: {before!r} -> '
+                                      f'{after!r}, acting {when}')
+            status.values += [KeyValue(key=f'{name}.old', value=repr(before)),
+                              KeyValue(key=f'{name}.new', value=repr(after))]
+        status.values.append(KeyValue(key='step', value=str(step)))
+        if self.change_pub is not None:
+            msg = DiagnosticArray(status=[status])
+            set_stamp(msg.header.stamp, stamp_ns(step, self.params.dt))
+            self.change_pub.publish(msg)
+            self.publish_model()
 
     def _extract(self, topic: str, msg: JointState, sensors: np.ndarray) -> bool:
         """Fill this topic's sensor slots; reject the step if a joint or value is bad."""

@@ -16,6 +16,11 @@ of the same loop again reads them instead of solving the eigenvalue problem (sec
 scenario). It logs the margins and names the sources it could not check; with ``loop_check`` =
 ``refuse`` a loop that is not stable ends the run with a RunError naming the spectral radius,
 with ``warn`` it logs a loud warning and runs, ``off`` skips the check (:class:`TruncationCheck`).
+
+A source that publishes a new model during the run (a damper whose gain was set) is checked
+again (:meth:`TruncationCheck.during_run`), in a thread while the run goes on: the plant logs
+the step at which the model arrived and the result, and ``refuse`` then ends the run, ``warn``
+logs the loud warning.
 """
 from __future__ import annotations
 
@@ -25,8 +30,9 @@ import hashlib
 import json
 import logging
 from pathlib import Path
+import threading
 import time
-from typing import Mapping, Sequence
+from typing import Any, Callable, Mapping, Sequence
 
 from std_msgs.msg import String
 
@@ -94,15 +100,25 @@ def sort_models(texts: Mapping[str, str | None], plant: PlantModel
 
 
 class ModelCollector:
-    """The plant's latched subscriptions to its sources' model topics."""
+    """
+    The plant's latched subscriptions to its sources' model topics.
 
-    def __init__(self, node, sources: Sequence[str]):
-        self.sources = list(sources)
+    ``step`` gives the plant's current step; the step at which each source's latest model
+    arrived is kept in ``arrived``.
+    """
+
+    def __init__(self, node, sources: Sequence[str], step: Callable[[], int] = lambda: 0):
+        self.sources, self.step = list(sources), step
         self.texts: dict[str, str] = {}
+        self.arrived: dict[str, int] = {}
         self.subs = [node.create_subscription(
-            String, controller_model_topic(s),
-            lambda msg, s=s: self.texts.__setitem__(s, msg.data), MODEL_QOS)
-            for s in self.sources]
+            String, controller_model_topic(s), lambda msg, s=s: self.take(s, msg.data),
+            MODEL_QOS) for s in self.sources]
+
+    def take(self, source: str, text: str) -> None:
+        """Keep a source's model text and the plant's step when it arrived."""
+        if self.texts.get(source) != text:
+            self.texts[source], self.arrived[source] = text, self.step()
 
     def wait(self, executor, timeout: float = MODEL_TIMEOUT) -> dict[str, str | None]:
         """Spin until every source's model is in or ``timeout`` [s]; source -> text or None."""
@@ -164,9 +180,21 @@ class TruncationCheck:
                  f_min: float, cache_dir: str, log):
         self.models, self.plant, self.dt, self.policy = models, plant, dt, policy
         self.sample_rate, self.f_min, self.cache_dir, self.log = sample_rate, f_min, cache_dir, log
+        self.checked: dict[str, str | None] = {}     # the model texts the last check used
+        self._check: tuple[PlantModel | None, str] | None = None    # (check model, name)
+        self._worker: threading.Thread | None = None
+        self._outcome: dict[str, Any] = {}
 
     def check_model(self) -> tuple[PlantModel | None, str]:
         """The check model of the plant's position (built once, cached) and its file name."""
+        if self._check is None:
+            check = self._load_check_model()
+            if check[1] == 'stopped':       # not kept: a later call builds it again
+                return None, ''
+            self._check = check
+        return self._check
+
+    def _load_check_model(self) -> tuple[PlantModel | None, str]:
         position, log = self.plant.meta.get('position') or '', self.log
         if not position:
             log.info('truncation check on the plant model only: it has no FE position')
@@ -181,7 +209,7 @@ class TruncationCheck:
                 check, origin = load_or_build_check_model(position, f_max, self.cache_dir,
                                                           stop=shutdown.requested)
         except CheckStopped:        # the caller sees the stop request and skips the check
-            return None, ''
+            return None, 'stopped'
         log.info(f'check model {origin}: {check.n_modes} modes')
         return check, cached.name
 
@@ -243,6 +271,7 @@ class TruncationCheck:
             log.info('truncation check off (loop_check = off)')
             return None
         texts = self.models.wait(executor)
+        self.checked = dict(texts)
         if shutdown.requested():    # stopped while waiting: no check model, no eigenvalues
             return None
         models, open_loop, unchecked = sort_models(texts, self.plant)
@@ -276,3 +305,72 @@ class TruncationCheck:
         log.info(f'truncation check in {time.monotonic() - start:.1f} s: {result.summary()}'
                  + (f' (open-loop sources: {", ".join(open_loop)})' if open_loop else ''))
         return result
+
+    def during_run(self) -> None:
+        """
+        Check the loop again when a source published a new model during the run.
+
+        Called with the plant's periodic graph checks: starts the check in a thread when a
+        model text differs from those checked last, and applies the policy once it is done
+        (logged with the step at which the model arrived).
+
+        Raises
+        ------
+        RunError
+            With ``loop_check`` = ``refuse``, once the new loop is found not stable.
+        """
+        if self.policy == 'off':
+            return
+        worker = self._worker
+        if worker is not None:
+            if not worker.is_alive():
+                self._worker = None
+                self._conclude(self._outcome)
+            return
+        texts = {s: self.models.texts.get(s) for s in self.models.sources}
+        changed = [s for s in texts if texts[s] != self.checked.get(s)]
+        if not changed:
+            return
+        self.checked = texts
+        steps = {s: self.models.arrived.get(s, 0) for s in changed}
+        self.log.info('truncation check again: new model of ' + ', '.join(
+            f'{s} (arrived at step {k})' for s, k in steps.items()))
+        self._outcome = outcome = {'steps': steps}
+
+        def work() -> None:
+            try:
+                models, _, unchecked = sort_models(texts, self.plant)
+                outcome['unchecked'] = unchecked
+                if models:
+                    check, name = self.check_model()
+                    outcome['result'] = self.result(
+                        models, check, name, f'loop of plant and {", ".join(models)}')[0]
+            except Exception as err:       # noqa: BLE001 (reported by _conclude)
+                outcome['error'] = err
+        self._worker = threading.Thread(target=work, name='truncation check', daemon=True)
+        self._worker.start()
+
+    def _conclude(self, outcome: Mapping[str, Any]) -> None:
+        """Log or refuse the result of a check during the run."""
+        when = ', '.join(f'{s} from step {k}' for s, k in outcome['steps'].items())
+        if 'error' in outcome:
+            raise RunError(f'truncation check of the new model of {when} failed: '
+                           f'{outcome["error"]}')
+        missing = ''.join(f'; unchecked source {s!r}: {why}'
+                          for s, why in outcome.get('unchecked', {}).items())
+        result = outcome.get('result')
+        if result is None:
+            self.log.warning(f'truncation check of the new model of {when}: no linear model '
+                             f'closes a loop{missing}')
+            return
+        try:
+            apply_policy(result, 'refuse')
+        except UnstableLoopError as err:
+            if self.policy == 'refuse':
+                raise RunError(f'truncation check (loop_check = refuse) of the new model of '
+                               f'{when}: {err}{missing}') from None
+            self.log.warning(f'!!! truncation check (loop_check = warn) of the new model of '
+                             f'{when}: {err}{missing} -- results of this run from then on are '
+                             'not trustworthy !!!')
+            return
+        self.log.info(f'truncation check of the new model of {when}: {result.summary()}')

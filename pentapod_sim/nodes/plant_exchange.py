@@ -36,14 +36,18 @@ class PlantExchange:
         The run's record.
     refresh : callable
         The plant's look at its subscribers (outputs and answer polling).
+    recheck : callable
+        Called with every graph check: the truncation check of models that changed mid-run
+        (:meth:`pentapod_sim.nodes.loop_check.TruncationCheck.during_run`).
     """
 
     def __init__(self, outputs: PlantOutputs, inputs: ForceInputs, poller: AnswerPoller,
                  bus_drain: Drain | None, executor, trace: Trace,
-                 refresh: Callable[[], None]):
+                 refresh: Callable[[], None], recheck: Callable[[], None] = lambda: None):
         self.outputs, self.inputs, self.poller = outputs, inputs, poller
         self.bus_drain, self.executor, self.trace, self.refresh = (bus_drain, executor, trace,
                                                                    refresh)
+        self.recheck = recheck
 
     def publish(self, k: int, y: np.ndarray) -> None:
         """Publish y_k (the subscribers looked up again every REFRESH_PERIOD s)."""
@@ -65,7 +69,14 @@ class PlantExchange:
         self.poller.poll(k)
 
     def gone(self) -> list[str]:
-        """Sources whose publisher left (RunError for a shared force topic)."""
+        """
+        Sources whose publisher left; the periodic checks of a run.
+
+        RunError for a second writer on a force or output topic
+        (:meth:`ForceInputs.gone`), or for a model changed mid-run that the truncation check
+        refuses.
+        """
+        self.recheck()
         return self.inputs.gone()
 
     def record(self, k: int, y: np.ndarray, u: np.ndarray) -> None:

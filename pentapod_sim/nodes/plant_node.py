@@ -36,6 +36,7 @@ from pentapod_sim.nodes.plant_exchange import PlantExchange
 from pentapod_sim.nodes.plant_outputs import PlantOutputs
 from pentapod_sim.nodes.run_status import RunStatusPublisher
 from pentapod_sim.nodes.testbed_node import TestbedNode
+from pentapod_sim.nodes.writers import WriterCheck
 from pentapod_sim.plant.build import load_or_build_model
 from pentapod_sim.sim.multirate import MultiRatePlant
 from pentapod_sim.sim.realtime import RealTime
@@ -65,14 +66,21 @@ class PlantNode(TestbedNode):
         self.n_steps = self._n_steps()
         lockstep = p.timing == 'lockstep'
         self.outputs = PlantOutputs(self, self.core, self.mixer, p.display_batch_period)
+        # one writer per topic (pentapod_sim.nodes.writers): the force topics it reads, and
+        # the per-step outputs and run status it writes itself (a second writer there would
+        # feed the sources and the recorder a state that is not the plant's)
+        self.writers = WriterCheck(self)
         self.inputs = ForceInputs(self, self.core, self.mixer, exact=lockstep,
-                                  shared_ok=p.shared_source_topics)
+                                  shared_ok=p.shared_source_topics, writers=self.writers)
         self.poller = AnswerPoller(self, self.inputs, p.answer_poll_time if lockstep else 0.0)
         self.status = RunStatusPublisher(self, self.core.dt, p.status_period,
                                          lambda: self.announce(interface.RUN_RUNNING, True))
+        for topic in self.outputs.topics() + [interface.RUN_STATUS]:
+            self.writers.watch(topic)
         self.loop_check = TruncationCheck(
-            ModelCollector(self, self.mixer.sources), self.model, self.core.dt, p.loop_check,
-            p.sample_rate, p.loop_check_f_min, p.model_cache_dir, self.get_logger())
+            ModelCollector(self, self.mixer.sources, lambda: self.core.k), self.model,
+            self.core.dt, p.loop_check, p.sample_rate, p.loop_check_f_min, p.model_cache_dir,
+            self.get_logger())
         waits = Waits(p.startup_timeout, p.source_timeout, p.resend_period)
         self.timing: Timing = (
             Lockstep(self.core, self.mixer, self.n_steps, waits) if lockstep else
@@ -165,7 +173,8 @@ class PlantNode(TestbedNode):
         self.status.start(self.core.k)
         try:
             self.timing.run(PlantExchange(self.outputs, self.inputs, self.poller,
-                                          self.bus_drain, executor, trace, self.refresh))
+                                          self.bus_drain, executor, trace, self.refresh,
+                                          self.loop_check.during_run))
             figures = self.timing.figures()
             if (line := self.timing.summary()) is not None:
                 log.info(line)

@@ -8,10 +8,11 @@ time) when its type starts with a std_msgs/Header or a builtin Time (Clock), els
 receive time of the node clock. With ``stop_at_run_end`` the recorder closes the bag once the
 plant announced the end of the run (:data:`pentapod_sim.interface.RUN_STATUS`) and every
 per-step topic holds the last step, or ``drain_timeout`` s after the announcement; it logs
-expected vs recorded messages per topic and stores them in the bag
-(:mod:`pentapod_sim.recording.run_end`, docs/recording.md). SIGINT/SIGTERM close the bag
-completely; after a SIGKILL the bag is readable up to the last periodic flush. The node
-publishes nothing.
+unique vs expected steps per topic and stores them in the bag
+(:mod:`pentapod_sim.recording.run_end`, docs/recording.md); missing steps, a conflicting copy of
+a step or a second writer on a recorded topic (:mod:`pentapod_sim.nodes.writers`) fail the
+recording: exit code 3 after the bag is closed. SIGINT/SIGTERM close the bag completely; after
+a SIGKILL the bag is readable up to the last periodic flush. The node publishes nothing.
 
 In a composed run the recorder takes the plant's and the in-process sources' per-step topics
 from the composition's bus as message objects (:meth:`RecorderNode.take_from_bus`,
@@ -35,7 +36,7 @@ from rclpy.serialization import deserialize_message
 import yaml
 
 from pentapod_sim import interface, shutdown
-from pentapod_sim.errors import BagError, ConfigError
+from pentapod_sim.errors import BagError, ConfigError, RecordingError
 from pentapod_sim.nodes.common import run_node
 from pentapod_sim.nodes.parameter_tables import RecorderParams
 from pentapod_sim.nodes.recorder_qos import (
@@ -48,9 +49,10 @@ from pentapod_sim.nodes.recorder_qos import (
 )
 from pentapod_sim.nodes.testbed_node import TestbedNode
 from pentapod_sim.nodes.wire_cdr import serializer, type_name
+from pentapod_sim.nodes.writers import WriterCheck
 from pentapod_sim.recording import BagWriter
 from pentapod_sim.recording.msgdefs import has_header_stamp
-from pentapod_sim.recording.run_end import RunStatus, shortfalls, StepLedger
+from pentapod_sim.recording.run_end import failures, report_record, RunStatus, StepLedger
 
 #: A recorder stops waiting for topics whose publishers all left once it took no message for
 #: this long [s]: what their publishers sent before leaving is taken first.
@@ -93,7 +95,13 @@ class RecorderNode(TestbedNode):
         self.ledger = StepLedger(self._selected)
         self.end = None           # RunStatus once the plant announced the end of the run
         self.end_seen = None      # monotonic time of that announcement
-        self.report = None        # expected vs recorded counts, set by close()
+        self.report = None        # expected vs unique counts, set by close()
+        self.failed: list[str] = []    # why the recording is not trustworthy (store_report)
+        # one writer per recorded per-step topic (pentapod_sim.nodes.writers): a second one is
+        # named at once and fails the recording; it is still recorded (the evidence)
+        self.writers = WriterCheck(self)
+        self.foreign: dict[str, str] = {}   # topic -> the refusal of its writers
+        self.conflicts: set[str] = set()      # topics with a conflicting copy of a step
         try:
             run_info = yaml.safe_load(params.run_info or '{}') or {}
         except yaml.YAMLError as err:
@@ -129,6 +137,10 @@ class RecorderNode(TestbedNode):
         the topic is subscribed again at that publisher's level, with a warning (its messages
         before the new subscription matched are lost). The level never goes back up.
         """
+        for topic, refusal in self.writers.check_each().items():
+            if topic not in self.foreign:
+                self.foreign[topic] = refusal
+                self.get_logger().error(f'foreign writer: {refusal}; the recording will fail')
         for topic, types in self.get_topic_names_and_types():
             if not self._selected(topic):
                 continue
@@ -165,6 +177,8 @@ class RecorderNode(TestbedNode):
         else:
             callback = self._from_dds(topic, callback)
         sub = self.create_subscription(message_class(msg_type), topic, callback, qos, raw=True)
+        if topic == interface.RUN_STATUS or interface.is_step_topic(topic):
+            self.writers.watch(topic)
         self.subs[topic] = (sub, msg_type, level)
         self.get_logger().info(f'subscribed {topic} [{msg_type}]'
                                f'{" best effort" if level == BEST_EFFORT else ""}')
@@ -240,6 +254,7 @@ class RecorderNode(TestbedNode):
         now_ns = (time.time_ns if not self.get_parameter('use_sim_time').value
                   else lambda: clock.now().nanoseconds)
         registered = []
+        conflicts = self.conflicts
 
         def on_message(data: bytes) -> None:
             if not selected:
@@ -255,8 +270,11 @@ class RecorderNode(TestbedNode):
                     self.duplicates[topic] = self.duplicates.get(topic, 0) + 1
                     return  # a lockstep plant re-sends a step while it waits: keep one copy
                 last_stamp[:], last_data[:] = [stamp], [data]
-                write(topic, data, stamp, received)
-                note(topic, stamp)
+                write(topic, data, stamp, received)    # a conflicting copy too: evidence
+                if not note(topic, stamp) and topic not in conflicts:
+                    conflicts.add(topic)
+                    self.get_logger().error(f'{topic}: a second, different message for stamp '
+                                            f'{stamp} ns; the recording will fail')
             else:
                 write(topic, data, received, received)
         last_stamp, last_data = [], []
@@ -311,23 +329,21 @@ class RecorderNode(TestbedNode):
                 and self._selected(t) and self.count_publishers(t)]
 
     def store_report(self) -> None:
-        """Log expected vs recorded counts per topic and store them in the bag."""
+        """Log unique vs expected steps per topic and why it failed; store them in the bag."""
         if self.end is None:
+            self.failed = [f'{t}: {text}' for t, text in self.foreign.items()]
             return
         self.report = report = self.ledger.report(
             self.end, self.expected_topics(), self.writer.topic_counts())
-        short = shortfalls(report)
-        self.writer.add_record(RECORDING_RECORD, {
-            'run_state': self.end.state, 'steps': self.end.steps,
-            'expected': _flow({t: c['expected'] for t, c in report.items()}),
-            'recorded': _flow({t: c['recorded'] for t, c in report.items()}),
-            'missing': _flow(short)})
-        text = ', '.join(f'{t} {c["recorded"]}/{c["expected"]}' for t, c in report.items())
-        log = self.get_logger()
-        if short:
-            log.warning(f'recorded/expected messages: {text}; MISSING {short}')
+        self.failed = failures(report, self.foreign)
+        self.writer.add_record(RECORDING_RECORD, report_record(self.end, report, self.foreign))
+        text = ', '.join(f'{t} {c["unique"]}/{c["expected"]}' for t, c in report.items())
+        if self.failed:
+            self.get_logger().error(f'unique/expected steps: {text}; FAILED: '
+                                    + '; '.join(self.failed))
         else:
-            log.info(f'recorded/expected messages: {text}; none missing')
+            self.get_logger().info(f'unique/expected steps: {text}; none missing, no '
+                                   'conflicting copy, no foreign writer')
 
     def close(self) -> None:
         """Store the counts, finish the bag (summary, footer, metadata.yaml)."""
@@ -338,11 +354,6 @@ class RecorderNode(TestbedNode):
             self.get_logger().info(f'skipped re-sent copies of a step: {self.duplicates}')
         if self.context.ok():
             self.get_logger().info(f'closed {self.writer.path}: {self.writer.topic_counts()}')
-
-
-def _flow(mapping: dict) -> str:
-    return yaml.safe_dump(mapping, default_flow_style=True, sort_keys=False,
-                          width=1 << 20).strip()
 
 
 #: After a stop signal the recorder waits this long [s, wall time] for the plant's end
@@ -370,6 +381,9 @@ def record(node: RecorderNode, executor) -> None:
                 executor.spin_once(timeout_sec=0.05)
     finally:
         node.close()
+    if node.failed:
+        raise RecordingError(f'recording {node.writer.path} is incomplete or not trustworthy: '
+                             + '; '.join(node.failed))
 
 
 def main(argv=None) -> int:

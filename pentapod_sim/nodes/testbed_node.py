@@ -98,6 +98,19 @@ class TestbedNode(Node):
                               "which mean 'none'") from None
         self._where = f'node {self.get_name()!r}'
         self.params = self._declare_params()
+        #: An error that ends the node, raised by its spin loop (:meth:`fail`)
+        self.failure: Exception | None = None
+
+    def fail(self, err: Exception) -> None:
+        """
+        End the node with ``err`` from a callback.
+
+        Raised from a callback, an error reaches the spin loop too, but rclpy's EventsExecutor
+        first logs it as FATAL with its traceback; :func:`pentapod_sim.nodes.common.run_node`
+        raises ``failure`` after the callback, so the error is one line like every other.
+        """
+        if self.failure is None:
+            self.failure = err
 
     def param_defaults(self) -> dict[str, Any]:
         """Defaults known only once the node exists (by field name); none by default."""
@@ -142,7 +155,17 @@ class TestbedNode(Node):
         return SetParametersResult(successful=True)
 
     def _take_set(self, changes: list[Parameter]) -> None:
-        self.params = self._changed(changes)
+        old, self.params = self.params, self._changed(changes)
+        names = [p.name for p in changes if declares(type(self).Params, p.name)]
+        if names:
+            self.on_params_changed(old, self.params, names)
+
+    def on_params_changed(self, old: Any, new: Any, names: list[str]) -> None:
+        """Hook after settable parameters were set (``old``, ``new``: the typed values)."""
+        for name in names:
+            self.get_logger().warning(f'parameter {name} changed: '
+                                      f'{old.ros_values().get(name)!r} -> '
+                                      f'{new.ros_values().get(name)!r}')
 
 
 def usage(cls: type) -> str:

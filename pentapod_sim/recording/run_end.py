@@ -14,6 +14,8 @@ from dataclasses import dataclass
 import time
 from typing import Callable, Iterable, Mapping
 
+import yaml
+
 from pentapod_sim.errors import BagError
 from pentapod_sim.interface import (
     is_step_topic,
@@ -76,7 +78,12 @@ class RunStatus:
 
 class StepLedger:
     """
-    Newest stamp per per-step topic a recorder wrote, and what the end of the run implies.
+    What a recorder wrote per stamped topic: unique steps, conflicting copies, the newest stamp.
+
+    A stamp already written comes again when a lockstep plant re-sends a step (the same bytes:
+    the recorder skips it) or when a second writer publishes the same step with other content:
+    a *conflicting* copy, written (the bag keeps the evidence) and counted; the end report then
+    fails (:func:`failures`). Unique stamps are kept per topic (a set: about 60 bytes a step).
 
     Parameters
     ----------
@@ -87,13 +94,25 @@ class StepLedger:
     def __init__(self, selected: Callable[[str], bool]) -> None:
         self.selected = selected
         self.newest: dict[str, int] = {}
+        self.stamps: dict[str, set[int]] = {}
+        self.conflicting: dict[str, int] = {}
         self.noted = time.monotonic()         # wall time [s] of the last note
 
-    def note(self, topic: str, stamp_ns: int) -> None:
-        """Record that a message of ``topic`` with stamp ``stamp_ns`` was written."""
+    def note(self, topic: str, stamp_ns: int) -> bool:
+        """
+        Note a message of ``topic`` with stamp ``stamp_ns`` that differs from the last one.
+
+        Returns False (counted as conflicting) if the stamp was written before.
+        """
         self.noted = time.monotonic()
+        seen = self.stamps.setdefault(topic, set())
+        if stamp_ns in seen:
+            self.conflicting[topic] = self.conflicting.get(topic, 0) + 1
+            return False
+        seen.add(stamp_ns)
         if stamp_ns > self.newest.get(topic, -1):
             self.newest[topic] = stamp_ns
+        return True
 
     def expected_topics(self, end: RunStatus, present: Iterable[str]) -> list[str]:
         """
@@ -114,12 +133,60 @@ class StepLedger:
 
     def report(self, end: RunStatus, topics: Iterable[str],
                counts: Mapping[str, int]) -> dict[str, dict[str, int]]:
-        """Return ``{topic: {'expected': steps, 'recorded': messages}}``."""
-        return {t: {'expected': end.steps, 'recorded': int(counts.get(t, 0))}
+        """
+        ``{topic: {'expected', 'recorded', 'unique', 'conflicting'}}`` per per-step topic.
+
+        ``expected``: the steps of the run; ``recorded``: messages written; ``unique``: steps
+        of the run (stamps up to the last one) among them; ``conflicting``: copies of a step
+        already written, with other content.
+        """
+        last = end.last_stamp_ns
+        return {t: {'expected': end.steps, 'recorded': int(counts.get(t, 0)),
+                    'unique': sum(1 for s in self.stamps.get(t, ()) if s <= last),
+                    'conflicting': self.conflicting.get(t, 0)}
                 for t in topics}
 
 
 def shortfalls(report: Mapping[str, Mapping[str, int]]) -> dict[str, int]:
-    """Return ``{topic: missing messages}`` of the topics with fewer than expected."""
-    return {t: c['expected'] - c['recorded'] for t, c in report.items()
-            if c['recorded'] < c['expected']}
+    """Return ``{topic: missing steps}`` of the topics with fewer unique steps than expected."""
+    return {t: c['expected'] - c.get('unique', c['recorded']) for t, c in report.items()
+            if c.get('unique', c['recorded']) < c['expected']}
+
+
+def failures(report: Mapping[str, Mapping[str, int]],
+             foreign: Mapping[str, str]) -> list[str]:
+    """
+    Why a recording cannot be trusted, one text per reason (empty: complete and clean).
+
+    Missing steps, conflicting copies of a step, and ``foreign``: topic -> the second writers
+    a recorder saw (:mod:`pentapod_sim.nodes.writers`).
+    """
+    out = [f'{t} misses {n} of {report[t]["expected"]} steps'
+           for t, n in shortfalls(report).items()]
+    out += [f'{t} holds {c["conflicting"]} conflicting copies of steps (a second writer)'
+            for t, c in report.items() if c.get('conflicting')]
+    out += [f'{t}: {text}' for t, text in foreign.items()]
+    return out
+
+
+def report_record(end: RunStatus, report: Mapping[str, Mapping[str, int]],
+                  foreign: Mapping[str, str]) -> dict[str, object]:
+    """
+    The recorder's record of a run's end in its bag (MCAP metadata ``pentapod_recording``).
+
+    ``run_state``, ``steps`` and per topic ``expected``, ``recorded`` (messages), ``unique``
+    (steps), ``missing`` (steps), ``conflicting`` (copies), and ``foreign`` (topic -> the
+    second writers seen); docs/recording.md.
+    """
+    def flow(mapping: Mapping[str, object]) -> str:
+        return yaml.safe_dump(dict(mapping), default_flow_style=True, sort_keys=False,
+                              width=1 << 20).strip()
+
+    def per_topic(key: str) -> str:
+        return flow({t: c[key] for t, c in report.items()})
+    return {'run_state': end.state, 'steps': end.steps,
+            'expected': per_topic('expected'), 'recorded': per_topic('recorded'),
+            'unique': per_topic('unique'), 'missing': flow(shortfalls(report)),
+            'conflicting': flow({t: c['conflicting'] for t, c in report.items()
+                                 if c['conflicting']}),
+            'foreign': flow(foreign)}

@@ -10,8 +10,12 @@ all (e.g. ``sample_rate``). A node runs the node kind its name starts with
 the file (:func:`pentapod_sim.scenario.files.read_scenario`), writes the run's one parameter
 file from the checked values, starts the sources first, then the plant, waits for the plant to
 end, stops the others with SIGINT (SIGKILL after a grace period; a source that saw the
-plant's run end says so and exits 0) and returns the plant's exit code (nonzero also if another
-node failed). launch/testbed.launch.py uses the same parser.
+plant's run end says so and exits 0) and returns the plant's exit code, or the code of what
+else went wrong (:mod:`pentapod_sim.exits`, docs/interface.md "Stopping and exit codes"): 3 if
+a recorder did not close its bag complete (it failed, was killed, or stayed stopped), naming
+it; 4 if a source saw the plant stall (the plant is then stopped at once); 5 if the plant did
+not end in time; 1 if another node failed; 128 + N for a plant killed by signal N.
+launch/testbed.launch.py uses the same parser.
 
 SIGINT, SIGTERM or SIGHUP to the runner is forwarded to every node; the nodes finish their
 step, write their files and exit with 128 + the signal number, and so does the runner, after
@@ -30,7 +34,7 @@ import sys
 import tempfile
 import time
 
-from pentapod_sim import shutdown
+from pentapod_sim import exits, shutdown
 from pentapod_sim.errors import ConfigError, RunError
 from pentapod_sim.registry import RECORDER
 from pentapod_sim.scenario.domain import DOMAIN_VAR, isolated_env, RANGE_VAR
@@ -70,6 +74,7 @@ def stop(procs: dict[str, Proc], grace: float = 5.0) -> dict[str, int | None]:
     running = [name for name, proc in procs.items() if proc.poll() is None]
     for name in running:
         procs[name].send_signal(signal.SIGINT)
+        procs[name].send_signal(signal.SIGCONT)   # a stopped process ends cleanly too
     end = time.monotonic() + grace
     for name, proc in procs.items():
         try:
@@ -97,10 +102,35 @@ def drain_recorders(scenario: Scenario, procs: dict[str, Proc],
                if getattr(n.params, 'stop_at_run_end', False)]
     end = time.monotonic() + max([limit] + [n.params.drain_timeout + 10.0 for n in waiting])
     for node in waiting:
-        try:
-            procs[node.name].wait(timeout=max(0.1, end - time.monotonic()))
-        except subprocess.TimeoutExpired:
+        proc = procs[node.name]
+        while proc.poll() is None and time.monotonic() < end:
+            if stopped_for(proc, STOPPED_LIMIT):
+                LOG.error('recorder %s is stopped (SIGSTOP or a debugger) and did not '
+                          'continue within %.0f s; killing it: its bag is incomplete',
+                          node.name, STOPPED_LIMIT)
+                proc.kill()
+                break
+            time.sleep(0.1)
+        if proc.poll() is None:
             LOG.warning('recorder %s still busy after the plant ended; stopping it', node.name)
+
+
+#: Wall time [s] a recorder may stay stopped (SIGSTOP) after the plant ended before the runner
+#: gives its recording up.
+STOPPED_LIMIT = 5.0
+_stopped_since: dict[int, float] = {}
+
+
+def stopped_for(proc: Proc, limit: float) -> bool:
+    """True once process ``proc`` has been stopped (state T, /proc) for ``limit`` s."""
+    try:
+        state = Path(f'/proc/{proc.pid}/stat').read_text().rsplit(')', 1)[1].split()[0]
+    except (OSError, IndexError):
+        return False
+    if state not in ('T', 't'):
+        _stopped_since.pop(proc.pid, None)
+        return False
+    return time.monotonic() - _stopped_since.setdefault(proc.pid, time.monotonic()) >= limit
 
 
 def run_scenario(scenario: str | Path | Scenario, plant_overrides: dict, timeout: float,
@@ -133,16 +163,7 @@ def run_scenario(scenario: str | Path | Scenario, plant_overrides: dict, timeout
         return _run_nodes(checked, timeout, run_env, log_dir, composed, warm, params_file)
 
 
-def describe_exit(code: int | None) -> str:
-    """How a process ended, in words: 'exited with code 1', 'killed by SIGKILL', 'running'."""
-    if code is None:
-        return 'running'
-    if code < 0:
-        try:
-            return f'killed by {signal.Signals(-code).name}'
-        except ValueError:
-            return f'killed by signal {-code}'
-    return f'exited with code {code}'
+describe_exit = exits.describe
 
 
 def _plant_grace(scenario: Scenario) -> float:
@@ -166,6 +187,7 @@ def _run_nodes(scenario: Scenario, timeout: float, env: dict, log_dir: Path | No
     logs: list = []
     forwarded = False
     code: int | None = None
+    cause: str | None = None          # why the runner stopped the plant: 'stalled', 'recording'
     tmp = tempfile.TemporaryDirectory(prefix='pentapod_scenario_')
     try:
         path = scenario.write(params_file or Path(tmp.name) / 'parameters.yaml')
@@ -186,21 +208,36 @@ def _run_nodes(scenario: Scenario, timeout: float, env: dict, log_dir: Path | No
         plant = procs[list(commands)[-1]]
         end = time.monotonic() + timeout
         reported: set = set()
+        recorders = {n.name for n in scenario.of_role(RECORDER)} & set(procs)
         while plant.poll() is None:
             if shutdown.requested() and not forwarded:
                 # the nodes finish their step, write their files and exit by themselves
                 _forward(procs, shutdown.signal_name())
                 forwarded = True
                 end = min(end, time.monotonic() + _plant_grace(scenario))
+            for name in sorted(recorders):
+                if procs[name].poll() is None and stopped_for(procs[name], STOPPED_LIMIT):
+                    LOG.error('recorder %s is stopped (SIGSTOP or a debugger) for %.0f s; '
+                              'killing it', name, STOPPED_LIMIT)
+                    procs[name].kill()
+                    procs[name].wait()
             dead = {n for n, p in procs.items() if p.poll() not in (None, 0)} - reported
             for name in sorted(dead):
-                # a dead source stops a lockstep plant with a named error; give it the time
                 LOG.error('node %s %s', name, describe_exit(procs[name].poll()))
-                end = min(end, time.monotonic() + _plant_grace(scenario))
+                if procs[name].poll() == exits.PLANT_STALLED:
+                    cause = cause or 'stalled'      # the plant is stuck: no grace helps it
+                elif name in recorders:
+                    cause = cause or 'recording'    # the run's record is lost from here on
+                # a dead source stops a lockstep plant with a named error; give it the time
+                end = min(end, time.monotonic() + (0.0 if cause else _plant_grace(scenario)))
             reported |= dead
             if time.monotonic() > end:
-                LOG.error('plant did not end in time (timeout %.0f s, or the grace after a '
-                          'node died or a stop signal); stopping it', timeout)
+                if cause is None:
+                    LOG.error('plant did not end in time (timeout %.0f s, or the grace after '
+                              'a node died or a stop signal); stopping it', timeout)
+                else:
+                    LOG.error('stopping the plant: %s', 'it stalled' if cause == 'stalled'
+                              else 'a recorder failed')
                 break
             time.sleep(0.1)
         code = plant.poll()
@@ -220,13 +257,34 @@ def _run_nodes(scenario: Scenario, timeout: float, env: dict, log_dir: Path | No
     for name, rc in failed.items():
         if name not in reported:
             LOG.error('node %s %s', name, describe_exit(rc))
+    return _end_code(scenario, code, failed, {**stopped, **failed}, cause)
+
+
+def _end_code(scenario: Scenario, code: int | None, failed: dict[str, int | None],
+              ends: dict[str, int | None], cause: str | None) -> int:
+    """The runner's exit code (:mod:`pentapod_sim.exits`), the reason logged by name."""
     if shutdown.requested():
         return shutdown.exit_code()
+    stalled = sorted(n for n, rc in failed.items() if rc == exits.PLANT_STALLED)
+    if stalled:
+        LOG.error('the plant %s stalled (seen by %s); it was stopped',
+                  scenario.plant.name, ', '.join(stalled))
+        return exits.PLANT_STALLED
+    recorders = {n.name for n in scenario.of_role(RECORDER)}
+    # SIGINT (130): the runner stopped it and it closed its bag (a failed report exits 3)
+    bad = {n: rc for n, rc in ends.items() if n in recorders
+           and rc not in (0, None, exits.of_signal(signal.SIGINT))}
+    if bad and (code == 0 or cause == 'recording'):
+        for name, rc in sorted(bad.items()):
+            LOG.error('recording failed: recorder %s %s; its bag is incomplete%s', name,
+                      describe_exit(rc), ' (no footer: `analyze recover`)'
+                      if rc is not None and rc < 0 else '')
+        return exits.RECORDING_FAILED
     if code is None:
-        return 2
+        return exits.TIMEOUT
     if code == 0 and failed:
-        return 1
-    return code
+        return exits.ERROR
+    return exits.of_returncode(code)
 
 
 def _forward(procs: dict[str, Proc], name: str) -> None:

@@ -218,9 +218,12 @@ class ForceMixer:
     Collect per-step force messages from several sources, validate them and sum them.
 
     A message carries port names, efforts [N or N m] and the step it answers. Bad messages
-    (unknown source, unknown or forbidden port, wrong length, NaN/Inf, above max_effort, stale
-    or future step) are rejected and counted per (source, reason); nothing already accepted is
-    lost.
+    (unknown source, unknown or forbidden port, not exactly the source's ports, wrong length,
+    NaN/Inf, above max_effort, stale or future step) are rejected and counted per (source,
+    reason); nothing already accepted is lost. A source's ports are its configured ones
+    (``ForceSource.ports``) or, if none are configured, those of its first accepted answer:
+    every answer must carry exactly these, once each, in any order (an empty answer, a subset
+    or a repeated name is rejected), so no answer can displace another with fewer forces.
 
     Parameters
     ----------
@@ -248,6 +251,9 @@ class ForceMixer:
             self.sources[src.name] = src
         self._allowed = {s.name: (set(s.ports) or set(self.input_names))
                          for s in self.sources.values()}
+        # the ports every answer of a source must carry: configured, else its first answer's
+        self.ports: dict[str, frozenset[str]] = {s.name: frozenset(s.ports)
+                                                 for s in self.sources.values() if s.ports}
         self._cache: dict[tuple[str, tuple[str, ...]], npt.NDArray[np.intp]] = {}
         self.rejected: Counter[tuple[str, str]] = Counter()     # (source, reason)
         self.accepted: Counter[str] = Counter()
@@ -255,6 +261,8 @@ class ForceMixer:
         self.latest = {name: np.zeros(n) for name in self.sources}
         self.latest_step = dict.fromkeys(self.sources, -1)
         self.latest_names: dict[str, Sequence[str]] = dict.fromkeys(self.sources, ())
+        #: source -> (step, reason) of its last rejected message
+        self.last_rejected: dict[str, tuple[int, str]] = {}
 
     def _indices(self, source: str, names: tuple[str, ...]) -> npt.NDArray[np.intp] | str:
         """Map port names to input indices (cached per name tuple) or return a reject reason."""
@@ -270,6 +278,13 @@ class ForceMixer:
                 return f'forbidden_port: {name!r} is not among the ports of this source'
         if len(set(names)) != len(names):
             return f'duplicate_port: names {list(names)} repeat a port'
+        own = self.ports.get(source)
+        if not names or (own is not None and set(names) != own):
+            lacks = sorted(own - set(names)) if own is not None else []
+            extra = sorted(set(names) - own) if own is not None else []
+            return ('ports: ' + ('an empty answer' if not names else
+                                 f'lacks {lacks}' if lacks else f'adds {extra}')
+                    + f' (the source drives {sorted(own) if own else "some ports"})')
         idx = np.array([self._index[n] for n in names], dtype=np.intp)
         self._cache[key] = idx
         return idx
@@ -299,7 +314,12 @@ class ForceMixer:
         reason = self._check(source, names, values, step, current_step, exact)
         if reason is not None:
             self.rejected[(source, reason.split(':')[0])] += 1
+            self.last_rejected[source] = (step, reason)
             return reason
+        if source not in self.ports:        # its first accepted answer fixes its ports
+            self.ports[source] = frozenset(names)
+            self._cache = {key: idx for key, idx in self._cache.items() if key[0] != source
+                           or set(key[1]) == self.ports[source]}
         vec = self.latest[source]
         vec[:] = 0.0
         vec[self._cache[(source, tuple(names))]] = values
@@ -334,6 +354,11 @@ class ForceMixer:
         if exact and self.latest_step[source] == step:
             return f'duplicate: second answer for step {step}'
         return None
+
+    def rejected_at(self, step: int, sources: Sequence[str]) -> dict[str, str]:
+        """Of ``sources``, those whose last rejected message answered ``step``: source -> why."""
+        return {s: self.last_rejected[s][1] for s in sources
+                if self.last_rejected.get(s, (None,))[0] == step}
 
     def drop(self, source: str) -> None:
         """Set the held force of ``source`` to zero (a source that left)."""

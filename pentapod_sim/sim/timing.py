@@ -94,6 +94,23 @@ class Waits:
     resend_period: float         # y_k is published again after this long without all answers
 
 
+def unanswered(mixer: ForceMixer, k: int, t: float, waited: float, waits: Waits) -> str:
+    """
+    Why step k got no accepted answer from some sources within the wait: rejected or silent.
+
+    A source whose last message answered step k and was rejected (above ``max_effort``, not
+    its ports, NaN, ...) is named as *rejected* with the reason; the others as *silent*.
+    """
+    missing = mixer.missing(k)
+    rejected = mixer.rejected_at(k, missing)
+    silent = [s for s in missing if s not in rejected]
+    parts = [f'force source(s) {", ".join(silent)} silent'] if silent else []
+    parts += [f'force source {s} rejected (every answer to the step refused; last: {why})'
+              for s, why in rejected.items()]
+    return (f'{"; ".join(parts)} for {waited:.3g} s at step {k} (t = {t:.6g} s); '
+            f'source_timeout = {waits.source_timeout} s')
+
+
 def apply_answers(core: DiscretePlant, mixer: ForceMixer, exchange: Exchange, k: int,
                   y: FloatArray) -> None:
     """Step k's end, the same in every timing: u_k = the held forces' sum; record; advance."""
@@ -160,9 +177,7 @@ class Lockstep:
                 return False
             now = self.clock()
             if now - start > limit:
-                raise RunError(f'force source(s) {", ".join(mixer.missing(k))} silent for '
-                               f'{now - start:.3g} s at step {k} (t = {core.time:.6g} s); '
-                               f'source_timeout = {waits.source_timeout} s')
+                raise RunError(unanswered(mixer, k, core.time, now - start, waits))
             if now - last_sent > waits.resend_period:
                 gone = [s for s in exchange.gone() if s in mixer.missing(k)]
                 if gone:
