@@ -102,10 +102,11 @@ class PlantOutputs:
             set_stamp(self.clock_msg.clock, ns)
             self.clock.publish(self.clock_msg)
         for out, lay in self.active:
-            pos, vel = lay.values(y)
+            pos, vel, eff = lay.values(y)
             msg = self.state_msgs[lay.topic]
             msg.position = array.array('d', pos.tobytes())
             msg.velocity = array.array('d', vel.tobytes())
+            msg.effort = array.array('d', eff.tobytes())
             set_stamp(msg.header.stamp, ns)
             out.publish(msg)
 
