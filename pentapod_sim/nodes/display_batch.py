@@ -14,8 +14,7 @@ force source on :func:`pentapod_sim.interface.display_batch_topic` (``/pentapod/
 * joints ``<joint>@j`` (j = 0..M-1, step k0 + j of the batch; the layout of the full-rate
   topic, :func:`pentapod_sim.interface.batch_layout`), the per-step topic's fields: position
   and velocity of the state topics (and effort where the topic has one), effort of a source's
-  force (its ports in the order of its
-  messages);
+  force (its ports in the order of its messages);
 * header.stamp t_k0; header.frame_id the step dt [s] as ``repr(dt)``, so a reader gets the
   stamp of sample j exactly, ``stamp_ns(k0 + j, dt)`` with ``k0 = step_of(stamp, dt)``.
 
