@@ -42,12 +42,11 @@ import math
 from typing import Sequence
 
 import numpy as np
+import numpy.typing as npt
 
 from pentapod_sim.errors import PortError
 from pentapod_sim.plant.ports import AXES, N_STRUTS
-# the layouts live in their own module; re-exported here, the contract's one import
-from pentapod_sim.topic_layout import (batch_layout, FIELDS, split_batch_name,  # noqa: F401
-                                       TopicLayout)
+from pentapod_sim.topic_layout import batch_layout, TopicLayout
 
 #: Namespace of every testbed topic except /clock.
 NAMESPACE = '/pentapod/'
@@ -323,9 +322,11 @@ def state_layouts(output_names: Sequence[str]) -> list[TopicLayout]:
             continue
         topic, joint, kind = PORT_LOCATION[port]
         joints[topic].setdefault(joint, {})[kind] = index[port]
-    return [TopicLayout(topic, list(table), *(
-        np.array([fields.get(f, -1) for fields in table.values()], dtype=np.intp)
-        for f in FIELDS)) for topic, table in joints.items() if table]
+    def column(table: dict[str, dict[str, int]], kind: str) -> npt.NDArray[np.intp]:
+        return np.array([fields.get(kind, -1) for fields in table.values()], dtype=np.intp)
+    return [TopicLayout(topic, list(table), column(table, 'position'),
+                        column(table, 'velocity'), column(table, 'effort'))
+            for topic, table in joints.items() if table]
 
 
 def fullrate_layout(output_names: Sequence[str], substeps: int) -> TopicLayout | None:

@@ -14,11 +14,11 @@ from pathlib import Path
 import subprocess
 import sys
 
-from fixtures.demo_model import DEMO_INPUTS, demo_model
 import numpy as np
 import pytest
 from scipy.linalg import expm
 
+from fixtures.demo_model import load_cell_model
 from pentapod_damper.scenario_laws import scenario_laws
 from pentapod_sim import interface
 from pentapod_sim.analysis.bag.reader import open_bag
@@ -28,39 +28,12 @@ from pentapod_sim.scenario.files import dump_params, read_scenario
 from pentapod_sim.sim.closed_loop import excitation_matrix, simulate
 from pentapod_sim.sim.excitation import Excitation, ExcitationSpec
 from pentapod_sim.sim.multirate import MultiRatePlant
+from pentapod_sim.topic_layout import batch_layout
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIO = ROOT / 'config' / 'scenarios' / 'iff_struts.yaml'
 STRUTS = range(1, N_STRUTS + 1)
 TCP = ['tcp_force_x', 'tcp_force_y', 'tcp_force_z']
-
-
-def load_cell_model() -> PlantModel:
-    """
-    Demo plant with feed-drive inputs and a load cell per strut: F = u_drive - k_a d_drive.
-
-    k_a is half the static stiffness the plant shows at the drive (k_a G_dd(0) = 0.5), so the
-    link's removal leaves a positive stiffness and F / u_drive has the zeros-below-poles pattern
-    of a load cell in series with its actuator (IFF then only damps).
-    """
-    drives = [f'strut{i}_drive_force' for i in STRUTS]
-    base = demo_model(8, seed=4, inputs=(*DEMO_INPUTS, *drives))
-    outputs, c_disp, c_vel = list(base.output_names), list(base.c_disp), list(base.c_vel)
-    d, units = list(base.d), list(base.output_units)
-    for i in STRUTS:
-        col = base.b[:, base.input_names.index(f'strut{i}_drive_force')]
-        k_a = 0.5 / float(np.sum(col ** 2 / base.omega ** 2))
-        outputs.append(f'strut{i}_force')
-        c_disp.append(-k_a * col)
-        c_vel.append(np.zeros_like(col))
-        d.append((np.array(base.input_names) == f'strut{i}_drive_force').astype(float))
-        units.append('N')
-    order = [outputs.index(n) for n in OUTPUT_NAMES if n in outputs]
-    names = [outputs[i] for i in order]
-    return PlantModel(base.omega, base.zeta, base.b, np.array(c_disp)[order],
-                      np.array(c_vel)[order], np.array(d)[order], list(base.input_names),
-                      names, list(base.input_units), [units[i] for i in order],
-                      list(base.input_names), names, {'synthetic': True})
 
 
 def test_the_load_cell_force_is_the_effort_of_the_drive_joint():
@@ -86,7 +59,7 @@ def test_the_load_cell_force_is_the_effort_of_the_drive_joint():
         assert layouts[topic].values(y)[2].size == 0
     # a display batch of 3 steps carries the efforts of every step
     rows = np.random.default_rng(1).normal(size=(3, len(names)))
-    batch = interface.batch_layout(strut, len(names), 3, 'b')
+    batch = batch_layout(strut, len(names), 3, 'b')
     eff3 = batch.values(rows.reshape(-1))[2].reshape(3, -1)
     for s in range(3):
         np.testing.assert_array_equal(eff3[s], strut.values(rows[s])[2])
@@ -124,7 +97,7 @@ def test_iff_struts_through_the_nodes_equals_the_offline_loop_and_publishes_the_
     exciter = {k: v for k, v in shipped['exciter'].items() if k != 'sample_rate'}
     exciter['duration'] = steps / rate
     damper = {k: v for k, v in shipped['damper_struts'].items() if k != 'sample_rate'}
-    model = load_cell_model()
+    model = load_cell_model(8, seed=4)
     doc = {'/**': {'ros__parameters': {'sample_rate': rate}},
            'exciter': {'ros__parameters': exciter},
            'damper_struts': {'ros__parameters': damper},

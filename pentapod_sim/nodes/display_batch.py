@@ -12,7 +12,7 @@ someone subscribes, publishes every M steps one sensor_msgs/JointState per state
 force source on :func:`pentapod_sim.interface.display_batch_topic` (``/pentapod/live/batch/...``):
 
 * joints ``<joint>@j`` (j = 0..M-1, step k0 + j of the batch; the layout of the full-rate
-  topic, :func:`pentapod_sim.interface.batch_layout`), the per-step topic's fields: position
+  topic, :func:`pentapod_sim.topic_layout.batch_layout`), the per-step topic's fields: position
   and velocity of the state topics (and effort where the topic has one), effort of a source's
   force (its ports in the order of its messages);
 * header.stamp t_k0; header.frame_id the step dt [s] as ``repr(dt)``, so a reader gets the
@@ -35,15 +35,14 @@ import numpy as np
 from sensor_msgs.msg import JointState
 
 from pentapod_sim.interface import (
-    batch_layout,
     display_batch_topic,
     force_topic,
     stamp_ns,
     state_layouts,
-    TopicLayout,
 )
 from pentapod_sim.nodes.common import qos, stamp_msg
 from pentapod_sim.nodes.wire_cdr import JointStateCdr
+from pentapod_sim.topic_layout import batch_layout, TopicLayout
 
 
 class DisplayBatches:
