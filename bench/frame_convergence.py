@@ -115,7 +115,7 @@ def table(results: list[dict], scenarios) -> str:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0], allow_abbrev=False)
     parser.add_argument('--sizes', default='0.3,0.2,0.12',
                         help='shell element sizes [m], comma separated')
     parser.add_argument('--positions', default='P1,P2')

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from pentapod_damper.laws import Dynamics, tcp_damper
-from pentapod_damper.study.damping import damping_rows, main, settling_time
+from pentapod_damper.study.__main__ import main
+from pentapod_damper.study.damping import damping_rows, settling_time
 from pentapod_sim.errors import ConfigError
 from pentapod_sim.plant.build import modal_damping
 from pentapod_sim.plant.config import default_path, load_reduction_config
@@ -36,20 +37,20 @@ def test_open_loop_rows_rank_modes_by_their_peak_compliance_in_the_band():
     w = 2 * np.pi * FREQ
     peak = SHAPE ** 2 / (2 * zeta * w ** 2 * np.sqrt(1 - zeta ** 2))[:, None]   # m/N
     for k, a in enumerate(AXES):
-        mine = [r for r in rows if r['direction'] == a + a]
+        mine = [r for r in rows if r.direction == a + a]
         inside = [i for i in np.argsort(-peak[:, k]) if peak[i, k] > 0 and FREQ[i] <= 200]
-        assert [r['mode'] - 1 for r in mine] == inside[:3]      # the 300 Hz mode is left out
+        assert [r.mode - 1 for r in mine] == inside[:3]      # the 300 Hz mode is left out
         for r in mine:
-            i = r['mode'] - 1
-            assert r['open_freq_hz'] == pytest.approx(FREQ[i], rel=1e-12)
-            assert r['open_zeta'] == zeta[i]
-            assert r['continuous_zeta'] == pytest.approx(zeta[i], rel=1e-9)
-            assert r['sampled_zeta'] == pytest.approx(zeta[i], rel=1e-6)   # ZOH: exp(s dt)
+            i = r.mode - 1
+            assert r.open_freq_hz == pytest.approx(FREQ[i], rel=1e-12)
+            assert r.open_zeta == zeta[i]
+            assert r.continuous_zeta == pytest.approx(zeta[i], rel=1e-9)
+            assert r.sampled_zeta == pytest.approx(zeta[i], rel=1e-6)   # ZOH: exp(s dt)
             # the zero-order hold changes the peak by O((w dt)^2) (0.26 % at 120 Hz, 3 kHz)
-            assert r['peak_um_per_N'] == pytest.approx(peak[i, k] * 1e6,
+            assert r.peak_um_per_N == pytest.approx(peak[i, k] * 1e6,
                                                        rel=(w[i] / 3000) ** 2 / 12)
-            assert r['decay_time_s'] == pytest.approx(1 / (zeta[i] * w[i]), rel=1e-6)
-    slowest = max(1 / (zeta[i] * w[i]) for i in {r['mode'] - 1 for r in rows})
+            assert r.decay_time_s == pytest.approx(1 / (zeta[i] * w[i]), rel=1e-6)
+    slowest = max(1 / (zeta[i] * w[i]) for i in {r.mode - 1 for r in rows})
     assert settling_time(rows) == pytest.approx(5 * slowest, rel=1e-6)
 
 
@@ -59,21 +60,21 @@ def test_tcp_damper_rows_against_closed_forms():
     plant = tcp_plant(z0)
     rows = damping_rows(plant, [tcp_damper('xyz', g)], dt, count=1)
     w, phi = 2 * np.pi * 35.0, 0.6
-    yy = next(r for r in rows if r['direction'] == 'yy')
-    assert yy['mode'] == 2 and yy['continuous_mac'] == pytest.approx(1.0)
-    assert yy['continuous_zeta'] == pytest.approx(z0 + g * phi ** 2 / (2 * w), rel=1e-9)
+    yy = next(r for r in rows if r.direction == 'yy')
+    assert yy.mode == 2 and yy.continuous_mac == pytest.approx(1.0)
+    assert yy.continuous_zeta == pytest.approx(z0 + g * phi ** 2 / (2 * w), rel=1e-9)
     sys = control.ss([[0, 1], [-w ** 2, -2 * z0 * w]], [[0], [phi]], [[0, phi]], [[0]])
     zd = control.poles(control.feedback(control.sample_system(sys, dt, 'zoh'), g))
     s = np.log(zd[zd.imag > 0][0]) / dt
-    assert yy['sampled_zeta'] == pytest.approx(-s.real / abs(s), rel=1e-8)
-    assert yy['sampled_freq_hz'] == pytest.approx(abs(s) / (2 * np.pi), rel=1e-10)
+    assert yy.sampled_zeta == pytest.approx(-s.real / abs(s), rel=1e-8)
+    assert yy.sampled_freq_hz == pytest.approx(abs(s) / (2 * np.pi), rel=1e-10)
 
 
 def test_low_pass_law_uses_its_continuous_filter():
     dt, g, z0, bw = 1 / 3000, 30.0, 0.001, 150.0
     law = tcp_damper('z', g, Dynamics(1, bw), dt)
     rows = damping_rows(tcp_plant(z0), [law], dt, directions='z', count=3)
-    zz = next(r for r in rows if r['mode'] == 3)         # 50 Hz; z also moves at 120 Hz
+    zz = next(r for r in rows if r.mode == 3)         # 50 Hz; z also moves at 120 Hz
     wf = 2 * np.pi * bw
     w = 2 * np.pi * FREQ[[2, 5]]
     phi = SHAPE[[2, 5], 2]
@@ -83,17 +84,17 @@ def test_low_pass_law_uses_its_continuous_filter():
                        np.r_[0, 0, phi][:, None], np.r_[0, 0, phi][None, :], [[0]])
     loop = control.feedback(plant, control.tf([g * wf], [1, wf]))
     ref = [p for p in control.poles(loop) if p.imag > 0]
-    mine = 2 * np.pi * zz['continuous_freq_hz']
+    mine = 2 * np.pi * zz.continuous_freq_hz
     near = min(ref, key=lambda p: abs(abs(p) - mine))
-    assert zz['continuous_zeta'] == pytest.approx(-near.real / abs(near), rel=1e-8)
+    assert zz.continuous_zeta == pytest.approx(-near.real / abs(near), rel=1e-8)
     # the filter costs damping against the same law without it
     plain = damping_rows(tcp_plant(z0), [tcp_damper('z', g)], dt, directions='z', count=3)
-    assert zz['continuous_zeta'] < next(r for r in plain if r['mode'] == 3)['continuous_zeta']
+    assert zz.continuous_zeta < next(r for r in plain if r.mode == 3).continuous_zeta
 
 
 def test_cli_refuses_a_bad_band(capsys):
-    assert main(['--band', '2']) == 1
-    assert 'damping:' in capsys.readouterr().err
+    assert main(['damping', '--band', '2']) == 1
+    assert capsys.readouterr().err.startswith('study damping: ')
 
 
 def _reduction_file(tmp_path: Path, groups: str) -> Path:
@@ -109,7 +110,7 @@ def test_damping_groups_from_the_file_set_the_modal_damping(tmp_path):
     zeta = modal_damping(FREQ, cfg.damping_ratio, cfg.damping_groups)
     np.testing.assert_array_equal(zeta, [0.005, 0.005, 0.003, 0.001, 0.001, 0.001])
     rows = damping_rows(tcp_plant(zeta), [], 1 / 3000, directions='y', count=1)
-    assert rows[0]['sampled_zeta'] == pytest.approx(0.005, rel=1e-6)
+    assert rows[0].sampled_zeta == pytest.approx(0.005, rel=1e-6)
 
 
 @pytest.mark.parametrize('group,message', [
@@ -126,8 +127,9 @@ def test_bad_damping_groups_are_refused_naming_the_value(tmp_path, group, messag
 
 def test_table_in_statespace_md_is_what_the_code_computes():
     from pentapod_damper.study.damping import markdown_table, rows
+    from pentapod_damper.study.pipeline import CHECK_CACHE
     text = (Path(__file__).parents[1] / 'docs' / 'statespace.md').read_text()
     begin, end = '<!-- loop-poles:begin -->\n', '\n<!-- loop-poles:end -->'
     stated = text[text.index(begin) + len(begin):text.index(end)]
     assert stated == markdown_table(rows(['P1', 'P2'], ['strut_damping_12', 'tcp_damping'],
-                                         directions='x'))
+                                         CHECK_CACHE, directions='x'))

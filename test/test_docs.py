@@ -4,7 +4,7 @@ Docs that cannot drift: generated tables equal their generators, stated facts eq
 * bench/RESULTS.md is what ``python bench/run_all.py --tables`` makes from the committed
   bench/results (no benchmark runs here).
 * docs/results.md's study tables and the README's result sentences are what
-  ``python -m pentapod_damper.study.readme`` makes from docs/results/*.csv, and the analytic
+  ``python -m pentapod_damper.study docs`` makes from docs/results/*.csv, and the analytic
   columns of those CSV copies are what the current code and config/study.yaml compute (the
   recorded columns need the ROS runs of the study).
 * The README stays a newcomer's page: short, the two commands, its figure drawn from the
@@ -25,13 +25,12 @@ import numpy as np
 import pytest
 
 from pentapod_damper.study import readme as study_readme
-from pentapod_damper.study.__main__ import pma_results
 from pentapod_damper.study.config import load_study_config
-from pentapod_damper.study.report import (
+from pentapod_damper.study.records import as_row, StudyResults
+from pentapod_damper.study.tables import (
     pma_highpass_rows,
     pma_rows,
     struts12_share,
-    StudyResults,
     summary_rows,
 )
 from pentapod_sim import interface
@@ -45,7 +44,7 @@ RESULTS = ROOT / 'docs' / 'results'
 RESULTS_MD = ROOT / 'docs' / 'results.md'
 BENCH_MD = ROOT / 'bench' / 'RESULTS.md'
 STALE = ('docs/results/ is stale: run tools/study.sh, then '
-         'python -m pentapod_damper.study.readme --from out/study')
+         'python -m pentapod_damper.study docs --from out/study')
 
 
 def _run_all():
@@ -210,15 +209,17 @@ def _analytic_results(out_dir: Path) -> StudyResults:
     Fresh plants of both positions; the truncation check against the (slow to build) check
     models is left out: it flags loops but changes none of the tables' numbers.
     """
-    from pentapod_damper.study import pipeline
+    from pentapod_damper.study import pipeline, stages
     cfg = load_study_config()
-    res = StudyResults(cfg, np.linspace(*cfg.freq_grid[:2], int(cfg.freq_grid[2])))
-    res.out_dir = out_dir
+    res = StudyResults(cfg, np.linspace(*cfg.freq_grid[:2], int(cfg.freq_grid[2])), out_dir)
     for pos in cfg.positions:
         res.models[pos] = model = pipeline.prepare_model(pos, out_dir, lambda msg: None)
         for scn in cfg.scenarios:
             res.analytic[(pos, scn)] = pipeline.scenario_analytic(model, scn, cfg, res.freq)
-    pma_results(res, cfg)
+    step = cfg.step_position
+    res.pma = {scn: stages.pma_requirements(cfg, res.freq, res.models[step],
+                                            res.analytic[(step, scn)])
+               for scn in cfg.scenarios if res.analytic[(step, scn)].pma is not None}
     return res
 
 
@@ -235,7 +236,8 @@ def _key(row: dict) -> tuple:
 def test_committed_study_tables_are_what_the_current_code_computes(study_analytic):
     """Analytic columns of docs/results/*.csv = the current code's, to 1e-6 relative."""
     res = study_analytic
-    for name, rows in (('summary', summary_rows(res)), ('struts12_share', struts12_share(res)),
+    for name, rows in (('summary', [as_row(r) for r in summary_rows(res)]),
+                       ('struts12_share', [as_row(r) for r in struts12_share(res)]),
                        ('pma', pma_rows(res)), ('pma_highpass', pma_highpass_rows(res))):
         committed = {_key(r): r for r in study_readme.read_csv(RESULTS / f'{name}.csv')}
         assert sorted(committed) == sorted(_key(r) for r in rows), (name, STALE)

@@ -10,9 +10,10 @@ from pentapod_damper.laws import ProofMassActuator, tcp_damper
 from pentapod_damper.scenario_laws import continuous_dampers, scenario_laws
 from pentapod_damper.study.analytic import discrete_frf, improvement_share, pma_requirements
 from pentapod_damper.study.config import load_study_config
-from pentapod_damper.study.pipeline import PositionModel, scenario_analytic
-from pentapod_damper.study.report import peak_rows, struts12_share, StudyResults, summary_rows
+from pentapod_damper.study.pipeline import scenario_analytic
+from pentapod_damper.study.records import PositionModel, StudyResults
 from pentapod_damper.study.runs import study_scenario
+from pentapod_damper.study.tables import peak_rows, struts12_share, summary_rows
 from pentapod_sim.errors import ConfigError
 from pentapod_sim.plant.frf import closed_loop_frf
 from pentapod_sim.plant.ports import collocated_output
@@ -178,18 +179,18 @@ def test_report_rows_use_exact_peaks_and_the_truncation_check(tmp_path):
         res.analytic[('P1', scn)] = scenario_analytic(model, scn, cfg, res.freq)
     peak = {scn: _dense_peak(model_plant, res.analytic[('P1', scn)].dampers, res.freq, cfg)
             for scn in scenarios}
-    rows = {r['scenario']: r for r in summary_rows(res)}
+    rows = {r.scenario: r for r in summary_rows(res)}
     for scn in scenarios:
-        assert rows[scn]['peak_um_per_N'] == pytest.approx(peak[scn] * 1e6, rel=1e-6)
-        assert rows[scn]['peak_reduction'] == pytest.approx(peak['baseline'] / peak[scn],
-                                                            rel=1e-6)
-        assert rows[scn]['sampled_loop'] == 'stable on the plant (no check model)'
-        assert rows[scn]['plant_margin'] > 0
-    share = struts12_share(res)[0]['peak_share']
+        assert rows[scn].peak_um_per_N == pytest.approx(peak[scn] * 1e6, rel=1e-6)
+        assert rows[scn].peak_reduction == pytest.approx(peak['baseline'] / peak[scn],
+                                                         rel=1e-6)
+        assert rows[scn].sampled_loop == 'stable on the plant (no check model)'
+        assert rows[scn].plant_margin > 0
+    share = struts12_share(res)[0].peak_share
     base, part, full = (peak[s] for s in ('baseline', 'strut_damping_12', 'strut_damping_all'))
     assert share == pytest.approx((base - part) / (base - full), rel=1e-5)
     grid = {r['scenario']: r['grid_peak_um_per_N'] for r in peak_rows(res)}
-    assert all(grid[s] <= rows[s]['peak_um_per_N'] * (1 + 1e-12) for s in scenarios)
+    assert all(grid[s] <= rows[s].peak_um_per_N * (1 + 1e-12) for s in scenarios)
 
 
 def test_positions_without_the_step_position_are_a_named_error(tmp_path, capsys):
@@ -199,3 +200,32 @@ def test_positions_without_the_step_position_are_a_named_error(tmp_path, capsys)
     err = capsys.readouterr().err
     assert 'step_response.position = P2 is not among the positions P1' in err
     assert 'Traceback' not in err
+
+
+def test_report_of_a_folder_without_a_run_names_what_it_lacks(tmp_path, capsys):
+    from pentapod_damper.study.__main__ import main
+    (tmp_path / 'summary.csv').write_text('position\n')
+    assert main(['report', '--out', str(tmp_path)]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f'study report: {tmp_path} is not the folder')
+    assert 'stability.csv' in err[0] and 'summary.csv' not in err[0]
+    assert 'study_settings.json' in err[0]
+
+
+def test_a_table_a_stage_adds_is_written_and_shown_in_the_report(tmp_path):
+    """The way in for a new stage's table: CSV file and report section, no report code."""
+    import dataclasses
+
+    from pentapod_damper.study.records import Table
+    from pentapod_damper.study.report import read_csv, rewrite_report, write_report
+    cfg = dataclasses.replace(load_study_config(), positions=(), scenarios=())
+    res = StudyResults(cfg, np.linspace(1.0, 10.0, 10), tmp_path)
+    res.tables.append(Table('damper_choice', 'Which damper to build', 'Cheapest first.',
+                            [{'damper': 'tcp', 'cost': 2.5}, {'damper': 'pma', 'cost': 11}]))
+    text = write_report(res, tmp_path).read_text()
+    assert read_csv(tmp_path / 'damper_choice.csv') == [{'damper': 'tcp', 'cost': '2.5'},
+                                                       {'damper': 'pma', 'cost': '11'}]
+    section = text.split('## Which damper to build\n\nCheapest first.\n\n')[1].split('\n\n')[0]
+    assert section.splitlines() == ['| damper | cost |', '|---|---|', '| tcp | 2.5 |',
+                                    '| pma | 11 |']
+    assert rewrite_report(tmp_path, cfg).read_text().split('\n', 3)[3] == text.split('\n', 3)[3]

@@ -15,6 +15,7 @@ from fixtures.demo_model import demo_model
 from pentapod_damper.scenario_laws import scenario_laws
 from pentapod_damper.study import damping, measured_damping, pipeline
 from pentapod_damper.study.config import load_study_config
+from pentapod_damper.study.records import PositionModel
 from pentapod_damper.study.runs import damping_excitation, run_on_testbed
 from pentapod_sim.scenario.files import read_scenario
 
@@ -36,7 +37,7 @@ def test_recorded_frf_matches_the_sampled_loop_within_1_db(tmp_path, ros_env):
     plant = demo_model(n_modes=5, f_min=25.0, f_max=220.0, zeta=0.02, feedthrough=2e-9,
                        seed=3)
     model_file = plant.save(tmp_path / 'plant.npz')
-    model = pipeline.PositionModel('demo', plant, model_file, plant.content_hash())
+    model = PositionModel('demo', plant, model_file, plant.content_hash())
     ana = pipeline.scenario_analytic(model, 'tcp_damping', cfg, np.linspace(1, 300, 50))
     run = run_on_testbed('tcp_damping', 'P1', model_file, model.model_hash, cfg, tmp_path,
                          timeout=240.0)
@@ -61,11 +62,11 @@ def test_damping_identified_from_a_recorded_run_matches_the_sampled_loop_poles(t
     plant = demo_model(n_modes=5, f_min=25.0, f_max=180.0, zeta=0.002, input_scale=0.01,
                        seed=3)
     model_file = plant.save(tmp_path / 'plant.npz')
-    dt = 1.0 / cfg.sample_rate
+    dt = cfg.dt
     laws = scenario_laws(read_scenario('tcp_damping').sections, dt)
     rows = damping.scenario_rows(plant, 'demo', 'tcp_damping', dt)
-    xx = [r for r in rows if r['direction'] == 'xx']
-    assert xx and max(r['sampled_zeta'] for r in xx) > 2 * 0.002     # the damper adds damping
+    xx = [r for r in rows if r.direction == 'xx']
+    assert xx and max(r.sampled_zeta for r in xx) > 2 * 0.002     # the damper adds damping
     settle = damping.settling_time(measured_damping.settle_rows(plant, laws, dt, 'x'),
                                    cfg.damping_time_constants)
     exciter = damping_excitation(cfg, settle)
@@ -76,6 +77,6 @@ def test_damping_identified_from_a_recorded_run_matches_the_sampled_loop_poles(t
     compared = measured_damping.compare(rows, ident, plant, laws, dt, 'x')
     assert len(compared) == len(xx)
     for r in compared:
-        assert abs(r['zeta_error']) < 0.05, r
-        assert abs(r['freq_error']) < 1e-3, r
-        assert abs(r['peak_error_db']) < 1.0, r
+        assert abs(r.zeta_error) < 0.05, r
+        assert abs(r.freq_error) < 1e-3, r
+        assert abs(r.peak_error_db) < 1.0, r

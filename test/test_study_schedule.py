@@ -1,10 +1,11 @@
 """
-The study's pieces side by side: order, overlap, lanes, failure and Ctrl-C; shared loop work.
+The study's stages side by side on dask: order, overlap, the ROS lane, failure and Ctrl-C.
 
-The races are made to happen: pieces that must overlap wait on a barrier only two running
-pieces can pass; a stop arrives while pieces are running.
+The races are made to happen: stages that must overlap wait on a barrier only two running
+stages can pass; a stop arrives while stages are running.
 """
 import dataclasses
+from dataclasses import dataclass
 import os
 from pathlib import Path
 import signal
@@ -21,7 +22,10 @@ from fixtures.stopping import stop_handlers  # noqa: F401  (a fixture)
 from pentapod_damper.scenario_laws import scenario_laws
 from pentapod_damper.study import damping, measured_damping, pipeline
 from pentapod_damper.study.analytic import discrete_frf, sampled_loop, SampledPairFrf
-from pentapod_damper.study.schedule import Interrupted, Piece, run_pieces
+from pentapod_damper.study.config import load_study_config
+from pentapod_damper.study.pipeline import scenario_pma
+from pentapod_damper.study.records import PositionModel
+from pentapod_damper.study.schedule import compute, Graph, Interrupted, study_graph
 from pentapod_sim import shutdown
 from pentapod_sim.errors import RunError
 from pentapod_sim.scenario.files import read_scenario
@@ -33,60 +37,86 @@ ROOT = Path(__file__).resolve().parents[1]
 pytestmark = pytest.mark.usefixtures('stop_handlers')   # stop signals recorded, as the study does
 
 
+@dataclass
+class Done:
+    """A stage's record: its progress line names it."""
+
+    name: str
+
+    def describe(self) -> str:
+        return f'stage {self.name}'
+
+
 def _lines():
     lines = []
     return lines, lines.append
 
 
-def test_independent_pieces_overlap_and_dependents_wait():
+def _dependencies(graph) -> dict:
+    """Key -> keys it waits for, of the dask graph of delayed stages."""
+    from dask.core import get_dependencies
+    dsk = dict(graph.__dask_graph__())
+    return {key: get_dependencies(dsk, key) for key in dsk}
+
+
+def test_independent_stages_overlap_and_dependents_wait():
     barrier = threading.Barrier(2, timeout=10.0)     # passes only if both run at once
     seen = []
-    pieces = [Piece('a', lambda: barrier.wait() or 'a', 's'),
-              Piece('b', lambda: barrier.wait() or 'b', 's'),
-              Piece('c', lambda: seen.append('c') or 'c', 't', after=('a', 'b'),
-                    done=lambda r: f'piece {r}')]
+    g = Graph()
+
+    def meet(name):
+        barrier.wait()
+        return Done(name)
+    a = g.add('s', 'a', meet, 'a')
+    b = g.add('s', 'b', meet, 'b')
+    c = g.add('t', 'c', lambda x, y: seen.append((x.name, y.name)) or Done('c'), a, b)
     lines, say = _lines()
-    schedule = run_pieces(pieces, 2, say)
-    assert seen == ['c']
-    assert schedule.started['c'] >= max(schedule.finished['a'], schedule.finished['b'])
-    assert lines == ['(3/3) piece c']
-    span, busy, count = schedule.stages()['s']
+    (value,), progress = compute([c], g.stage_of, 2, say)
+    assert value == Done('c') and seen == [('a', 'b')]
+    assert progress.started['t: c'] >= max(progress.finished['s: a'], progress.finished['s: b'])
+    assert sorted(lines) == ['(1/3) stage a', '(2/3) stage b', '(3/3) stage c'] or \
+        sorted(lines) == ['(1/3) stage b', '(2/3) stage a', '(3/3) stage c']
+    span, busy, count = progress.timings()['s']
     assert count == 2 and span < busy            # the two overlapped
 
 
-def test_ready_pieces_start_in_priority_order_and_done_may_add_pieces():
-    order = []
-
-    def piece(key, priority, done=None):
-        return Piece(key, lambda: order.append(key), 's', priority=priority, done=done)
-    added = piece('late', 0)
-    pieces = [piece('low', 5), piece('high', 1), piece('mid', 3, done=lambda r: ('', [added]))]
-    run_pieces(pieces, 1, lambda line: None)
-    assert order == ['high', 'mid', 'late', 'low']
+def test_two_stages_may_not_share_a_name():
+    g = Graph()
+    g.add('s', 'a', lambda: Done('a'))
+    with pytest.raises(ValueError, match="two stages are named 's: a'"):
+        g.add('s', 'a', lambda: Done('a'))
 
 
-def test_a_lane_limits_its_pieces_but_not_the_others():
+def test_the_lane_runs_one_testbed_run_at_a_time_beside_other_stages():
     lock = threading.Lock()
     running, peak = [0], [0]
     other = threading.Event()
 
-    def in_lane():
+    def testbed_run(name):
         with lock:
             running[0] += 1
             peak[0] = max(peak[0], running[0])
-        other.wait(timeout=0.3)          # long enough for a second lane piece to start
+        other.wait(timeout=0.3)          # long enough for a second run to start
         with lock:
             running[0] -= 1
+        return Done(name)
 
-    pieces = [Piece(f'ros{i}', in_lane, 'runs', lane='ros') for i in range(3)]
-    pieces.append(Piece('cpu', lambda: other.wait(timeout=0.3) or time.sleep(0.5), 'cpu'))
-    schedule = run_pieces(pieces, 2, lambda line: None, lanes={'ros': 1})
+    g = Graph(lane=True)
+    runs = [g.run('runs', f'r{i}', testbed_run, f'r{i}') for i in range(3)]
+    cpu = g.add('cpu', 'work', lambda: other.wait(timeout=0.3) or time.sleep(0.5) or Done('c'))
+    _, progress = compute([*runs, cpu], g.stage_of, 2, lambda line: None)
     assert peak[0] == 1
-    # the other piece ran beside a lane piece
-    assert schedule.started['cpu'] < schedule.finished['ros0']
+    # the analytic stage ran beside a testbed run
+    assert progress.started['cpu: work'] < progress.finished['runs: r0']
+    # without the lane the runs run side by side
+    running[0] = peak[0] = 0
+    free = Graph()
+    runs = [free.run('runs', f'r{i}', testbed_run, f'r{i}') for i in range(2)]
+    compute(runs, free.stage_of, 2, lambda line: None)
+    assert peak[0] == 2
 
 
-def test_a_failed_piece_stops_the_running_ones_and_starts_no_more():
+def test_a_failed_stage_stops_the_running_ones_and_starts_no_more():
     started = threading.Event()
     stopped = []
 
@@ -96,38 +126,68 @@ def test_a_failed_piece_stops_the_running_ones_and_starts_no_more():
         while time.monotonic() < end and not shutdown.requested():
             time.sleep(0.01)
         stopped.append(shutdown.requested())
+        return Done('long')
 
     def failing():
         started.wait(timeout=10.0)
         raise RunError('run P1_baseline failed (exit code 1): error: boom')
 
     never = []
-    pieces = [Piece('long', long_run, 'runs', priority=0),
-              Piece('fail', failing, 'runs', priority=1),
-              Piece('later', lambda: never.append(1), 'runs', priority=2)]
+    g = Graph()
+    long = g.add('runs', 'long', long_run)
+    fail = g.add('runs', 'fail', failing)
+    later = g.add('runs', 'later', lambda *_: never.append(1), fail)
     t0 = time.monotonic()
     with pytest.raises(RunError, match='boom'):
-        run_pieces(pieces, 2, lambda line: None)
+        compute([long, later], g.stage_of, 2, lambda line: None)
     assert stopped == [True] and never == []
     assert time.monotonic() - t0 < 10.0
 
 
-def test_a_signal_stops_the_pieces_with_the_shells_exit_code():
-    def interrupt():                     # Ctrl-C arrives while pieces run
+def test_a_signal_stops_the_stages_with_the_shells_exit_code():
+    def interrupt():                     # Ctrl-C arrives while stages run
         os.kill(os.getpid(), signal.SIGINT)
         time.sleep(0.5)
+        return Done('a')
 
     never = []
-    pieces = [Piece('a', interrupt, 's'), Piece('b', lambda: time.sleep(0.5), 's'),
-              Piece('c', lambda: never.append(1), 's', after=('a',))]
+    g = Graph()
+    a = g.add('s', 'a', interrupt)
+    b = g.add('s', 'b', lambda: time.sleep(0.5) or Done('b'))
+    c = g.add('s', 'c', lambda _: never.append(1) or Done('c'), a)
     with pytest.raises(Interrupted) as err:
-        run_pieces(pieces, 2, lambda line: None)
+        compute([b, c], g.stage_of, 2, lambda line: None)
     assert err.value.code == 130 and never == []
 
 
-def test_unknown_dependency_is_named():
-    with pytest.raises(ValueError, match='nothing'):
-        run_pieces([Piece('a', lambda: None, 's', after=('nothing',))], 2, lambda line: None)
+def test_the_study_graph_has_every_stage_and_its_inputs(tmp_path):
+    """One analytic stage and one FRF run per pair; damping, step runs where the file says."""
+    cfg = load_study_config()
+    freq = np.linspace(1.0, 10.0, 3)
+    g = study_graph(cfg, tmp_path, freq)
+    pairs = [(p, s) for p in cfg.positions for s in cfg.scenarios]
+    assert list(g.analytic) == pairs and list(g.frf_runs) == pairs
+    assert list(g.damping_runs) == [(p, s) for p, s in pairs if s in cfg.damping_scenarios]
+    pma = [s for s in cfg.scenarios if scenario_pma(s) is not None]
+    assert pma == ['pma_5kg', 'pma_1kg'] and list(g.step_runs) == list(g.pma) == pma
+    deps = _dependencies(g.frf_runs[pairs[0]])['FRF and step runs: P1 baseline']
+    # the run needs its model and analytic results; runs may go side by side: none waits for
+    # another
+    assert deps == {'models: P1', 'analytic FRFs, checks and poles: P1 baseline'}
+    analytic_only = study_graph(cfg, tmp_path, freq, runs=False)
+    assert not analytic_only.frf_runs and not analytic_only.damping_runs
+    assert not analytic_only.step_runs and list(analytic_only.pma) == pma
+
+
+def test_on_the_lane_every_testbed_run_waits_for_the_one_before(tmp_path):
+    cfg = load_study_config()
+    g = study_graph(cfg, tmp_path, np.linspace(1.0, 10.0, 3), lane=True)
+    runs = [*g.damping_runs.values(), *g.frf_runs.values(), *g.step_runs.values()]
+    deps = _dependencies(runs[-1])
+    keys = [r.key for r in runs]
+    for before, after in zip(keys, keys[1:]):
+        assert before in deps[after], (before, after)
+    assert len(keys) == 8 + 18 + 2
 
 
 def test_ctrl_c_stops_the_study_without_a_traceback(tmp_path):
@@ -172,8 +232,7 @@ def test_shared_loop_gives_the_same_frfs_and_poles_bit_for_bit():
 def test_truncation_check_is_kept_per_loop_and_read_back_exactly(tmp_path, monkeypatch):
     plant = demo_model(n_modes=4, f_min=30.0, f_max=200.0, zeta=0.01, seed=3)
     check = demo_model(n_modes=12, f_min=30.0, f_max=2000.0, zeta=0.01, seed=3)
-    model = pipeline.PositionModel('demo', plant, tmp_path / 'p.npz', plant.content_hash(),
-                                   check)
+    model = PositionModel('demo', plant, tmp_path / 'p.npz', plant.content_hash(), check)
     monkeypatch.setattr(pipeline, 'CHECK_CACHE', tmp_path / 'cache')
     dt = 1.0 / 3000.0
     laws = scenario_laws(read_scenario('tcp_damping').sections, dt)

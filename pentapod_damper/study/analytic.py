@@ -11,7 +11,7 @@ recorded lockstep run must match it up to estimation error.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Sequence
+from typing import Any, Sequence
 
 import numpy as np
 import numpy.typing as npt
@@ -67,7 +67,7 @@ class SampledLoop:
     vec: np.ndarray
 
 
-def sampled_loop(plant: PlantModel, laws: Sequence, dt: float) -> SampledLoop:
+def sampled_loop(plant: PlantModel, laws: Sequence[Any], dt: float) -> SampledLoop:
     """The sampled loop of ``plant`` (discretised with zero-order hold at ``dt`` [s]) and laws."""
     core = DiscretePlant(plant.discretize(dt))
     a, b, c_y, c_u, augmented = closed_loop_system(core, laws)
@@ -93,8 +93,8 @@ class DiscreteFrf:
     """
 
     freq: np.ndarray
-    outputs: dict
-    efforts: dict
+    outputs: dict[str, npt.NDArray[np.complex128]]
+    efforts: dict[str, npt.NDArray[np.complex128]]
     spectral_radius: float
 
 
@@ -109,7 +109,7 @@ def _resolvent_columns(a: np.ndarray, b: np.ndarray, z: np.ndarray,
     return np.stack([np.linalg.solve(zf * eye - a, b) for zf in z], axis=1)
 
 
-def discrete_frf(plant: PlantModel, laws: Sequence, dt: float, freq_hz: npt.ArrayLike,
+def discrete_frf(plant: PlantModel, laws: Sequence[Any], dt: float, freq_hz: npt.ArrayLike,
                  input_: str, loop: SampledLoop | None = None) -> DiscreteFrf:
     """
     FRFs of the lockstep sampled loop (u_k answers y_k, zero-order hold) from an external input.
@@ -159,7 +159,7 @@ class SampledPairFrf:
     :func:`sampled_loop` of the same plant, laws and ``dt``, if already built.
     """
 
-    def __init__(self, plant: PlantModel, laws: Sequence, dt: float, output: str,
+    def __init__(self, plant: PlantModel, laws: Sequence[Any], dt: float, output: str,
                  input_: str, loop: SampledLoop | None = None) -> None:
         loop = sampled_loop(plant, laws, dt) if loop is None else loop
         core, b, c_y, c_u, augmented = loop.core, loop.b, loop.c_y, loop.c_u, loop.augmented

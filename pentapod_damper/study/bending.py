@@ -18,14 +18,17 @@ from __future__ import annotations
 from typing import Sequence
 
 import numpy as np
+import numpy.typing as npt
 from scipy.optimize import minimize_scalar
 
 from pentapod_damper.study.analytic import continuous_frf, improvement_share, peak_and_rms
+from pentapod_damper.study.records import BendingComparison, BendingModel
 from pentapod_sim.plant.frf_peaks import exact_peak, plant_pair_frf
 from pentapod_sim.plant.model import PlantModel
 
+FloatArray = npt.NDArray[np.float64]
 #: Model name -> (input port pattern, gain unit, sweep gains).
-MODELS = {
+MODELS: dict[str, tuple[str, str, FloatArray]] = {
     'rotational': ('strut{i}_bending_moment_{k}', 'N m s/rad', np.geomspace(10.0, 1e5, 25)),
     'chord': ('strut{i}_chord_force_{k}', 'N s/m', np.geomspace(1e2, 1e6, 25)),
 }
@@ -42,7 +45,7 @@ def dampers(model: str, struts: Sequence[int], gain: float) -> dict[str, float]:
 
 
 def peak(plant: PlantModel, model: str, struts: Sequence[int], gain: float, direction: str,
-         band: tuple[float, float], grid: np.ndarray) -> float:
+         band: tuple[float, float], grid: FloatArray) -> float:
     """Exact TCP peak [m/N] with the model's dampers on ``struts``."""
     frf = plant_pair_frf(plant, f'tcp_displacement_{direction}', f'tcp_force_{direction}',
                          dampers(model, struts, gain))
@@ -50,7 +53,7 @@ def peak(plant: PlantModel, model: str, struts: Sequence[int], gain: float, dire
 
 
 def rms(plant: PlantModel, model: str, struts: Sequence[int], gain: float, direction: str,
-        band: tuple[float, float], grid: np.ndarray) -> float:
+        band: tuple[float, float], grid: FloatArray) -> float:
     """RMS of |H| over the band on the grid [m/N]."""
     h = continuous_frf(plant, dampers(model, struts, gain), grid,
                        f'tcp_displacement_{direction}', f'tcp_force_{direction}')
@@ -58,7 +61,7 @@ def rms(plant: PlantModel, model: str, struts: Sequence[int], gain: float, direc
 
 
 def sweep(plant: PlantModel, model: str, direction: str, band: tuple[float, float],
-          grid: np.ndarray) -> dict[str, np.ndarray]:
+          grid: FloatArray) -> dict[str, FloatArray]:
     """Exact peaks [m/N] over the model's sweep gains, all struts and struts 1+2."""
     gains = MODELS[model][2]
     return {label: np.array([peak(plant, model, struts, g, direction, band, grid)
@@ -66,8 +69,8 @@ def sweep(plant: PlantModel, model: str, direction: str, band: tuple[float, floa
             for label, struts in (('all struts', ALL_STRUTS), ('struts 1, 2', STRUTS_12))}
 
 
-def optimal_gain(plant: PlantModel, model: str, peaks_all: np.ndarray, direction: str,
-                 band: tuple[float, float], grid: np.ndarray) -> float:
+def optimal_gain(plant: PlantModel, model: str, peaks_all: FloatArray, direction: str,
+                 band: tuple[float, float], grid: FloatArray) -> float:
     """Gain that minimises the all-struts exact peak (bounded search around the sweep's best)."""
     gains = MODELS[model][2]
     i = int(np.argmin(peaks_all))
@@ -78,43 +81,40 @@ def optimal_gain(plant: PlantModel, model: str, peaks_all: np.ndarray, direction
     return float(10 ** res.x) if res.fun <= peaks_all[i] else float(gains[i])
 
 
-def _at_gain(plant, model, gain, base_peak, base_rms, direction, band, grid) -> dict:
+def _at_gain(plant: PlantModel, model: str, gain: float, base_peak: float, base_rms: float,
+             direction: str, band: tuple[float, float], grid: FloatArray
+             ) -> tuple[float, float, float, float]:
+    """Peak reduction all struts and struts 1+2, struts 1+2 share by peak and by RMS."""
     p = {s: peak(plant, model, st, gain, direction, band, grid)
          for s, st in (('all', ALL_STRUTS), ('12', STRUTS_12))}
     r = {s: rms(plant, model, st, gain, direction, band, grid)
          for s, st in (('all', ALL_STRUTS), ('12', STRUTS_12))}
-    return {'reduction_all': base_peak / p['all'], 'reduction_12': base_peak / p['12'],
-            'peak_share_12': improvement_share(base_peak, p['12'], p['all']),
-            'rms_share_12': improvement_share(base_rms, r['12'], r['all'])}
+    return (base_peak / p['all'], base_peak / p['12'],
+            improvement_share(base_peak, p['12'], p['all']),
+            improvement_share(base_rms, r['12'], r['all']))
 
 
 def compare(plant: PlantModel, position: str, direction: str, band: tuple[float, float],
-            grid: np.ndarray) -> tuple[list[dict], dict[str, np.ndarray]]:
+            grid: FloatArray) -> BendingComparison:
     """
-    Both bending models at one position: table rows and sweep curves.
+    Both bending models at one position: optimal gains, reductions, shares and sweep curves.
 
-    Returns
-    -------
-    rows : list of dict
-        Per model: unit, optimal gain, exact peak reductions (all struts, struts 1+2) and
-        struts-1+2 shares (peak, RMS) at the optimal gain and at the paper's b = 20,000.
-    curves : dict
-        ``'<position>, <model>, <struts>'`` -> exact peak reduction over ``MODELS`` gains.
+    Per model: unit, optimal gain, exact peak reductions (all struts, struts 1+2) and
+    struts-1+2 shares (peak, RMS) at the optimal gain and at the paper's b = 20,000; curves
+    ``'<position>, <model>, <struts>'``: exact peak reduction over ``MODELS`` gains.
     """
     out = f'tcp_displacement_{direction}'
     base = plant_pair_frf(plant, out, f'tcp_force_{direction}')
     base_peak = exact_peak(base, band[0], band[1], grid).value
     base_rms = peak_and_rms(continuous_frf(plant, {}, grid, out, f'tcp_force_{direction}'),
                             grid, *band)[1]
-    rows, curves = [], {}
+    models, curves = [], {}
     for model, (_, unit, _) in MODELS.items():
         peaks = sweep(plant, model, direction, band, grid)
         for label, values in peaks.items():
             curves[f'{position}, {model}, {label}'] = base_peak / values
         best = optimal_gain(plant, model, peaks['all struts'], direction, band, grid)
-        row = {'position': position, 'model': model, 'gain_unit': unit, 'optimal_gain': best}
-        for tag, gain in (('opt', best), ('paper', PAPER_GAIN)):
-            vals = _at_gain(plant, model, gain, base_peak, base_rms, direction, band, grid)
-            row.update({f'{k}_{tag}': v for k, v in vals.items()})
-        rows.append(row)
-    return rows, curves
+        at = [_at_gain(plant, model, gain, base_peak, base_rms, direction, band, grid)
+              for gain in (best, PAPER_GAIN)]
+        models.append(BendingModel(position, model, unit, best, *at[0], *at[1]))
+    return BendingComparison(position, models, curves)

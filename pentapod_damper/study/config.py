@@ -103,29 +103,29 @@ class StudyConfig:
         Settling time in decay time constants of the slowest dominant mode of the loop.
     """
 
-    positions: tuple
-    scenarios: tuple
+    positions: tuple[str, ...]
+    scenarios: tuple[str, ...]
     sample_rate: float
     direction: str
     amplitude: float
-    band: tuple
+    band: tuple[float, ...]
     duration: float
     seed: int
     nperseg: int
     f_max: float
     coherence_min: float
-    freq_grid: tuple
+    freq_grid: tuple[float, float, int]
     pma_force_amplitude: float
     step_position: str
     step_amplitude: float
     step_duration: float
     check_f_min: float
     check_policy: str
-    pma_band: tuple
-    pma_frequencies: tuple
+    pma_band: tuple[float, ...]
+    pma_frequencies: tuple[float, ...]
     pma_highpass_hz: float
-    damping_scenarios: tuple
-    damping_band: tuple
+    damping_scenarios: tuple[str, ...]
+    damping_band: tuple[float, ...]
     damping_period: float
     damping_amplitude: float
     damping_periods: int
@@ -274,7 +274,7 @@ def _get(obj: Any, key_path: str) -> Any:
     return obj
 
 
-def _set(doc: dict, key_path: str, value: Any) -> None:
+def _set(doc: dict[str, Any], key_path: str, value: Any) -> None:
     *parents, last = key_path.split('.')
     for key in parents:                 # the file was checked: its sections are mappings
         doc = doc[key]

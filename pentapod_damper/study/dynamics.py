@@ -14,28 +14,30 @@ to compare candidates; ``--markdown`` prints the table of
 docs/statespace.md ("Default dynamics per damper type"), which test/test_damper_dynamics.py
 checks against this code.
 
-    python -m pentapod_damper.study.dynamics [--positions P1,P2] [--scenarios a,b]
+    python -m pentapod_damper.study dynamics [--positions P1,P2] [--scenarios a,b]
                                              [--try 1,150,0] [--markdown]
 
 Units: frequencies [Hz], peaks [m/N], gains as the laws'.
 """
 from __future__ import annotations
 
-import sys
+from dataclasses import dataclass
+import math
+from pathlib import Path
+from typing import Any, Sequence
 
 from pentapod_damper.laws import Dynamics, ViscousDamper
 from pentapod_damper.node_parameters import DamperParams, DynamicsParams
 from pentapod_damper.scenario_laws import scenario_laws
 from pentapod_damper.study.analytic import SampledPairFrf
 from pentapod_damper.study.config import load_study_config
-from pentapod_damper.study.pipeline import CHECK_CACHE
-from pentapod_sim.cli import CommandParser
-from pentapod_sim.errors import ConfigError
 from pentapod_sim.plant.build import load_or_build_model
 from pentapod_sim.plant.check_model import check_f_max, load_or_build_check_model
 from pentapod_sim.plant.frf_peaks import exact_peak, maximise_near_poles, plant_pair_frf
+from pentapod_sim.plant.model import PlantModel
 from pentapod_sim.scenario.files import executable_of, read_scenario
-from pentapod_sim.sim.stability import check_loop, controller_of
+from pentapod_sim.sim.controllers import controller_of
+from pentapod_sim.sim.stability import check_loop
 
 #: Scenarios with viscous damper nodes that the study runs.
 SCENARIOS = ('strut_damping_all', 'strut_damping_12', 'strut_chord_damping_all',
@@ -48,7 +50,32 @@ _LAW_KEYS = frozenset([p.name for p in DynamicsParams.ros_params()]
                       + [p.name for p in DamperParams.ros_params() if p.name.endswith('_gain')])
 
 
-def ideal_laws(scenario: str, dt: float) -> list:
+@dataclass(frozen=True)
+class DamperVariant:
+    """
+    One scenario's dampers at one position, as shipped (``buildable``) or ``ideal``.
+
+    ``gain`` is the largest gain [N s/m, N m s/rad if ``moment``], then the law's dynamics;
+    the spectral radii of the sampled loop on the plant and on the check model, the verdict
+    of the truncation check and the exact TCP peak reduction (NaN if the loop is unstable on
+    the plant).
+    """
+
+    position: str
+    scenario: str
+    variant: str
+    gain: float
+    moment: bool
+    filter_order: int
+    bandwidth_hz: float
+    delay_steps: int
+    plant_radius: float
+    check_radius: float
+    verdict: str
+    peak_reduction: float
+
+
+def ideal_laws(scenario: str, dt: float) -> list[ViscousDamper]:
     """The scenario's viscous dampers with the node's default gains and no dynamics."""
     sections = {name: {k: v for k, v in params.items() if k not in _LAW_KEYS}
                 if executable_of(name) == 'damper' else params
@@ -56,29 +83,30 @@ def ideal_laws(scenario: str, dt: float) -> list:
     return [law for law in scenario_laws(sections, dt) if isinstance(law, ViscousDamper)]
 
 
-def _with(laws: list, dyn: Dynamics, dt: float) -> list:
-    return [ViscousDamper(law.actuator_ports, law.gains, dyn, dt) for law in laws]
+def _with(laws: Sequence[ViscousDamper], dyn: Dynamics, dt: float) -> list[ViscousDamper]:
+    return [ViscousDamper(law.actuator_ports, [float(g) for g in law.gains], dyn, dt)
+            for law in laws]
 
 
-def evaluate(plant, check, laws: list, dt: float, direction: str, band: tuple[float, float],
-             base_peak: float) -> dict:
-    """Check-model margin and exact sampled-loop peak reduction of one set of laws."""
+def evaluate(plant: PlantModel, check: PlantModel, laws: Sequence[Any], dt: float,
+             direction: str, band: tuple[float, float],
+             base_peak: float) -> tuple[float, float, str, float]:
+    """Spectral radii (plant, check model), verdict and exact peak reduction of some laws."""
     loop = check_loop(plant, check, [controller_of(law) for law in laws], dt, 'warn')
-    row = {'plant_radius': loop.plant_radius, 'check_radius': loop.check_radius,
-           'verdict': loop.verdict, 'peak_reduction': float('nan')}
+    reduction = math.nan
     if loop.plant_radius < 1.0:
         frf = SampledPairFrf(plant, laws, dt, f'tcp_displacement_{direction}',
                              f'tcp_force_{direction}')
         peak = maximise_near_poles(lambda f: abs(frf(f)), frf.poles, *band)
-        row['peak_reduction'] = base_peak / peak.value
-    return row
+        reduction = base_peak / peak.value
+    return loop.plant_radius, loop.check_radius, loop.verdict, reduction
 
 
-def rows(positions, scenarios, candidate: Dynamics | None = None,
-         cache_dir=CHECK_CACHE) -> list[dict]:
-    """One row per (position, scenario, variant) with radii, verdict and peak reduction."""
+def rows(positions: Sequence[str], scenarios: Sequence[str], cache_dir: Path,
+         candidate: Dynamics | None = None) -> list[DamperVariant]:
+    """One row per (position, scenario, variant); plants and check models kept in cache_dir."""
     cfg = load_study_config()
-    dt = 1.0 / cfg.sample_rate
+    dt = cfg.dt
     band = (float(cfg.band[0]), float(cfg.f_max))
     d = cfg.direction
     out = []
@@ -95,74 +123,50 @@ def rows(positions, scenarios, candidate: Dynamics | None = None,
             for variant, variant_laws in (('buildable', shipped),
                                           ('ideal', ideal_laws(scn, dt))):
                 dyn = variant_laws[0].dynamics
-                row = evaluate(plant, check, variant_laws, dt, d, band, base)
-                out.append({'position': pos, 'scenario': scn, 'variant': variant,
-                            'gain': float(max(abs(g) for law in variant_laws
-                                              for g in law.gains)),
-                            'moment': any('moment' in port for law in variant_laws
-                                          for port in law.actuator_ports),
-                            'filter_order': dyn.order, 'bandwidth_hz': dyn.bandwidth_hz,
-                            'delay_steps': dyn.delay_steps, **row})
+                out.append(DamperVariant(
+                    pos, scn, variant, float(max(abs(g) for law in variant_laws
+                                                 for g in law.gains)),
+                    any('moment' in port for law in variant_laws
+                        for port in law.actuator_ports),
+                    dyn.order, dyn.bandwidth_hz, dyn.delay_steps,
+                    *evaluate(plant, check, variant_laws, dt, d, band, base)))
     return out
 
 
-def _unit(scenario_rows: list[dict]) -> str:
-    return 'N m s/rad' if scenario_rows[0]['moment'] else 'N s/m'
+def _unit(scenario_rows: Sequence[DamperVariant]) -> str:
+    return 'N m s/rad' if scenario_rows[0].moment else 'N s/m'
 
 
-def _law(r: dict) -> str:
-    dyn = (f'order-{r["filter_order"]} low-pass {r["bandwidth_hz"]:g} Hz'
-           if r['filter_order'] else 'no low-pass')
-    delay = f', delay {r["delay_steps"]} step(s)' if r['delay_steps'] else ''
-    return f'{r["gain"]:g}, {dyn}{delay}'
+def _law(r: DamperVariant) -> str:
+    dyn = (f'order-{r.filter_order} low-pass {r.bandwidth_hz:g} Hz'
+           if r.filter_order else 'no low-pass')
+    delay = f', delay {r.delay_steps} step(s)' if r.delay_steps else ''
+    return f'{r.gain:g}, {dyn}{delay}'
 
 
-def markdown_table(table: list[dict]) -> str:
+def markdown_table(table: Sequence[DamperVariant]) -> str:
     """Per scenario and variant: the law, check radius and peak reduction per position."""
-    positions = list(dict.fromkeys(r['position'] for r in table))
+    positions = list(dict.fromkeys(r.position for r in table))
     lines = ['| scenario | variant | gain [unit], dynamics | check-model radius '
              + ' / '.join(positions) + ' | TCP peak reduction ' + ' / '.join(positions)
              + ' | verdict ' + ' / '.join(positions) + ' |', '|---' * 6 + '|']
-    for scn in dict.fromkeys(r['scenario'] for r in table):
+    for scn in dict.fromkeys(r.scenario for r in table):
         for variant in ('buildable', 'ideal'):
-            sel = [r for r in table if r['scenario'] == scn and r['variant'] == variant]
+            sel = [r for r in table if r.scenario == scn and r.variant == variant]
             lines.append(
                 f'| `{scn}` | {variant} | {_law(sel[0])} [{_unit(sel)}] | '
-                + ' / '.join(f'{r["check_radius"]:.6f}' for r in sel) + ' | '
-                + ' / '.join(f'{r["peak_reduction"]:.3f}' for r in sel) + ' | '
-                + ' / '.join(r['verdict'] for r in sel) + ' |')
+                + ' / '.join(f'{r.check_radius:.6f}' for r in sel) + ' | '
+                + ' / '.join(f'{r.peak_reduction:.3f}' for r in sel) + ' | '
+                + ' / '.join(r.verdict for r in sel) + ' |')
     return '\n'.join(lines)
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Print the table; return 1 with a message on a configuration error."""
-    parser = CommandParser(description=__doc__.split('\n\n')[0])
-    parser.add_argument('--positions', default='P1,P2')
-    parser.add_argument('--scenarios', default=','.join(SCENARIOS))
-    parser.add_argument('--try', dest='candidate', help='order,bandwidth_hz,delay_steps')
-    parser.add_argument('--markdown', action='store_true',
-                        help='print the table of docs/statespace.md instead')
-    args = parser.parse_args(argv)
-    try:
-        candidate = None
-        if args.candidate:
-            order, bw, delay = args.candidate.split(',')
-            candidate = Dynamics(int(order), float(bw), delay_steps=int(delay))
-        table = rows(args.positions.split(','), args.scenarios.split(','), candidate)
-    except (ConfigError, ValueError) as err:
-        print(f'dynamics: {err}', file=sys.stderr)
-        return 1
-    if args.markdown:
-        print(markdown_table(table))
-        return 0
-    print(f'{"pos":4} {"scenario":24} {"variant":14} {"ord":>3} {"bw Hz":>7} {"dly":>3} '
-          f'{"rho plant":>10} {"rho check":>10} {"peak red.":>9}  verdict')
+def format_table(table: Sequence[DamperVariant]) -> str:
+    """Plain-text table of :func:`rows`."""
+    lines = [f'{"pos":4} {"scenario":24} {"variant":14} {"ord":>3} {"bw Hz":>7} {"dly":>3} '
+             f'{"rho plant":>10} {"rho check":>10} {"peak red.":>9}  verdict']
     for r in table:
-        print(f'{r["position"]:4} {r["scenario"]:24} {r["variant"]:14} {r["filter_order"]:3d} '
-              f'{r["bandwidth_hz"]:7g} {r["delay_steps"]:3d} {r["plant_radius"]:10.6f} '
-              f'{r["check_radius"]:10.6f} {r["peak_reduction"]:9.3f}  {r["verdict"]}')
-    return 0
-
-
-if __name__ == '__main__':
-    sys.exit(main())
+        lines.append(f'{r.position:4} {r.scenario:24} {r.variant:14} {r.filter_order:3d} '
+                     f'{r.bandwidth_hz:7g} {r.delay_steps:3d} {r.plant_radius:10.6f} '
+                     f'{r.check_radius:10.6f} {r.peak_reduction:9.3f}  {r.verdict}')
+    return '\n'.join(lines)

@@ -15,12 +15,14 @@ from __future__ import annotations
 from dataclasses import dataclass
 import math
 from pathlib import Path
-from typing import Sequence
+from typing import Any, Sequence
 
 import numpy as np
+import numpy.typing as npt
 
 from pentapod_damper.study import damping
 from pentapod_damper.study.analytic import SampledLoop, SampledPairFrf
+from pentapod_damper.study.damping import ModeDamping
 from pentapod_sim.analysis.ema import plots as ema_plots
 from pentapod_sim.analysis.ema.identify import identify_modes, ModalModel
 from pentapod_sim.analysis.ema.poles import Tolerances
@@ -29,6 +31,7 @@ from pentapod_sim.errors import BagError
 from pentapod_sim.interface import TCP_STATE
 from pentapod_sim.plant.frf_peaks import maximise_near_poles
 from pentapod_sim.plant.model import PlantModel
+from pentapod_sim.sim.loop_poles import LoopPoles
 
 #: The identified pole nearest an analytic one in the s-plane is paired with it if their
 #: frequencies differ by less than this fraction, or by less than PAIR_BANDWIDTHS analytic
@@ -53,6 +56,27 @@ class Identified:
     run: RunFrfs
     model: ModalModel
     output: str
+
+
+@dataclass(frozen=True)
+class IdentifiedMode:
+    """
+    A dominant mode of a loop (``analytic``) and what the damping run identified of it.
+
+    ``measured_freq_hz`` and ``measured_zeta`` are NaN if no identified pole pairs with the
+    mode; ``freq_error`` and ``zeta_error`` relative to the sampled-loop pole;
+    ``peak_analytic_um_per_N``: the sampled-loop FRF maximised near the mode,
+    ``peak_measured_um_per_N``: the identified model's FRF maximised near its pole.
+    """
+
+    analytic: ModeDamping
+    measured_freq_hz: float
+    measured_zeta: float
+    freq_error: float
+    zeta_error: float
+    peak_analytic_um_per_N: float
+    peak_measured_um_per_N: float
+    peak_error_db: float
 
 
 def identify_run(bag: Path, direction: str, band: Sequence[float]) -> Identified:
@@ -83,9 +107,9 @@ def identify_run(bag: Path, direction: str, band: Sequence[float]) -> Identified
     return Identified(run, model, output)
 
 
-def _pole(f: np.ndarray, zeta: np.ndarray) -> np.ndarray:
-    w = 2 * np.pi * np.asarray(f)
-    return -zeta * w + 1j * w * np.sqrt(np.clip(1 - np.asarray(zeta) ** 2, 0.0, None))
+def _pole(f: npt.ArrayLike, zeta: npt.ArrayLike) -> npt.NDArray[np.complex128]:
+    w, z = 2 * np.pi * np.asarray(f), np.asarray(zeta)
+    return -z * w + 1j * w * np.sqrt(np.clip(1 - z ** 2, 0.0, None))
 
 
 def _pair(f0: float, zeta0: float, model: ModalModel) -> int | None:
@@ -102,45 +126,38 @@ def _local_band(f0: float, zeta: float) -> tuple[float, float]:
     return max(f0 - half, 1e-3), f0 + half
 
 
-def compare(rows: Sequence[dict], ident: Identified, plant: PlantModel, laws: Sequence,
-            dt: float, direction: str, loop: SampledLoop | None = None) -> list[dict]:
+def compare(rows: Sequence[ModeDamping], ident: Identified, plant: PlantModel,
+            laws: Sequence[Any], dt: float, direction: str,
+            loop: SampledLoop | None = None) -> list[IdentifiedMode]:
     """
-    The analytic rows of ``direction`` with the identified frequency, damping ratio and peak.
+    The analytic modes of ``direction`` with the identified frequency, damping ratio and peak.
 
-    Adds ``measured_freq_hz``, ``measured_zeta`` (NaN if no identified pole pairs with the
-    mode), ``zeta_error`` (relative), ``freq_error`` (relative), ``peak_analytic_um_per_N``
-    (sampled-loop FRF maximised near the mode), ``peak_measured_um_per_N`` (identified model's
-    FRF maximised near its pole) and ``peak_error_db``. ``loop``: the sampled loop of the
-    same plant, laws and ``dt`` (:func:`pentapod_damper.study.analytic.sampled_loop`), if
-    already built.
+    ``loop``: the sampled loop of the same plant, laws and ``dt``
+    (:func:`pentapod_damper.study.analytic.sampled_loop`), if already built.
     """
     model = ident.model
     frf = SampledPairFrf(plant, laws, dt, f'tcp_displacement_{direction}',
                          f'tcp_force_{direction}', loop)
     out = []
     for row in rows:
-        if row['direction'] not in (direction, direction * 2):
+        if row.direction not in (direction, direction * 2):
             continue
-        f0, z0 = row['sampled_freq_hz'], row['sampled_zeta']
+        f0, z0 = row.sampled_freq_hz, row.sampled_zeta
         lo, hi = _local_band(f0, z0)
         analytic = maximise_near_poles(lambda f: np.abs(frf(f)), frf.poles, lo, hi).value
         j = _pair(f0, z0, model)
-        new = dict(row, peak_analytic_um_per_N=analytic * 1e6)
         if j is None:
-            new.update(measured_freq_hz=math.nan, measured_zeta=math.nan, freq_error=math.nan,
-                       zeta_error=math.nan, peak_measured_um_per_N=math.nan,
-                       peak_error_db=math.nan)
-        else:
-            f1, z1 = float(model.freq_hz[j]), float(model.damping[j])
-            lo, hi = _local_band(f1, z1)
+            nan = math.nan
+            out.append(IdentifiedMode(row, nan, nan, nan, nan, analytic * 1e6, nan, nan))
+            continue
+        f1, z1 = float(model.freq_hz[j]), float(model.damping[j])
+        lo, hi = _local_band(f1, z1)
 
-            def synth(f: np.ndarray) -> np.ndarray:
-                return np.abs(model.synthesise(np.atleast_1d(f))[0, 0])
-            measured = maximise_near_poles(synth, model.poles, lo, hi).value
-            new.update(measured_freq_hz=f1, measured_zeta=z1, freq_error=f1 / f0 - 1.0,
-                       zeta_error=z1 / z0 - 1.0, peak_measured_um_per_N=measured * 1e6,
-                       peak_error_db=20.0 * math.log10(measured / analytic))
-        out.append(new)
+        def synth(f: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+            return np.abs(model.synthesise(np.atleast_1d(f))[0, 0])
+        measured = maximise_near_poles(synth, model.poles, lo, hi).value
+        out.append(IdentifiedMode(row, f1, z1, f1 / f0 - 1.0, z1 / z0 - 1.0, analytic * 1e6,
+                                  measured * 1e6, 20.0 * math.log10(measured / analytic)))
     return out
 
 
@@ -154,8 +171,8 @@ def figures(ident: Identified, folder: Path, tag: str) -> tuple[Path, Path]:
                                        title=f'{tag}: measured and identified FRF'))
 
 
-def settle_rows(plant: PlantModel, laws: Sequence, dt: float, direction: str,
-                poles: tuple | None = None) -> list[dict]:
+def settle_rows(plant: PlantModel, laws: Sequence[Any], dt: float, direction: str,
+                poles: tuple[LoopPoles, LoopPoles] | None = None) -> list[ModeDamping]:
     """
     The :data:`SETTLE_MODES` modes with the largest terms in TCP dd (their decay times).
 

@@ -7,14 +7,13 @@ processes; everything here reads and computes plain arrays.
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass, field
 import hashlib
 import json
 import logging
 import os
 from pathlib import Path
 import threading
-from typing import Callable
+from typing import Any, Callable
 
 import numpy as np
 
@@ -26,21 +25,33 @@ from pentapod_damper.study.analytic import (
     DiscreteFrf,
     pma_requirements,
     sampled_loop,
-    SampledLoop,
 )
 from pentapod_damper.study.config import StudyConfig
 from pentapod_damper.study.pma import pma_design, PmaDesign
+from pentapod_damper.study.records import (
+    FloatArray,
+    Measured,
+    PmaSpec,
+    PositionModel,
+    ScenarioAnalytic,
+)
 from pentapod_damper.study.runs import RunResult
 from pentapod_sim.analysis.bag.reader import open_bag
 from pentapod_sim.analysis.frf.estimation import frf_from_series
 from pentapod_sim.errors import ConfigError
+from pentapod_sim.fe.imported.build import load_fe_model
 from pentapod_sim.interface import EXCITATION, PMA_STATE, TCP_STATE
-from pentapod_sim.plant.build import build_plant
-from pentapod_sim.plant.check_model import check_f_max, load_or_build_check_model
-from pentapod_sim.plant.frf_peaks import exact_peak, Peak, plant_pair_frf, PoleResidueFrf
-from pentapod_sim.plant.model import PlantModel
+from pentapod_sim.plant.build import build_plant, plant_from_fe, reduce_plant
+from pentapod_sim.plant.check_model import (
+    check_f_max,
+    check_model_from_fe,
+    load_or_build_check_model,
+)
+from pentapod_sim.plant.config import load_reduction_config
+from pentapod_sim.plant.frf_peaks import exact_peak, plant_pair_frf
 from pentapod_sim.scenario.files import read_scenario
-from pentapod_sim.sim.stability import apply_policy, check_loop, controller_of, LoopCheck
+from pentapod_sim.sim.controllers import controller_of
+from pentapod_sim.sim.stability import apply_policy, check_loop, LoopCheck
 
 LOG = logging.getLogger(__name__)
 
@@ -49,77 +60,56 @@ LOG = logging.getLogger(__name__)
 CHECK_CACHE = Path('out') / 'models'
 
 
-@dataclass
-class PositionModel:
-    """
-    The reduced plant of one position, saved for the plant node to load.
-
-    ``check_plant`` is the position's check model (every FE mode below the check cut-off, for
-    the truncation check); None for a plant without an FE model behind it.
-    """
-
-    position: str
-    plant: PlantModel
-    model_file: Path
-    model_hash: str
-    check_plant: PlantModel | None = None
-
-
-@dataclass
-class ScenarioAnalytic:
-    """Analytic results of one scenario at one position (excited TCP direction d)."""
-
-    name: str
-    laws: list
-    dampers: dict
-    continuous: np.ndarray            # TCP displacement d / TCP force d [m/N] on the grid
-    discrete: DiscreteFrf             # sampled lockstep loop, every output and effort
-    pma: dict = field(default_factory=dict)   # mass, gain of an ideal PMA, if any
-    frf: PoleResidueFrf | None = None  # the continuous TCP FRF, exact at any frequency
-    peak: Peak | None = None          # its exact peak over the band
-    loop: LoopCheck | None = None     # truncation check of the sampled loop
-    sampled: SampledLoop | None = None  # the sampled loop and its eigen-decomposition
-
-
-@dataclass
-class Measured:
-    """What one testbed run's bag gives: the TCP FRF and, for PMA runs, stroke and force."""
-
-    run: RunResult
-    freq: np.ndarray
-    h: np.ndarray
-    coherence: np.ndarray
-    pma_stroke: np.ndarray | None = None      # stroke / TCP force [m/N]
-    pma_force: np.ndarray | None = None       # force / TCP force [N/N]
-    n_messages: dict = field(default_factory=dict)
-
-
 def prepare_model(position: str, out_dir: Path, say: Callable[[str], None],
-                  cfg: StudyConfig | None = None) -> PositionModel:
+                  cfg: StudyConfig | None = None,
+                  fe_model: Path | None = None) -> PositionModel:
     """
     Build the reduced plant of a position and save it (the plant node loads the file).
 
     With ``cfg``, also load or build the position's check model (modes below
-    ``max(check_f_min, 2 sample_rate)``, cached in :data:`CHECK_CACHE`).
+    ``max(check_f_min, 2 sample_rate)``, cached in :data:`CHECK_CACHE`). ``fe_model``: an
+    imported FE model's description (docs/own_machine.md) instead of the own machine at
+    ``position``, which then only names the model; its check model is built, not cached.
     """
-    plant = build_plant(position, progress=say)
-    path = plant.save(out_dir / 'models' / f'plant_{position}.npz')
     check = None
-    if cfg is not None:
-        check, origin = load_or_build_check_model(
-            position, check_f_max(cfg.sample_rate, cfg.check_f_min), CHECK_CACHE)
-        say(f'check model {origin}: {check.n_modes} modes')
+    if fe_model is None:
+        plant = build_plant(position, progress=say)
+        if cfg is not None:
+            check, origin = load_or_build_check_model(
+                position, check_f_max(cfg.sample_rate, cfg.check_f_min), CHECK_CACHE)
+            say(f'check model {origin}: {check.n_modes} modes')
+    else:
+        fe = load_fe_model(fe_model)
+        reduction = load_reduction_config()
+        plant_all, keep = plant_from_fe(fe, reduction, say)
+        plant = reduce_plant(plant_all, keep, reduction.static_correction)
+        plant.meta['position'] = position
+        say(f'imported from {fe_model}: kept {keep.size} of {plant_all.n_modes} modes')
+        if cfg is not None:
+            f_max = check_f_max(cfg.sample_rate, cfg.check_f_min)
+            check = check_model_from_fe(fe, reduction, f_max)
+            say(f'check model built from {fe_model} (modes below {f_max:g} Hz): '
+                f'{check.n_modes} modes')
+    path = plant.save(out_dir / 'models' / f'plant_{position}.npz')
     return PositionModel(position, plant, Path(path), plant.content_hash(), check)
 
 
-def welch_freq(cfg: StudyConfig) -> np.ndarray:
+def welch_freq(cfg: StudyConfig) -> FloatArray:
     """Frequency bins [Hz] of the measured FRFs (Welch segments of ``nperseg``), DC left out."""
-    freq = np.fft.rfftfreq(cfg.nperseg, 1.0 / cfg.sample_rate)
-    return freq[(freq > 0) & (freq <= cfg.f_max)]
+    freq = np.fft.rfftfreq(cfg.nperseg, cfg.dt)
+    return np.asarray(freq[(freq > 0) & (freq <= cfg.f_max)], dtype=np.float64)
+
+
+def scenario_pma(scenario: str) -> PmaSpec | None:
+    """The proof-mass actuator of a scenario file (its PMA node), if any."""
+    for node in read_scenario(scenario).of_kind('pma'):
+        values: PmaParams = node.params           # typed, with the PMA node's defaults
+        return PmaSpec(values.proof_mass, values.gain, values.directions)
+    return None
 
 
 def scenario_analytic(model: PositionModel, scenario: str, cfg: StudyConfig,
-                      freq: np.ndarray) -> ScenarioAnalytic:
+                      freq: FloatArray) -> ScenarioAnalytic:
     """
     Closed-loop FRFs of a scenario from the TCP force, its exact peak and truncation check.
 
@@ -131,7 +121,7 @@ def scenario_analytic(model: PositionModel, scenario: str, cfg: StudyConfig,
     unstable on the plant itself is refused whatever the policy.
     """
     d = cfg.direction
-    dt = 1.0 / cfg.sample_rate
+    dt = cfg.dt
     sections = read_scenario(scenario).sections
     laws = scenario_laws(sections, dt)
     dampers = continuous_dampers(laws)
@@ -145,16 +135,11 @@ def scenario_analytic(model: PositionModel, scenario: str, cfg: StudyConfig,
                           f'tcp_force_{d}')
     frf = plant_pair_frf(model.plant, f'tcp_displacement_{d}', f'tcp_force_{d}', dampers)
     peak = exact_peak(frf, float(cfg.band[0]), float(cfg.f_max), freq)
-    pma = {}
-    for name, params in sections.items():
-        if name.startswith('pma'):
-            values = PmaParams.build(params, f'node {name!r}')    # the PMA node's defaults
-            pma = {'mass': values.proof_mass, 'gain': values.gain,
-                   'directions': values.directions}
-    return ScenarioAnalytic(scenario, laws, dampers, cont, disc, pma, frf, peak, loop, sampled)
+    return ScenarioAnalytic(scenario, laws, dampers, cont, disc, scenario_pma(scenario), frf,
+                            peak, loop, sampled, model.position)
 
 
-def checked_loop(model: PositionModel, controllers: list, dt: float, policy: str,
+def checked_loop(model: PositionModel, controllers: list[Any], dt: float, policy: str,
                  label: str) -> LoopCheck:
     """
     :func:`pentapod_sim.sim.stability.check_loop` of a position's sampled loop, kept on disk.
@@ -189,26 +174,26 @@ def checked_loop(model: PositionModel, controllers: list, dt: float, policy: str
 
 
 def pma_curves(model: PositionModel, ana: ScenarioAnalytic, cfg: StudyConfig,
-               freq: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+               freq: FloatArray) -> tuple[FloatArray, FloatArray]:
     """Analytic stroke [m] and force [N] amplitudes of the scenario's PMA (continuous loop)."""
+    assert ana.pma is not None
     d = cfg.direction
     v = continuous_frf(model.plant, ana.dampers, freq, f'pma_mount_velocity_{d}',
                        f'tcp_force_{d}')
-    return pma_requirements(v, freq, ana.pma['mass'], ana.pma['gain'],
-                            cfg.pma_force_amplitude)
+    return pma_requirements(v, freq, ana.pma.mass, ana.pma.gain, cfg.pma_force_amplitude)
 
 
 def pma_designs(model: PositionModel, ana: ScenarioAnalytic,
-                cfg: StudyConfig) -> dict[str, PmaDesign]:
+                cfg: StudyConfig) -> tuple[PmaDesign, PmaDesign]:
     """
-    The scenario's PMA as run (``ideal``) and with the study's high-pass (``highpass``).
+    The scenario's PMA as run (ideal) and with the study's high-pass.
 
     Both in the continuous closed loop with the scenario's other viscous dampers.
     """
-    d, mass, gain = cfg.direction, ana.pma['mass'], ana.pma['gain']
-    return {'ideal': pma_design(model.plant, d, mass, gain, 0.0, ana.dampers),
-            'highpass': pma_design(model.plant, d, mass, gain, cfg.pma_highpass_hz,
-                                   ana.dampers)}
+    assert ana.pma is not None
+    d, mass, gain = cfg.direction, ana.pma.mass, ana.pma.gain
+    return (pma_design(model.plant, d, mass, gain, 0.0, ana.dampers),
+            pma_design(model.plant, d, mass, gain, cfg.pma_highpass_hz, ana.dampers))
 
 
 def measure(run: RunResult, cfg: StudyConfig) -> Measured:
@@ -253,7 +238,8 @@ def deviation_db(measured: Measured, disc: DiscreteFrf, output: str, cfg: StudyC
     return float(np.max(np.abs(diff))), float(good.sum() / band.sum())
 
 
-def step_series(run: RunResult, cfg: StudyConfig) -> tuple[np.ndarray, ...]:
+def step_series(run: RunResult,
+                cfg: StudyConfig) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Time [s], stroke [m] and force [N] of the PMA in a step-response run."""
     bag = open_bag(run.bag)
     d = cfg.direction

@@ -7,22 +7,26 @@ from typing import Mapping, Sequence
 import matplotlib
 
 matplotlib.use('Agg')
+from matplotlib.axes import Axes  # noqa: E402
+from matplotlib.figure import Figure  # noqa: E402
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+import numpy.typing as npt  # noqa: E402
 
 from pentapod_sim.figures import save_figure  # noqa: E402
 
+Array = npt.NDArray[np.float64]
 #: Fixed colour per scenario, so every figure reads the same way.
 COLORS = {'baseline': 'black', 'strut_damping_all': 'tab:blue', 'strut_damping_12': 'tab:cyan',
           'axial_damping': 'tab:green', 'tcp_damping': 'tab:red', 'pma_5kg': 'tab:purple',
           'pma_1kg': 'tab:orange'}
 
 
-def _save(fig, path) -> Path:
+def _save(fig: Figure, path: Path) -> Path:
     return save_figure(fig, path, tight=False)
 
 
-def _mag_axes(title: str, unit: str):
+def _mag_axes(title: str, unit: str) -> tuple[Figure, Axes, Axes]:
     fig, (ax_m, ax_p) = plt.subplots(2, 1, figsize=(9, 6.5), sharex=True,
                                      gridspec_kw={'height_ratios': [3, 1]})
     ax_m.set_title(title)
@@ -54,7 +58,8 @@ def baseline_frf_plot(freq: np.ndarray, curves: Mapping[str, np.ndarray],
 
 
 def damping_plot(freq: np.ndarray, analytic: Mapping[str, np.ndarray],
-                 measured: Mapping[str, tuple], title: str, path: Path,
+                 measured: Mapping[str, tuple[Array, npt.NDArray[np.complex128]]],
+                 title: str, path: Path,
                  unit: str = 'm/N') -> Path:
     """
     Compare scenarios: analytic FRFs as lines, FRFs measured on the testbed as dots.
@@ -79,9 +84,10 @@ def damping_plot(freq: np.ndarray, analytic: Mapping[str, np.ndarray],
     return _save(fig, path)
 
 
-def pma_requirements_plot(freq: np.ndarray, curves: Mapping[str, tuple],
-                          measured: Mapping[str, tuple], force_amplitude: float,
-                          path: Path, variants: Mapping[str, tuple] | None = None,
+def pma_requirements_plot(freq: np.ndarray, curves: Mapping[str, tuple[Array, Array]],
+                          measured: Mapping[str, tuple[Array, Array, Array]],
+                          force_amplitude: float, path: Path,
+                          variants: Mapping[str, tuple[Array, Array]] | None = None,
                           band: Sequence[float] | None = None,
                           marks: Sequence[float] = ()) -> Path:
     """
@@ -119,7 +125,8 @@ def pma_requirements_plot(freq: np.ndarray, curves: Mapping[str, tuple],
     return _save(fig, path)
 
 
-def step_response_plot(runs: Mapping[str, tuple], amplitude: float, path: Path) -> Path:
+def step_response_plot(runs: Mapping[str, tuple[Array, Array, Array]], amplitude: float,
+                       path: Path) -> Path:
     """PMA stroke [mm] and force [N] after a TCP force step; runs: name -> (t, stroke, force)."""
     fig, (ax_s, ax_f) = plt.subplots(2, 1, figsize=(9, 6), sharex=True)
     ax_s.set_title(f'Proof-mass actuator after a {amplitude:g} N step force at the TCP')
@@ -135,7 +142,7 @@ def step_response_plot(runs: Mapping[str, tuple], amplitude: float, path: Path) 
     return _save(fig, path)
 
 
-def gain_sweep_plot(gains: Sequence[float], ratios: Mapping[str, np.ndarray], chosen: float,
+def gain_sweep_plot(gains: npt.ArrayLike, ratios: Mapping[str, np.ndarray], chosen: float,
                     title: str, path: Path, unit: str = 'N m s/rad',
                     marks: Mapping[str, float] | None = None) -> Path:
     """Peak reduction factor of the TCP FRF over a strut damper gain [``unit``]."""

@@ -18,7 +18,7 @@ Units: frequencies [Hz], mass [kg], gain [1/s], force amplitude [N], stroke [m].
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Mapping
+from typing import Mapping, Sequence
 
 import control
 import numpy as np
@@ -45,7 +45,8 @@ def highpass_response(freq_hz: npt.ArrayLike, highpass_hz: float) -> np.ndarray:
     return scipy.signal.freqs(num, den, 2 * np.pi * freq)[1]
 
 
-def _gain_block(plant: PlantModel, entries: Mapping[tuple[str, str], control.StateSpace]):
+def _gain_block(plant: PlantModel,
+                entries: Mapping[tuple[str, str], control.StateSpace]) -> control.StateSpace:
     """Controller ``u = K(s) y`` over all plant ports from SISO blocks (input, output) -> K."""
     n_in, n_out = len(plant.input_names), len(plant.output_names)
     total = control.ss([], [], [], np.zeros((n_in, n_out)))
@@ -131,8 +132,10 @@ def pma_design(plant: PlantModel, direction: str, mass: float, gain: float,
                      pair(f'tcp_displacement_{direction}'))
 
 
-def requirement_row(design: PmaDesign, amplitude: float, excitation_band: tuple,
-                    stated_band: tuple, frequencies: tuple, grid_hz: np.ndarray) -> dict:
+def requirement_row(design: PmaDesign, amplitude: float,
+                    excitation_band: tuple[float, float], stated_band: Sequence[float],
+                    frequencies: Sequence[float], grid_hz: npt.NDArray[np.float64]
+                    ) -> dict[str, float]:
     """
     Table row of one PMA design: worst cases in both bands, values at stated frequencies.
 
@@ -141,13 +144,14 @@ def requirement_row(design: PmaDesign, amplitude: float, excitation_band: tuple,
     ``force_N_at_<f>_hz`` and ``free_mass_stroke_mm_at_<f>_hz`` (``F / (m_a w^2)``: the stroke
     if the proof mass took the whole force) per stated frequency; the exact TCP peak.
     """
-    row: dict = {}
+    row: dict[str, float] = {}
     for prefix, (lo, hi) in (('', excitation_band), ('band_', stated_band)):
-        stroke = design.worst('stroke', float(lo), float(hi), amplitude, grid_hz)
-        force = design.worst('force', float(lo), float(hi), amplitude, grid_hz)
-        row.update({f'{prefix}max_stroke_mm': stroke.value * 1e3,
-                    f'{prefix}{"stroke_" if prefix else ""}at_hz': stroke.freq_hz,
-                    f'{prefix}max_force_N': force.value, f'{prefix}force_at_hz': force.freq_hz})
+        worst_stroke = design.worst('stroke', float(lo), float(hi), amplitude, grid_hz)
+        worst_force = design.worst('force', float(lo), float(hi), amplitude, grid_hz)
+        row.update({f'{prefix}max_stroke_mm': worst_stroke.value * 1e3,
+                    f'{prefix}{"stroke_" if prefix else ""}at_hz': worst_stroke.freq_hz,
+                    f'{prefix}max_force_N': worst_force.value,
+                    f'{prefix}force_at_hz': worst_force.freq_hz})
     freq = np.asarray(frequencies, dtype=float)
     stroke, force = design.stroke_force(freq, amplitude)
     for f, s, fa in zip(freq, stroke, force):

@@ -1,7 +1,7 @@
 """
 The study's generated docs: the tables of docs/results.md and the result sentences of the README.
 
-``python -m pentapod_damper.study.readme --from out/study`` copies the CSV tables of a study run
+``python -m pentapod_damper.study docs --from out/study`` copies the CSV tables of a study run
 (``python -m pentapod_damper.study``) to ``docs/results/``, refreshes the study figures that
 ``docs/figures/`` holds, and rewrites, from the copies, the section between
 ``<!-- study-tables:begin -->`` and ``<!-- study-tables:end -->`` of docs/results.md and the
@@ -12,16 +12,14 @@ rewrites the two sections. test/test_docs.py checks that both equal what this ma
 """
 from __future__ import annotations
 
-import csv
 import math
 from pathlib import Path
 import shutil
-import sys
 import textwrap
 
 from pentapod_damper.study.config import load_study_config, StudyConfig
 from pentapod_damper.study.measured_damping import SETTLE_MODES
-from pentapod_sim.cli import CommandParser
+from pentapod_damper.study.report import read_csv
 
 #: section of docs/results.md with the tables, section of the README with the sentences
 SECTION, SUMMARY = 'study-tables', 'study-summary'
@@ -32,9 +30,10 @@ SUMMARY_SCENARIOS = (('tcp_damping', 'TCP damper'), ('pma_5kg', '5 kg PMA'),
 #: the paper's claim: struts 1 and 2 give at least this share of the all-strut improvement
 PAPER_SHARE = 0.7
 TABLES = ('summary', 'struts12_share', 'pma', 'pma_highpass', 'damping')
-COMMAND = 'python -m pentapod_damper.study.readme'
+COMMAND = 'python -m pentapod_damper.study docs'
+Columns = tuple[tuple[str, str, str], ...]
 #: (CSV column, header in docs/results.md, format) of each table; columns a run lacks show '-'.
-COLUMNS = {
+COLUMNS: dict[str, Columns] = {
     'summary': (('position', 'position', 's'), ('scenario', 'scenario', 'code'),
                 ('peak_um_per_N', 'peak [um/N]', '.3g'), ('peak_hz', 'at [Hz]', '.3g'),
                 ('peak_reduction', 'peak reduction', '.3g'),
@@ -87,12 +86,6 @@ def replace_section(text: str, name: str, body: str) -> str:
     return f'{head}{begin}\n{body.strip()}\n{end}{tail}'
 
 
-def read_csv(path: Path) -> list[dict[str, str]]:
-    """Rows of a CSV table as dicts of strings."""
-    with open(path, newline='') as stream:
-        return list(csv.DictReader(stream))
-
-
 def _cell(text: str | None, kind: str) -> str:
     if text is None or text == '':
         return '-'
@@ -113,7 +106,7 @@ def _damping_rows(rows: list[dict[str, str]], cfg: StudyConfig) -> list[dict[str
             and r['direction'] == d + d]
 
 
-def markdown_table(rows: list[dict[str, str]], columns: tuple) -> str:
+def markdown_table(rows: list[dict[str, str]], columns: Columns) -> str:
     """Selected CSV columns as a Markdown table with the headers and formats of COLUMNS."""
     lines = ['| ' + ' | '.join(c[1] for c in columns) + ' |', '|' + '---|' * len(columns)]
     lines += ['| ' + ' | '.join(_cell(r.get(key), kind) for key, _, kind in columns) + ' |'
@@ -257,27 +250,3 @@ def update_docs(readme: Path, results_md: Path, results: Path,
                                           study_section(results, cfg)))
     readme.write_text(replace_section(readme.read_text(), SUMMARY,
                                       summary_section(results, cfg)))
-
-
-def main(argv: list[str] | None = None) -> int:
-    """Copy a study run's tables (``--from``) and rewrite the generated study docs."""
-    parser = CommandParser(description=__doc__.split('\n\n')[0])
-    parser.add_argument('--from', dest='study_out', type=Path,
-                        help='output folder of a study run, e.g. out/study')
-    parser.add_argument('--readme', type=Path, default=Path('README.md'))
-    parser.add_argument('--results-md', type=Path, default=Path('docs/results.md'))
-    parser.add_argument('--results', type=Path, default=Path('docs/results'))
-    parser.add_argument('--figures', type=Path, default=Path('docs/figures'))
-    args = parser.parse_args(argv)
-    try:
-        if args.study_out is not None:
-            copy_results(args.study_out, args.results, args.figures)
-        update_docs(args.readme, args.results_md, args.results)
-    except (OSError, ValueError) as err:
-        print(f'study readme: {err}', file=sys.stderr)
-        return 1
-    return 0
-
-
-if __name__ == '__main__':
-    sys.exit(main())

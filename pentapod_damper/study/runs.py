@@ -81,8 +81,8 @@ def damping_excitation(cfg: StudyConfig, settle: float) -> dict[str, Any]:
 
 
 def study_scenario(scenario: str, position: str, model_file: Path, cfg: StudyConfig,
-                   bag_dir: Path, run_info: dict, kind: str = 'random',
-                   exciter: dict | None = None) -> Scenario:
+                   bag_dir: Path, run_info: dict[str, Any], kind: str = 'random',
+                   exciter: dict[str, Any] | None = None) -> Scenario:
     """
     One run: the scenario's nodes with the study settings, and a recorder (typed, checked).
 
@@ -123,7 +123,7 @@ def study_scenario(scenario: str, position: str, model_file: Path, cfg: StudyCon
         'run_info': yaml.safe_dump(info, sort_keys=False)})
 
 
-def run_duration(cfg: StudyConfig, kind: str, exciter: dict | None = None) -> float:
+def run_duration(cfg: StudyConfig, kind: str, exciter: dict[str, Any] | None = None) -> float:
     """Simulated time of a run [s]: the exciter's duration if given, else the study's."""
     if exciter:
         return float(exciter['duration'])
@@ -132,7 +132,7 @@ def run_duration(cfg: StudyConfig, kind: str, exciter: dict | None = None) -> fl
 
 def run_on_testbed(scenario: str, position: str, model_file: Path, model_hash: str,
                    cfg: StudyConfig, out_dir: Path, kind: str = 'random',
-                   timeout: float = 900.0, exciter: dict | None = None,
+                   timeout: float = 900.0, exciter: dict[str, Any] | None = None,
                    composed: bool = True) -> RunResult:
     """
     Run one scenario at one position in lockstep and record it.

@@ -1,36 +1,53 @@
 """
-The study's pieces side by side: a graph of pieces run on a few threads, in priority order.
+The study as a graph of its stages, run by dask's threaded scheduler.
 
-A :class:`Piece` is one model build, one scenario's analytic FRFs, one testbed run, ...; it
-names the pieces it needs (``after``) and a ``priority`` (lower first among the pieces that
-are ready). :func:`run_pieces` keeps ``workers`` pieces running on a
-:class:`concurrent.futures.ThreadPoolExecutor` and hands each result to the piece's ``done``
-in the calling (main) thread, which stores it, returns the progress line printed for the piece
-and may add pieces. Threads suffice on two cores: a testbed run is a child process (one core),
-and the analytic pieces spend their time in LAPACK, which releases the GIL.
+:func:`study_graph` lists the stages in the order a reader follows the study: per position
+its model; per position and scenario the analytic FRFs and loop poles, a random-excitation
+testbed run and, for the damping scenarios, a multisine damping run; the PMA step runs and
+requirements; per position the bending damper comparison; the figures. Each stage is a
+``dask.delayed`` call of a function of :mod:`pentapod_damper.study.stages` on the records of
+the stages it needs. :func:`compute` runs the graph on ``jobs`` threads (dask's local
+scheduler; it orders the ready stages itself, by the shape of the graph) and prints one line
+per finished stage. Threads suffice on two cores: a testbed run is a child process (one
+core), and the analytic stages spend their time in LAPACK, which releases the GIL.
 
-Stopping: a failed piece or a stop signal (:mod:`pentapod_sim.shutdown`: SIGINT, SIGTERM,
-SIGHUP, recorded by the handler the study installs) starts no further piece; the running
-testbed runs stop their nodes (the scenario runner sees the same request), and once every
-running piece has returned the first error is raised again, or :class:`Interrupted` for a
-signal.
+Testbed runs each reserve a free ROS domain, so they run side by side. With ``ROS_DOMAIN_ID``
+set (the user's choice of one domain) they form one lane: each run waits for the one before
+(an edge of the graph), while the other threads keep the cores busy with analytic stages.
+
+Adding a stage: a function in :mod:`~pentapod_damper.study.stages` returning a record (a
+:class:`~pentapod_damper.study.records.Table` for a table the report shows as it is), and one
+line in :func:`study_graph` that adds it with the results it needs.
+
+Stopping: a stop signal (:mod:`pentapod_sim.shutdown`: SIGINT, SIGTERM, SIGHUP, recorded by
+the handler the study installs) or a failed stage starts no further stage; the running testbed
+runs stop their nodes (the scenario runner sees the same request), and once every running
+stage has returned the error is raised again, or :class:`Interrupted` for a signal.
 """
 from __future__ import annotations
 
-from concurrent.futures import FIRST_COMPLETED, Future, ThreadPoolExecutor, wait
-from dataclasses import dataclass, field
-import itertools
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field, fields
+import math
+from pathlib import Path
 import signal
-import threading
 import time
-from typing import Any, Callable, Hashable, Iterable
+from typing import Any, Callable, Mapping
 
+from dask.base import compute as dask_compute
+from dask.callbacks import Callback
+from dask.delayed import Delayed, delayed
+
+from pentapod_damper.study import figures, stages
+from pentapod_damper.study.config import StudyConfig
+from pentapod_damper.study.pipeline import scenario_pma
+from pentapod_damper.study.records import Figures, FloatArray, Pair, StudyResults
 from pentapod_sim import shutdown
 
-#: How often the main thread looks for a stop signal while pieces run [s].
-POLL = 0.2
-#: pyplot is not thread-safe: pieces that draw figures hold this lock.
-FIGURE_LOCK = threading.Lock()
+#: Stages (their times are summed per stage in the report's Timings).
+MODELS, ANALYTIC, BENDING, PMA = ('models', 'analytic FRFs, checks and poles',
+                                  'bending dampers', 'PMA requirements')
+FRF_RUNS, DAMPING_RUNS, FIGURES = 'FRF and step runs', 'damping runs', 'figures'
 
 
 class Interrupted(Exception):
@@ -41,156 +58,214 @@ class Interrupted(Exception):
         self.code = code
 
 
-@dataclass
-class Piece:
-    """
-    One unit of work of the study.
+class _Stopped(Exception):
+    """Raised by a stage that would start after a stop was requested."""
 
-    Attributes
-    ----------
-    key : hashable
-        Names the piece (e.g. ``('run', 'P1', 'baseline')``); unique.
-    work : callable
-        Runs in a worker thread; its return value goes to ``done``.
-    stage : str
-        Stage the piece's time is counted in (:attr:`Schedule.stages`).
-    after : tuple of keys
-        Pieces that must have finished first.
-    priority : int
-        Lower starts first among the ready pieces (ties: order of adding).
-    done : callable, optional
-        ``done(result)`` in the main thread: stores the result and returns the piece's
-        progress line (None: no line) and, optionally, new pieces as ``(line, pieces)``.
-    lane : str, optional
-        Pieces of a lane with a limit (:func:`run_pieces` ``lanes``) run at most that many
-        at a time (e.g. runs on one ROS domain: one).
-    """
 
-    key: Hashable
-    work: Callable[[], Any]
-    stage: str
-    after: tuple = ()
-    priority: int = 0
-    done: Callable[[Any], Any] | None = None
-    lane: str | None = None
+def _stage(function: Callable[..., Any], *args: Any, after: Any = None) -> Any:
+    """Run one stage unless a stop was requested (``after``: a lane's previous stage)."""
+    if shutdown.requested():
+        raise _Stopped()
+    return function(*args)
 
 
 @dataclass
-class Schedule:
-    """What :func:`run_pieces` measured: per stage the wall span and busy time [s]."""
+class Graph:
+    """
+    The stages of a study as dask.delayed calls, each named ``'<stage>: <what>'``.
 
-    started: dict = field(default_factory=dict)    # key -> perf_counter at start
-    finished: dict = field(default_factory=dict)   # key -> perf_counter at end
-    stage_of: dict = field(default_factory=dict)   # key -> stage
+    ``lane``: testbed runs one at a time, each after the previous one.
+    """
 
-    def stages(self) -> dict[str, tuple[float, float, int]]:
-        """Stage -> (wall span from first start to last end, summed busy time, pieces) [s]."""
-        out: dict[str, list] = {}
+    lane: bool = False
+    stage_of: dict[str, str] = field(default_factory=dict)
+    _last_run: Delayed | None = None
+
+    def add(self, stage: str, what: str, function: Callable[..., Any], *args: Any) -> Delayed:
+        """The call ``function(*args)`` (args may hold results of other stages)."""
+        return self._call(stage, what, function, args, None)
+
+    def run(self, stage: str, what: str, function: Callable[..., Any], *args: Any) -> Delayed:
+        """A testbed run: on the lane (after the previous run) if there is one."""
+        self._last_run = self._call(stage, what, function, args,
+                                    self._last_run if self.lane else None)
+        return self._last_run
+
+    def _call(self, stage: str, what: str, function: Callable[..., Any], args: tuple[Any, ...],
+              after: Delayed | None) -> Delayed:
+        key = f'{stage}: {what}'
+        if key in self.stage_of:
+            raise ValueError(f'two stages are named {key!r}')
+        self.stage_of[key] = stage
+        call: Delayed = delayed(_stage, pure=False)(function, *args, after=after,
+                                                    dask_key_name=key)
+        return call
+
+
+@dataclass
+class StudyGraph:
+    """The study's stages, keyed like the fields of :class:`StudyResults` they fill."""
+
+    models: dict[str, Delayed] = field(default_factory=dict)
+    analytic: dict[Pair, Delayed] = field(default_factory=dict)
+    damping_runs: dict[Pair, Delayed] = field(default_factory=dict)
+    frf_runs: dict[Pair, Delayed] = field(default_factory=dict)
+    step_runs: dict[str, Delayed] = field(default_factory=dict)
+    bending: dict[str, Delayed] = field(default_factory=dict)
+    pma: dict[str, Delayed] = field(default_factory=dict)
+    figures: list[Delayed] = field(default_factory=list)
+    tables: list[Delayed] = field(default_factory=list)
+    graph: Graph = field(default_factory=Graph)
+
+    def outputs(self) -> dict[str, Any]:
+        """The stages by :class:`StudyResults` field (what :func:`compute` computes)."""
+        return {f.name: getattr(self, f.name) for f in fields(self) if f.name != 'graph'}
+
+
+def study_graph(cfg: StudyConfig, out_dir: Path, freq: FloatArray, runs: bool = True,
+                lane: bool = False, fe_model: Path | None = None) -> StudyGraph:
+    """
+    Every stage of the study and what it needs.
+
+    ``runs`` False: analytic stages and figures only (no ROS). ``lane``: testbed runs one at
+    a time. ``fe_model``: an imported FE model's description for the (one) position.
+    """
+    g = StudyGraph(graph=Graph(lane))
+    add, run = g.graph.add, g.graph.run
+    pairs = [(p, s) for p in cfg.positions for s in cfg.scenarios]
+    damped = [(p, s) for p, s in pairs if s in cfg.damping_scenarios] if runs else []
+    step = cfg.step_position
+    pma = [s for s in cfg.scenarios if scenario_pma(s) is not None] if step in cfg.positions \
+        else []
+    for pos in cfg.positions:
+        g.models[pos] = add(MODELS, pos, stages.build_model, cfg, out_dir, pos, fe_model)
+    for pos, scn in pairs:
+        g.analytic[pos, scn] = add(ANALYTIC, f'{pos} {scn}', stages.analyse_scenario, cfg,
+                                   freq, g.models[pos], scn, (pos, scn) in damped)
+    for pos, scn in damped:
+        g.damping_runs[pos, scn] = run(DAMPING_RUNS, f'{pos} {scn}', stages.damping_run, cfg,
+                                       out_dir, g.models[pos], g.analytic[pos, scn])
+    for pos, scn in pairs if runs else []:
+        g.frf_runs[pos, scn] = run(FRF_RUNS, f'{pos} {scn}', stages.frf_run, cfg, out_dir,
+                                   g.models[pos], g.analytic[pos, scn])
+    for scn in pma if runs else []:
+        g.step_runs[scn] = run(FRF_RUNS, f'{step} {scn} step', stages.step_run, cfg, out_dir,
+                               g.models[step], scn)
+    for scn in pma:
+        g.pma[scn] = add(PMA, scn, stages.pma_requirements, cfg, freq, g.models[step],
+                         g.analytic[step, scn])
+    for pos in cfg.positions:
+        g.bending[pos] = add(BENDING, pos, stages.bending_dampers, cfg, freq, g.models[pos])
+    for pos in cfg.positions:
+        g.figures.append(add(FIGURES, pos, figures.position_figures, cfg, out_dir, freq,
+                             g.models[pos], _of(g.analytic, pos), _of(g.frf_runs, pos)))
+    first = cfg.positions[0]
+    g.figures.append(add(FIGURES, 'gain sweeps', figures.sweep_figures, cfg, out_dir,
+                         g.bending, _of(g.analytic, first)))
+    if g.pma:
+        g.figures.append(add(FIGURES, 'PMA requirements', figures.pma_figure, cfg, out_dir,
+                             freq, g.pma, _of(g.frf_runs, step)))
+    if g.step_runs:
+        g.figures.append(add(FIGURES, 'PMA steps', figures.step_figure, cfg, out_dir,
+                             g.step_runs))
+    return g
+
+
+def _of(table: Mapping[Pair, Delayed], position: str) -> dict[str, Delayed]:
+    """The entries of one position, by scenario."""
+    return {scn: value for (pos, scn), value in table.items() if pos == position}
+
+
+@dataclass
+class Progress(Callback):
+    """
+    One line per finished stage (``say``), counted; start and end of every stage.
+
+    dask calls these methods in the thread that called :func:`compute`.
+    """
+
+    stage_of: dict[str, str]
+    say: Callable[[str], None]
+    started: dict[str, float] = field(default_factory=dict)
+    finished: dict[str, float] = field(default_factory=dict)
+    total: int = 0
+
+    def _start_state(self, dsk: Mapping[str, Any], state: Any) -> None:
+        self.total = sum(key in self.stage_of for key in dsk)
+
+    def _pretask(self, key: str, dsk: Any, state: Any) -> None:
+        self.started[key] = time.perf_counter()
+
+    def _posttask(self, key: str, result: Any, dsk: Any, state: Any, worker_id: Any) -> None:
+        self.finished[key] = time.perf_counter()
+        if key in self.stage_of:
+            done = sum(k in self.stage_of for k in self.finished)
+            line = result.describe() if hasattr(result, 'describe') else key
+            if not (isinstance(result, Figures) and not result.paths):
+                self.say(f'({done}/{self.total}) {line}')
+
+    def timeline(self, origin: float) -> list[dict[str, Any]]:
+        """Every stage's task with its start and end [s after ``origin``], in start order."""
+        keys = sorted((k for k in self.finished if k in self.stage_of),
+                      key=self.started.__getitem__)
+        return [{'stage': self.stage_of[k], 'task': k, 'start_s': self.started[k] - origin,
+                 'end_s': self.finished[k] - origin} for k in keys]
+
+    def busy_share(self, jobs: int) -> float:
+        """Summed busy time of the stages over ``jobs`` times first start to last end."""
+        spans = self.timings()
+        if not spans:
+            return math.nan
+        start = min(self.started[k] for k in self.finished if k in self.stage_of)
+        end = max(self.finished[k] for k in self.finished if k in self.stage_of)
+        return sum(busy for _, busy, _ in spans.values()) / (jobs * (end - start))
+
+    def timings(self) -> dict[str, tuple[float, float, int]]:
+        """Stage -> (first start to last end, summed busy time, count) [s]."""
+        spans: dict[str, list[float]] = {}
         for key, end in self.finished.items():
+            if key not in self.stage_of:
+                continue
             start = self.started[key]
-            span = out.setdefault(self.stage_of[key], [start, end, 0.0, 0])
+            span = spans.setdefault(self.stage_of[key], [start, end, 0.0, 0])
             span[0], span[1] = min(span[0], start), max(span[1], end)
             span[2] += end - start
             span[3] += 1
-        return {k: (v[1] - v[0], v[2], v[3]) for k, v in out.items()}
+        return {k: (v[1] - v[0], v[2], int(v[3])) for k, v in spans.items()}
 
 
-def run_pieces(pieces: Iterable[Piece], workers: int, say: Callable[[str], None],
-               schedule: Schedule | None = None, lanes: dict | None = None) -> Schedule:
+def compute(outputs: Any, stage_of: dict[str, str], jobs: int,
+            say: Callable[[str], None]) -> tuple[Any, Progress]:
     """
-    Run ``pieces`` (and those their ``done`` adds), at most ``workers`` at a time.
-
-    ``lanes`` limits how many pieces of a lane run at once (lane -> count).
-
-    Prints (``say``) one line per finished piece, prefixed by its number and the count known.
+    Compute ``outputs`` (a structure of stages) on ``jobs`` threads; the same structure back.
 
     Raises
     ------
     Exception
-        The first error a piece raised (no further piece started; the running ones finished).
+        The first error a stage raised (no further stage started; the running ones finished).
     Interrupted
         If a stop signal arrived.
-    ValueError
-        If a piece waits for a key that no piece has, or two pieces share a key.
     """
-    schedule = Schedule() if schedule is None else schedule
-    lanes = lanes or {}
-    waiting: dict[Hashable, Piece] = {}
-    ready: list = []            # (priority, order, piece), sorted
-    order = itertools.count()
-    finished: set = set()
-    running: dict[Future, Piece] = {}
-    error: BaseException | None = None
-    total = 0
-
-    def add(new: Iterable[Piece]) -> None:
-        nonlocal total
-        for piece in new:
-            if piece.key in waiting or piece.key in schedule.stage_of:
-                raise ValueError(f'two pieces are named {piece.key!r}')
-            waiting[piece.key] = piece
-            schedule.stage_of[piece.key] = piece.stage
-            total += 1
-
-    def release() -> None:
-        for key, piece in list(waiting.items()):
-            if all(k in finished for k in piece.after):
-                del waiting[key]
-                ready.append((piece.priority, next(order), piece))
-        ready.sort(key=lambda item: item[:2])
-
-    def pick() -> Piece | None:
-        """The first ready piece whose lane has room (removed from ``ready``)."""
-        busy: dict = {}
-        for piece in running.values():
-            busy[piece.lane] = busy.get(piece.lane, 0) + 1
-        for i, (_, _, piece) in enumerate(ready):
-            if piece.lane not in lanes or busy.get(piece.lane, 0) < lanes[piece.lane]:
-                return ready.pop(i)[2]
-        return None
-
-    def timed(piece: Piece) -> Any:
-        schedule.started[piece.key] = time.perf_counter()
+    progress = Progress(stage_of, say)
+    values: Any = None
+    with ThreadPoolExecutor(max(1, jobs), thread_name_prefix='study') as pool, progress:
         try:
-            return piece.work()
-        finally:
-            schedule.finished[piece.key] = time.perf_counter()
-
-    add(pieces)
-    release()
-    with ThreadPoolExecutor(max_workers=max(1, workers),
-                            thread_name_prefix='study') as pool:
-        while ready or running:
-            stopping = error is not None or shutdown.requested()
-            while ready and not stopping and len(running) < max(1, workers):
-                piece = pick()
-                if piece is None:
-                    break
-                running[pool.submit(timed, piece)] = piece
-            if not running:
-                break
-            done, _ = wait(running, timeout=POLL, return_when=FIRST_COMPLETED)
-            for future in done:
-                piece = running.pop(future)
-                try:
-                    result = future.result()
-                    line = piece.done(result) if piece.done else None
-                    line, new = line if isinstance(line, tuple) else (line, ())
-                except BaseException as err:       # noqa: B902 (re-raised below)
-                    if error is None and not shutdown.requested():
-                        error = err
-                        shutdown.request(signal.SIGTERM)   # stops the other running runs
-                    continue
-                finished.add(piece.key)
-                if line:
-                    say(f'({len(finished)}/{total}) {line}')
-                add(new)
-                release()
-    if error is not None:
-        raise error
+            (values,) = dask_compute(outputs, scheduler='threads', pool=pool)
+        except BaseException:      # noqa: B902 (re-raised once the running stages end)
+            if not shutdown.requested():
+                shutdown.request(signal.SIGTERM)    # stops the running testbed runs
+                raise
+        # leaving the pool waits for the stages still running
     if shutdown.requested():
         raise Interrupted(shutdown.signal_name(), shutdown.exit_code())
-    if waiting:
-        missing = {k for p in waiting.values() for k in p.after} - set(schedule.stage_of)
-        raise ValueError(f'pieces wait for unknown pieces: {sorted(map(str, missing))}')
-    return schedule
+    return values, progress
+
+
+def run_study(res: StudyResults, jobs: int, say: Callable[[str], None], runs: bool = True,
+              lane: bool = False, fe_model: Path | None = None) -> Progress:
+    """Every stage of the study, ``jobs`` at a time; ``res`` filled in the study's order."""
+    g = study_graph(res.cfg, res.out_dir, res.freq, runs, lane, fe_model)
+    values, progress = compute(g.outputs(), g.graph.stage_of, jobs, say)
+    for name, value in values.items():
+        setattr(res, name, value)
+    return progress

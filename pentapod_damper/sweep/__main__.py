@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+from pathlib import Path
 import sys
 import time
 
@@ -90,7 +91,7 @@ def _print_report(report: SweepReport) -> None:
               'results)')
 
 
-def _plots(store: ResultStore, out_dir) -> None:
+def _plots(store: ResultStore, out_dir: Path) -> None:
     from pentapod_damper.sweep import sweep_plot
     table = store.load()
     paths = sweep_plot.all_figures(table, store.schema, out_dir / 'figures')

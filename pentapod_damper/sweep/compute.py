@@ -11,7 +11,7 @@ from __future__ import annotations
 import os
 import socket
 import time
-from typing import Sequence
+from typing import Any, Sequence
 
 import numpy as np
 
@@ -19,6 +19,7 @@ from pentapod_damper.sweep.loops import DIRECTIONS, Loop, loop_columns
 from pentapod_damper.sweep.poses import AXES, UNITS
 from pentapod_damper.sweep.settings import SweepSettings
 from pentapod_sim.errors import UnreachablePoseError
+from pentapod_sim.fe.model import FEModel
 from pentapod_sim.modes.causes import strain_energy_shares, tcp_directions
 from pentapod_sim.modes.frame_reduction import build_model
 from pentapod_sim.modes.solver import ModalResult, solve_modes
@@ -86,7 +87,7 @@ def columns(settings: SweepSettings) -> list[tuple[str, str, str, str]]:
     return list(dict.fromkeys(cols))
 
 
-def first_modes(fe, f_max: float, modes=None) -> dict:
+def first_modes(fe: FEModel, f_max: float, modes: ModalResult | None = None) -> dict[str, Any]:
     """
     Frequency [Hz] and TCP direction of the first frame mode and the first strut mode.
 
@@ -108,7 +109,7 @@ def first_modes(fe, f_max: float, modes=None) -> dict:
              for k, v in sets.items()}
     cause = np.array(list(total))[np.argmax(np.stack(list(total.values())), axis=0)]
     dirs = tcp_directions(modes, fe.points['tcp'])
-    row = {}
+    row: dict[str, Any] = {}
     for kind in ('frame', 'strut'):
         hits = np.flatnonzero(cause == kind)
         j = int(hits[0]) if hits.size else None
@@ -124,18 +125,18 @@ def loops_of(settings: SweepSettings) -> dict[str, Loop]:
             for label, name, factor in settings.labels()}
 
 
-def evaluate(pose: np.ndarray, settings: SweepSettings) -> dict:
+def evaluate(pose: np.ndarray, settings: SweepSettings) -> dict[str, Any]:
     """Result columns of a reachable pose (raises UnreachablePoseError otherwise)."""
     fe = build_model(settings.machine, np.asarray(pose, dtype=float))
     # one modal solve serves the mode columns and the plant (it was two)
     modes = solve_modes(fe.K, fe.M, f_max=max(settings.mode_f_max,
                                               settings.reduction.modes_f_max))
-    row = {'n_dof': fe.n_dof, **first_modes(fe, settings.mode_f_max, modes)}
+    row: dict[str, Any] = {'n_dof': fe.n_dof, **first_modes(fe, settings.mode_f_max, modes)}
     plant_all, keep = plant_from_fe(fe, settings.reduction, progress=lambda msg: None,
                                     modes=modes)
     plant = reduce_plant(plant_all, keep, settings.reduction.static_correction)
     row['n_modes_kept'] = plant.n_modes
-    freq = np.linspace(*settings.freq[:2], int(settings.freq[2]))
+    freq = np.linspace(settings.freq[0], settings.freq[1], int(settings.freq[2]))
     row.update(loop_columns(plant, loops_of(settings), freq, settings.band,
                             sample_time(settings.sample_rate), settings.pma_force_amplitude,
                             settings.share_labels()))
@@ -155,7 +156,7 @@ def peak_rss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
-def compute_pose(pose: Sequence[float], key: str, settings: SweepSettings) -> dict:
+def compute_pose(pose: Sequence[float], key: str, settings: SweepSettings) -> dict[str, Any]:
     """
     One result row of a pose (never raises; see the module docstring).
 
@@ -169,8 +170,8 @@ def compute_pose(pose: Sequence[float], key: str, settings: SweepSettings) -> di
         What to compute.
     """
     t0, cpu0 = time.perf_counter(), time.process_time()
-    row = {'key': key, 'status': OK, 'error': '',
-           **{a: float(v) for a, v in zip(AXES, pose)}}
+    row: dict[str, Any] = {'key': key, 'status': OK, 'error': '',
+                           **{a: float(v) for a, v in zip(AXES, pose)}}
     try:
         row.update(evaluate(np.asarray(pose, dtype=float), settings))
     except UnreachablePoseError as err:
@@ -184,6 +185,6 @@ def compute_pose(pose: Sequence[float], key: str, settings: SweepSettings) -> di
 
 
 def compute_batch(poses: Sequence[Sequence[float]], keys: Sequence[str],
-                  settings: SweepSettings) -> list[dict]:
+                  settings: SweepSettings) -> list[dict[str, Any]]:
     """Rows of several poses (one Dask task)."""
     return [compute_pose(p, k, settings) for p, k in zip(poses, keys)]

@@ -13,7 +13,11 @@ Units: compliance m/N, frequencies Hz, damping ratios -, stroke m, force N.
 """
 from __future__ import annotations
 
+from typing import Any
+
+import control
 import numpy as np
+import numpy.typing as npt
 import scipy.linalg as sla
 
 from pentapod_damper.laws import ProofMassActuator
@@ -50,7 +54,8 @@ class Loop:
         Linear models of the laws for the sampled-loop check.
     """
 
-    def __init__(self, sections: dict, dt: float, factor: float = 1.0) -> None:
+    def __init__(self, sections: dict[str, dict[str, Any]], dt: float,
+                 factor: float = 1.0) -> None:
         laws = scenario_laws(sections, dt)
         self.factor = float(factor)
         self.dampers = {p: g * factor for p, g in continuous_dampers(laws).items()}
@@ -122,8 +127,9 @@ def paired_damping(lam: np.ndarray, vec: np.ndarray,
     return out
 
 
-def pair_frfs(sys, lam: np.ndarray, vec: np.ndarray, pairs: list[tuple[str, str]],
-              freq: np.ndarray, plant: PlantModel, dampers: dict) -> list[np.ndarray]:
+def pair_frfs(sys: control.StateSpace, lam: np.ndarray, vec: np.ndarray,
+              pairs: list[tuple[str, str]], freq: np.ndarray, plant: PlantModel,
+              dampers: dict[str, float]) -> list[npt.NDArray[np.complex128]]:
     """
     FRFs ``output / input`` of a state space from its eigen-decomposition, pair by pair.
 
@@ -144,7 +150,7 @@ def pair_frfs(sys, lam: np.ndarray, vec: np.ndarray, pairs: list[tuple[str, str]
 
 def loop_columns(plant: PlantModel, loops: dict[str, Loop], freq: np.ndarray,
                  band: tuple[float, float], dt: float, pma_force: float,
-                 shares: list[tuple[str, str, str]]) -> dict:
+                 shares: list[tuple[str, str, str]]) -> dict[str, Any]:
     """
     Result columns of the open loop and of every damped loop at one pose.
 
@@ -170,7 +176,7 @@ def loop_columns(plant: PlantModel, loops: dict[str, Loop], freq: np.ndarray,
     inputs, outputs = ports_needed(list(loops.values()))
     sub = plant.select(inputs, outputs)
     dom = dominant_modes(sub)
-    row: dict = {}
+    row: dict[str, Any] = {}
     for label, loop in [('open', None)] + list(loops.items()):
         dampers = loop.dampers if loop else {}
         sys = damper_feedback(sub, dampers) if dampers else sub.to_statespace()

@@ -14,9 +14,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 import logging
+from pathlib import Path
 import sys
 import time
-from typing import Callable, Sequence
+from typing import Any, Callable, Iterator, Sequence
 
 import numpy as np
 
@@ -38,8 +39,9 @@ class SweepReport:
     poses: int = 0
     skipped: int = 0
     computed: int = 0
-    counts: dict = field(default_factory=dict)     # status -> poses computed now
-    errors: list = field(default_factory=list)     # (pose, error) of failed poses
+    counts: dict[str, int] = field(default_factory=dict)     # status -> poses computed now
+    #: (pose, error) of the failed poses
+    errors: list[tuple[list[float], str]] = field(default_factory=list)
     seconds: float = 0.0
     workers: int = 0
     interrupted: bool = False
@@ -50,7 +52,13 @@ class SweepReport:
         return 60.0 * self.computed / self.seconds if self.seconds > 0 else float('nan')
 
 
-def failed_rows(poses: Sequence, keys: Sequence[str], error: BaseException) -> list[dict]:
+Row = dict[str, Any]
+#: ``compute(poses, keys, settings) -> rows`` of one task.
+Compute = Callable[[Sequence[Sequence[float]], Sequence[str], SweepSettings], list[Row]]
+
+
+def failed_rows(poses: Sequence[Sequence[float]], keys: Sequence[str],
+                error: BaseException) -> list[Row]:
     """Rows of a task that raised instead of returning rows."""
     now = time.time()
     return [{'key': k, 'status': FAILED, 'error': f'{type(error).__name__}: {error}',
@@ -58,18 +66,19 @@ def failed_rows(poses: Sequence, keys: Sequence[str], error: BaseException) -> l
             for p, k in zip(poses, keys)]
 
 
-def _batches(poses: np.ndarray, keys: list[str], size: int):
+def _batches(poses: np.ndarray, keys: list[str],
+             size: int) -> Iterator[tuple[list[list[float]], list[str]]]:
     for start in range(0, len(keys), size):
         yield poses[start:start + size].tolist(), keys[start:start + size]
 
 
-def _progress(total: int, enabled: bool):
+def _progress(total: int, enabled: bool) -> Any:
     from tqdm import tqdm
     return tqdm(total=total, unit='pose', desc='sweep', disable=not enabled, file=sys.stderr,
                 smoothing=0.1)
 
 
-def local_cluster(n_workers: int):
+def local_cluster(n_workers: int) -> Any:
     """A LocalCluster of ``n_workers`` single-threaded processes with single-threaded BLAS."""
     import dask
     from distributed import LocalCluster
@@ -80,10 +89,10 @@ def local_cluster(n_workers: int):
                             dashboard_address=':0', silence_logs=logging.ERROR)
 
 
-def run_sweep(poses: np.ndarray, settings: SweepSettings, out_dir, *,
+def run_sweep(poses: np.ndarray, settings: SweepSettings, out_dir: str | Path, *,
               scheduler: str | None = None, n_workers: int = DEFAULT_WORKERS, batch: int = 1,
-              serial: bool = False, progress: bool = True, compute: Callable = compute_batch,
-              on_rows: Callable[[list[dict]], None] | None = None) -> SweepReport:
+              serial: bool = False, progress: bool = True, compute: Compute = compute_batch,
+              on_rows: Callable[[list[Row]], None] | None = None) -> SweepReport:
     """
     Compute every pose not yet in the store of ``out_dir``.
 
@@ -126,7 +135,7 @@ def run_sweep(poses: np.ndarray, settings: SweepSettings, out_dir, *,
     report = SweepReport(poses=len(keys), skipped=len(keys) - len(todo))
     t0 = time.perf_counter()
 
-    def finish(rows: list[dict]) -> None:
+    def finish(rows: list[Row]) -> None:
         store.write(rows)
         report.computed += len(rows)
         for row in rows:
@@ -154,14 +163,16 @@ def run_sweep(poses: np.ndarray, settings: SweepSettings, out_dir, *,
     return report
 
 
-def _run_dask(tasks, settings, scheduler, n_workers, compute, finish, report) -> None:
+def _run_dask(tasks: list[tuple[list[list[float]], list[str]]], settings: SweepSettings,
+              scheduler: str | None, n_workers: int, compute: Compute,
+              finish: Callable[[list[Row]], None], report: SweepReport) -> None:
     from distributed import as_completed, Client
     cluster = None if scheduler else local_cluster(n_workers)
     if scheduler and scheduler.endswith('.json'):     # dask scheduler --scheduler-file
         client = Client(scheduler_file=scheduler)
     else:
         client = Client(scheduler or cluster)
-    futures = []
+    futures: dict[Any, tuple[list[list[float]], list[str]]] = {}
     try:
         report.workers = len(client.scheduler_info()['workers'])
         shared = client.scatter(settings, broadcast=True)

@@ -60,16 +60,16 @@ class SweepSettings:
         SHA-256 (hex) over everything above and the package version.
     """
 
-    scenarios: tuple
-    gain_factors: tuple
-    freq: tuple
-    band: tuple
+    scenarios: tuple[str, ...]
+    gain_factors: tuple[float, ...]
+    freq: tuple[float, float, int]
+    band: tuple[float, float]
     sample_rate: float
     pma_force_amplitude: float
     mode_f_max: float
     machine: Any
     reduction: Any
-    sections: dict
+    sections: dict[str, dict[str, dict[str, Any]]]
     digest: str = ''
 
     def labels(self) -> list[tuple[str, str, float]]:

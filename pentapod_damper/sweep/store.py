@@ -14,7 +14,7 @@ import hashlib
 import json
 import os
 from pathlib import Path
-from typing import Sequence
+from typing import Any, Sequence
 
 import numpy as np
 import pyarrow as pa
@@ -74,7 +74,7 @@ class ResultStore:
         """The finished task files."""
         return sorted(self.results.glob('*.parquet')) if self.results.exists() else []
 
-    def write(self, rows: Sequence[dict]) -> Path:
+    def write(self, rows: Sequence[dict[str, Any]]) -> Path:
         """One file with ``rows`` (missing columns become null), named after their keys."""
         table = pa.Table.from_pylist([self._typed(r) for r in rows], schema=self.schema)
         name = hashlib.sha256('|'.join(r['key'] for r in rows).encode()).hexdigest()[:16]
@@ -84,7 +84,7 @@ class ResultStore:
         os.replace(tmp, path)
         return path
 
-    def _typed(self, row: dict) -> dict:
+    def _typed(self, row: dict[str, Any]) -> dict[str, Any]:
         out = {}
         for field in self.schema:
             value = row.get(field.name)

@@ -9,18 +9,27 @@ their paths.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import matplotlib
 
 matplotlib.use('Agg')
+from matplotlib.axes import Axes  # noqa: E402
 from matplotlib.colors import Normalize, TwoSlopeNorm  # noqa: E402
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+import numpy.typing as npt  # noqa: E402
 import pyarrow as pa  # noqa: E402
 
 from pentapod_damper.sweep.store import as_arrays  # noqa: E402
 from pentapod_sim.figures import save_figure  # noqa: E402
 
+#: Columns of a result table as arrays (:func:`pentapod_damper.sweep.store.as_arrays`).
+Data = dict[str, npt.NDArray[Any]]
+#: One slice of the poses: z [m], a [rad], b [rad].
+Slice = tuple[float, float, float]
+#: x and y axes [m], the (ny, nx) values and the status of each pose of one slice.
+Grid = tuple[npt.NDArray[Any], npt.NDArray[Any], npt.NDArray[Any], npt.NDArray[Any]]
 #: The paper's claim: struts 1 and 2 give at least this share of the all-struts benefit.
 CLAIM = 0.7
 DIRS = ('xx', 'yy', 'zz')
@@ -29,19 +38,19 @@ DISPLAY = {'m/N': (1e6, 'um/N'), 'm': (1e3, 'mm'), '-': (1.0, '-'), 'Hz': (1.0, 
            'N': (1.0, 'N')}
 
 
-def slices(data: dict) -> list[tuple[float, float, float]]:
+def slices(data: Data) -> list[Slice]:
     """Distinct (z [m], a [rad], b [rad]) of the poses, rounded to 1 um / 1 urad."""
     keys = np.round(np.stack([data['z'], data['a'], data['b']], axis=1), 6)
-    return [tuple(k) for k in np.unique(keys, axis=0)]
+    return [(float(z), float(a), float(b)) for z, a, b in np.unique(keys, axis=0)]
 
 
-def slice_name(zab: tuple[float, float, float]) -> str:
+def slice_name(zab: Slice) -> str:
     """File-name part of a slice, e.g. ``z0.850_a0.0_b10.0`` (tilts in degrees)."""
     z, a, b = zab
     return f'z{z:.3f}_a{np.degrees(a):.1f}_b{np.degrees(b):.1f}'
 
 
-def _grid(data: dict, zab, name: str):
+def _grid(data: Data, zab: Slice, name: str) -> Grid | None:
     """x, y axes and the (ny, nx) values of one slice; None if it is not a 2-D grid."""
     sel = np.all(np.isclose(np.stack([data['z'], data['a'], data['b']], axis=1), zab,
                             atol=1e-6), axis=1)
@@ -57,8 +66,8 @@ def _grid(data: dict, zab, name: str):
     return xs, ys, values, status
 
 
-def _panel(ax, grid, title: str, unit: str, contour: float | None = None,
-           vlim: tuple | None = None, cmap: str = 'viridis') -> None:
+def _panel(ax: Axes, grid: Grid, title: str, unit: str, contour: float | None = None,
+           vlim: tuple[float, float] | None = None, cmap: str = 'viridis') -> None:
     xs, ys, values, status = grid
     scale, shown = DISPLAY.get(unit, (1.0, unit))
     if unit == '-' and contour is not None:
@@ -67,6 +76,7 @@ def _panel(ax, grid, title: str, unit: str, contour: float | None = None,
     finite = z[np.isfinite(z)]
     if vlim is None and finite.size:
         vlim = (finite.min(), finite.max())
+    norm: Normalize | None
     if contour is not None and vlim is not None:    # the claim's value in the colour map's middle
         norm = TwoSlopeNorm(contour * scale, vlim[0], vlim[1])
     else:
@@ -87,8 +97,9 @@ def _panel(ax, grid, title: str, unit: str, contour: float | None = None,
     ax.set_aspect('equal')
 
 
-def map_figure(data: dict, units: dict, zab, panels: list[tuple[str, str]], path: Path,
-               title: str, contour: float | None = None, vlim=None, cmap: str = 'viridis',
+def map_figure(data: Data, units: dict[str, str], zab: Slice, panels: list[tuple[str, str]],
+               path: Path, title: str, contour: float | None = None,
+               vlim: tuple[float, float] | None = None, cmap: str = 'viridis',
                ncols: int = 3) -> Path | None:
     """
     One figure of x-y maps of a slice, a panel per (column, panel title).
@@ -102,7 +113,9 @@ def map_figure(data: dict, units: dict, zab, panels: list[tuple[str, str]], path
     ncols = min(ncols, len(panels))
     fig, axes = plt.subplots(nrows, ncols, figsize=(4.3 * ncols, 3.6 * nrows), squeeze=False)
     for ax, (col, text) in zip(axes.flat, panels):
-        _panel(ax, _grid(data, zab, col), text, units.get(col, '-'), contour, vlim, cmap)
+        grid = _grid(data, zab, col)
+        assert grid is not None                 # the same poses as the first panel's
+        _panel(ax, grid, text, units.get(col, '-'), contour, vlim, cmap)
     for ax in list(axes.flat)[len(panels):]:
         ax.set_visible(False)
     z, a, b = zab
@@ -111,12 +124,12 @@ def map_figure(data: dict, units: dict, zab, panels: list[tuple[str, str]], path
     return save_figure(fig, path)
 
 
-def _labels(data: dict) -> list[str]:
+def _labels(data: Data) -> list[str]:
     """Damped loop labels present in the columns."""
     return sorted({c[len('peak_xx_'):] for c in data if c.startswith('peak_xx_')} - {'open'})
 
 
-def _reductions(data: dict) -> None:
+def _reductions(data: Data) -> None:
     """Add ``red_{kind}_{dd}_{label}`` = open / damped (peak and RMS) columns."""
     for label in _labels(data):
         for kind in ('peak', 'rms'):
@@ -142,7 +155,7 @@ def all_figures(table: pa.Table, schema: pa.Schema, fig_dir: str | Path,
     paths = []
     for zab in slices(data):
         name = slice_name(zab)
-        figures = [
+        figures: list[tuple[str, str, list[tuple[str, str]], dict[str, Any]]] = [
             ('modes', 'First frame and strut mode, dominant modes',
              [('frame_mode_f', 'first frame mode'), ('strut_mode_f', 'first strut mode'),
               ('n_modes_kept', 'modes kept')]
@@ -173,7 +186,7 @@ def all_figures(table: pa.Table, schema: pa.Schema, fig_dir: str | Path,
     return paths + ([summary] if summary else [])
 
 
-def claim_fractions(data: dict) -> dict[tuple[str, str], tuple[int, int]]:
+def claim_fractions(data: Data) -> dict[tuple[str, str], tuple[int, int]]:
     """(kind, dd) -> (poses where the share is >= 70 %, poses with a share) over ok poses."""
     ok = data['status'] == 'ok'
     out = {}
@@ -202,7 +215,7 @@ def claim_lines(table: pa.Table) -> list[str]:
     return lines
 
 
-def claim_summary(data: dict, path: Path) -> Path | None:
+def claim_summary(data: Data, path: Path) -> Path | None:
     """Bar chart: fraction of reachable poses where the 70 % claim holds, by direction."""
     fractions = claim_fractions(data)
     if not fractions:

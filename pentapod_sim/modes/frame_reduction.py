@@ -168,7 +168,7 @@ def build_model(machine: MachineParams, pose: npt.ArrayLike | str,
 def main(argv: Sequence[str] | None = None) -> int:
     """Reduce and cache the plate frame of a machine file (progress on stderr)."""
     parser = argparse.ArgumentParser(prog='python -m pentapod_sim.modes.frame_reduction',
-                                     description=__doc__.split('\n\n')[0])
+                                     description=__doc__.split('\n\n')[0], allow_abbrev=False)
     parser.add_argument('--machine', help='machine.yaml (default: the package config)')
     parser.add_argument('--element-size', type=float,
                         help='shell element edge [m] (default: shell_frame.element_size)')

@@ -116,7 +116,7 @@ class WarmStarter:
 
     _lock = threading.Lock()
 
-    def __init__(self):
+    def __init__(self) -> None:
         self._context = multiprocessing.get_context('forkserver')
 
     def start(self, command: list[str], env: dict[str, str], log: Path | None = None

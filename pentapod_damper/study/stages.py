@@ -1,0 +1,110 @@
+"""
+The study's stages: plain functions from the settings and earlier results to one typed record.
+
+Each function computes one thing for one position or one (position, scenario) and returns a
+record of :mod:`pentapod_damper.study.records`; :mod:`pentapod_damper.study.schedule` says what
+each needs and runs them. ROS appears only in the testbed runs
+(:func:`pentapod_damper.study.runs.run_on_testbed` starts the nodes).
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+from pentapod_damper.study import bending, damping, measured_damping, pipeline
+from pentapod_damper.study.config import StudyConfig
+from pentapod_damper.study.figures import FIGURE_LOCK
+from pentapod_damper.study.records import (
+    BendingComparison,
+    DampingRun,
+    FloatArray,
+    FrfRun,
+    PmaRequirements,
+    PositionModel,
+    ScenarioAnalytic,
+    StepRun,
+)
+from pentapod_damper.study.runs import damping_excitation, run_on_testbed
+
+
+def build_model(cfg: StudyConfig, out_dir: Path, position: str,
+                fe_model: Path | None = None) -> PositionModel:
+    """The reduced plant of a position (saved for the plant node) and its check model."""
+    notes: list[str] = []
+    model = pipeline.prepare_model(position, out_dir, notes.append, cfg, fe_model)
+    model.origin = notes[-1] if notes else ''
+    return model
+
+
+def analyse_scenario(cfg: StudyConfig, freq: FloatArray, model: PositionModel, scenario: str,
+                     damping_run: bool) -> ScenarioAnalytic:
+    """
+    Analytic FRFs, truncation check and the dominant modes of one scenario's loop.
+
+    One computation of the loop's poles serves the table of dominant modes and, if the
+    scenario has a ``damping_run``, the modes that set its settling time.
+    """
+    ana = pipeline.scenario_analytic(model, scenario, cfg, freq)
+    dt = cfg.dt
+    poles = damping.loop_poles(model.plant, ana.laws, dt)
+    ana.modes = damping.scenario_rows(model.plant, model.position, scenario, dt, laws=ana.laws,
+                                      poles=poles)
+    if damping_run:
+        ana.settle_modes = measured_damping.settle_rows(model.plant, ana.laws, dt,
+                                                        cfg.direction, poles)
+    return ana
+
+
+def frf_run(cfg: StudyConfig, out_dir: Path, model: PositionModel,
+            analytic: ScenarioAnalytic) -> FrfRun:
+    """A random-excitation run on the testbed; its TCP FRF against the sampled loop's."""
+    run = run_on_testbed(analytic.name, model.position, model.model_file, model.model_hash,
+                         cfg, out_dir)
+    mes = pipeline.measure(run, cfg)
+    dev, share = pipeline.deviation_db(mes, analytic.discrete,
+                                       f'tcp_displacement_{cfg.direction}', cfg,
+                                       float(cfg.band[0]))
+    return FrfRun(mes, dev, share)
+
+
+def damping_run(cfg: StudyConfig, out_dir: Path, model: PositionModel,
+                analytic: ScenarioAnalytic) -> DampingRun:
+    """
+    A multisine run on the testbed, its modes identified and paired with the loop's poles.
+
+    It settles for :attr:`StudyConfig.damping_time_constants` decay times of the slowest of
+    the loop's strongest modes (:attr:`ScenarioAnalytic.settle_modes`).
+    """
+    pos, scn, d = model.position, analytic.name, cfg.direction
+    settle = damping.settling_time(analytic.settle_modes, cfg.damping_time_constants)
+    exciter = damping_excitation(cfg, settle)
+    run = run_on_testbed(scn, pos, model.model_file, model.model_hash, cfg, out_dir,
+                         kind='damping', exciter=exciter)
+    ident = measured_damping.identify_run(run.bag, d, cfg.damping_band)
+    modes = measured_damping.compare(analytic.modes, ident, model.plant, analytic.laws, cfg.dt,
+                                     d, analytic.sampled)
+    with FIGURE_LOCK:
+        paths = measured_damping.figures(ident, out_dir / 'figures', f'{pos}_{scn}')
+    return DampingRun(run, int(exciter['settle_periods']), cfg.damping_period,
+                      cfg.damping_periods, cfg.damping_time_constants, ident, modes, paths)
+
+
+def step_run(cfg: StudyConfig, out_dir: Path, model: PositionModel, scenario: str) -> StepRun:
+    """A step-response run of a PMA scenario: the PMA's stroke and force over time."""
+    run = run_on_testbed(scenario, model.position, model.model_file, model.model_hash, cfg,
+                         out_dir, kind='step')
+    return StepRun(run, *pipeline.step_series(run, cfg))
+
+
+def bending_dampers(cfg: StudyConfig, freq: FloatArray,
+                    model: PositionModel) -> BendingComparison:
+    """Both strut bending damper models: gain sweeps, optimal gains, struts 1+2 shares."""
+    band = (float(cfg.band[0]), float(cfg.f_max))
+    return bending.compare(model.plant, model.position, cfg.direction, band, freq)
+
+
+def pma_requirements(cfg: StudyConfig, freq: FloatArray, model: PositionModel,
+                     analytic: ScenarioAnalytic) -> PmaRequirements:
+    """Stroke and force of a scenario's PMA: as run, and the designs ideal and high-pass."""
+    stroke, force = pipeline.pma_curves(model, analytic, cfg, freq)
+    return PmaRequirements(analytic.name, stroke, force,
+                           *pipeline.pma_designs(model, analytic, cfg))
