@@ -55,7 +55,7 @@ def parser() -> CommandParser:
                    'file) whose force sources other than the exciter are the controller')
     how = p.add_mutually_exclusive_group()
     how.add_argument('--command', help='command line started for every run (separate '
-                     'processes, in the run\'s ROS domain)')
+                     "processes, in the run's ROS domain)")
     how.add_argument('--node', help='name of a node that already runs (on ROS_DOMAIN_ID, 0 if '
                      'unset)')
     how.add_argument('--compare', nargs=2, metavar=('A', 'B'), help='judge A with B in the '
@@ -68,7 +68,7 @@ def parser() -> CommandParser:
     p.add_argument('--sensors', help='output ports it reads, comma-separated (default: its '
                    'published model, else the velocities collocated with its ports)')
     p.add_argument('--config', help='settings and thresholds (default config/judge.yaml)')
-    p.add_argument('--positions', help='positions, comma-separated (default: the config\'s)')
+    p.add_argument('--positions', help="positions, comma-separated (default: the config's)")
     p.add_argument('--sample-rate', type=float, help='plant sample rate [Hz]')
     p.add_argument('--directions', help='TCP directions, e.g. xyz or x')
     p.add_argument('--reference', help='scenario of the reference law (none: no reference)')

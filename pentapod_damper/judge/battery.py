@@ -28,8 +28,8 @@ from pentapod_damper.judge.machining import (
     StableDepth,
 )
 from pentapod_damper.judge.measure import (
-    Analytic,
     analyse_multisine,
+    Analytic,
     analytic_reference,
     MultisineRun,
 )
@@ -44,8 +44,8 @@ from pentapod_damper.judge.runs import (
     MULTISINE,
     ROBUSTNESS,
     run_document,
-    RunRecord,
     Runner,
+    RunRecord,
     RunSpec,
     settle_periods,
 )

@@ -24,9 +24,9 @@ from pathlib import Path
 import shlex
 from typing import Any
 
+from pentapod_sim import registry
 from pentapod_sim.errors import ConfigError
 from pentapod_sim.parameters import load_class, NODE_CLASS, NodeParams
-from pentapod_sim import registry
 from pentapod_sim.registry import SOURCE
 from pentapod_sim.scenario.files import read_scenario, resolve
 from pentapod_sim.schema import read_mapping

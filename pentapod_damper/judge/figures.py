@@ -1,6 +1,8 @@
 """
-The report's figures (PNG): TCP compliance per direction, the controller's identified FRF, the
-return-difference margin of its loop, the stability lobes.
+The report's figures (PNG).
+
+TCP compliance per direction, the controller's identified FRF, the return-difference margin
+of its loop, the stability lobes.
 """
 from __future__ import annotations
 

@@ -1,6 +1,8 @@
 """
-What a multisine run's bag gives: the TCP FRFs at the lines, the identified modes, the peak and
-the RMS of the compliance, and the analytic sampled-loop reference where a model exists.
+What a multisine run's bag gives.
+
+The TCP FRFs at the lines, the identified modes, the peak and the RMS of the compliance, and
+the analytic sampled-loop reference where a model exists.
 
 The FRFs come from the stored excitation (synchronous averaging over whole periods after the
 settling periods, :func:`pentapod_sim.analysis.frf.from_run.frfs_from_bag`) for the TCP

@@ -74,7 +74,7 @@ def _causes(position: str, plant: PlantModel, cache_dir: Path) -> tuple[list[str
         return list(doc['cause']), list(doc['tcp_direction'])
     except (OSError, ValueError, KeyError):
         pass
-    from pentapod_sim.fe.machine_data import load_machine   # FE code only when needed
+    from pentapod_sim.fe.machine_data import load_machine  # FE code only when needed
     from pentapod_sim.modes.causes import analyse_causes
     from pentapod_sim.modes.frame_reduction import build_model
     from pentapod_sim.modes.solver import solve_modes

@@ -1,7 +1,9 @@
 """
-One page per judged controller: the summary table first, then every section with its tables
-and figures; written as ``report.md`` (with PNG files in ``figures/``), a self-contained
-``report.html`` and ``numbers.csv`` (every number of every table).
+One page per judged controller.
+
+The summary table first, then every section with its tables and figures; written as
+``report.md`` (with PNG files in ``figures/``), a self-contained ``report.html`` and
+``numbers.csv`` (every number of every table).
 """
 from __future__ import annotations
 
@@ -17,8 +19,8 @@ from pentapod_damper.judge.controller import Controller
 from pentapod_damper.judge.document import (
     Block,
     Column,
-    csv_text,
     CSV_HEADER,
+    csv_text,
     Figure,
     Heading,
     html_page,
@@ -29,6 +31,8 @@ from pentapod_damper.judge.document import (
 from pentapod_damper.judge.verdict import overall, Summary
 from pentapod_sim.machining.lobe_plot import lobe_diagram
 from pentapod_sim.machining.materials import load_machining
+
+ASSUMED = ', assumed: the velocities collocated with its ports'
 
 
 def _how(ctrl: Controller) -> str:
@@ -59,21 +63,21 @@ def intro(cfg: JudgeConfig, ctrl: Controller, ref: str | None,
              f'{cfg.multisine.band[1]:g} Hz, {cfg.multisine.amplitude:g} N peak, lines '
              f'{1 / cfg.multisine.period:g} Hz apart, settled {first.settle_periods} periods of '
              f'{cfg.multisine.period:g} s, {cfg.multisine.periods} averaged; modes identified '
-             'by pLSCF + LSFD. The damping compares the baseline\'s '
+             "by pLSCF + LSFD. The damping compares the baseline's "
              f'{cfg.identification.modes} dominant modes per direction (FE mode number, plant '
              'index and cause).']
     if rob is not None:
         sensors = ', '.join(rob.sensors)
         rests.append(
-            f'Loop check: the controller\'s FRF u / y identified from a run with white noise '
+            f"Loop check: the controller's FRF u / y identified from a run with white noise "
             f'on {", ".join(rob.ports)} (sensors {sensors}'
-            f'{", assumed: the velocities collocated with its ports" if rob.sensors_assumed else ""}'
+            f'{ASSUMED if rob.sensors_assumed else ""}'
             f'), closed with the reduced plant ({first.position.plant.n_modes} modes) and '
             + (f'the check model ({check.n_modes} FE modes below '
                f'{check.meta.get("check_f_max_hz", 0):.0f} Hz)' if check is not None
                else 'no check model (a model file without one: the truncated modes are not '
                'checked)')
-            + '; the open loop is taken as stable (the plant is; a black box\'s own poles '
+            + "; the open loop is taken as stable (the plant is; a black box's own poles "
             'cannot be seen from its FRF).')
     return [Heading(f'Judgement of {ctrl.label}', 1), Paragraph(text),
             Paragraph(' '.join(rests))]

@@ -140,9 +140,9 @@ def assess(bag_path: Path, sources: Sequence[str], given_sensors: Sequence[str],
     sensors, assumed = sensors_of(models, given_sensors, ports)
     y, u = loop_signals(bag, sources, ports, sensors, dt)
     frf = mimo_frf([(y, u)], dt, min(nperseg, y.shape[0]), sensors, ports)
-    inner = frf.coherence[1:]
-    coherence = float(np.nanmin(inner)) if np.isfinite(inner).any() else float('nan')
-    if not np.all(frf.identifiable[1:]):
+    finite = np.isfinite(frf.coherence)
+    coherence = float(np.min(frf.coherence[finite])) if finite.any() else float('nan')
+    if not np.all(frf.identifiable):
         raise BagError(f'{bag_path}: the controller reads {len(sensors)} sensors that the run '
                        'did not excite independently; give the sensors it reads (--sensors)')
     plants = {'plant': plant}

@@ -16,6 +16,7 @@ import numpy as np
 
 from pentapod_damper.judge.battery import Judged, PositionResult
 from pentapod_damper.judge.config import JudgeConfig
+from pentapod_damper.judge.demand import RunFaults
 from pentapod_damper.judge.machining import depth_mm
 from pentapod_sim.sim.stability import STABLE, TRUNCATION, UNSTABLE
 
@@ -273,10 +274,14 @@ class Summary:
                      judge(value <= limit))
         self.add(res, 'steps published again (an answer was late)', '-',
                  lambda j: total(j, 'late_steps'), '-', INFO)
-        ended = all(f.state == 'finished' and f.steps == f.planned for f in mine)
+        ended = all(_complete(f) for f in mine)
         self.add(res, 'runs that finished every planned step', '-',
-                 lambda j: (f'{sum(f.state == "finished" and f.steps == f.planned for f in j.faults)}'
-                            f'/{len(j.faults)}') if j.faults else '-', 'all', judge(ended))
+                 lambda j: (f'{sum(_complete(f) for f in j.faults)}/{len(j.faults)}'
+                            if j.faults else '-'), 'all', judge(ended))
+
+
+def _complete(f: RunFaults) -> bool:
+    return f.state == 'finished' and f.steps == f.planned
 
 
 def overall(rows: Sequence[Row]) -> str:

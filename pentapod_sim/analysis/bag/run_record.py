@@ -1,6 +1,8 @@
 """
-What a bag says about its run (ROS-free): the plant's run status, the recorder's counts, the
-linear models the sources published, and how the steps of a per-step topic were answered.
+What a bag says about its run (ROS-free).
+
+The plant's run status, the recorder's counts, the linear models the sources published, and
+how the steps of a per-step topic were answered.
 
 * :func:`run_statuses`: every ``/pentapod/run_status`` message (diagnostic_msgs/DiagnosticStatus)
   as its key/value mapping, in order; the last one holds ``state`` (finished or stopped),

@@ -8,6 +8,9 @@ exactly and the H1 estimate from auto and cross spectra is unbiased up to leakag
 the spectra of y have full rank: at least as many independent excitations as inputs
 (:mod:`pentapod_sim.sim.disturbance`). Spectra are Welch averages (Hann window, 50 % overlap,
 :func:`scipy.signal.csd`), summed over several records (independent experiments) if given.
+Segments are not detrended: removing each segment's mean from y and from u separately breaks
+``u = K y`` for a controller with memory, which cost the lowest bins their estimate (multiple
+coherence 0.87 at 5.9 Hz for the shipped TCP damper, 1.0000 without).
 
 The *multiple coherence* of output i, ``gamma_i^2 = (S_uy S_yy^-1 S_yu)_ii / S_uu,ii``, is the
 share of its power that is a linear function of all inputs: 1 for a linear time-invariant
@@ -82,7 +85,7 @@ def _spectra(a: npt.NDArray[np.float64], b: npt.NDArray[np.float64], fs: float,
              nperseg: int) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.complex128]]:
     """Cross spectral matrix S[f, i, j] = csd(a_i, b_j) = E[conj(A_i) B_j] of two column sets."""
     freq, s = scipy.signal.csd(a.T[:, None, :], b.T[None, :, :], fs=fs, window='hann',
-                               nperseg=nperseg, axis=-1)
+                               nperseg=nperseg, detrend=False, axis=-1)
     return freq, np.moveaxis(s, -1, 0)
 
 
@@ -116,8 +119,9 @@ def mimo_frf(records: Sequence[tuple[npt.ArrayLike, npt.ArrayLike]], dt: float, 
     segments = 0
     n_in = n_out = -1
     for y_raw, u_raw in records:
-        y = np.asarray(y_raw, dtype=float).reshape(len(y_raw), -1)
-        u = np.asarray(u_raw, dtype=float).reshape(len(u_raw), -1)
+        y_arr, u_arr = np.asarray(y_raw, dtype=float), np.asarray(u_raw, dtype=float)
+        y = y_arr.reshape(y_arr.shape[0], -1)
+        u = u_arr.reshape(u_arr.shape[0], -1)
         if y.shape[0] != u.shape[0]:
             raise ValueError(f'inputs have {y.shape[0]} samples, outputs {u.shape[0]}')
         if n_in >= 0 and (y.shape[1], u.shape[1]) != (n_in, n_out):
