@@ -10,6 +10,7 @@ published in their recordings.
 """
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 import logging
 from pathlib import Path
@@ -143,7 +144,7 @@ def run_position(cfg: JudgeConfig, pos: PositionModel, controllers: Sequence[Con
                 raise_no_ports(ctrl)
             record = _run(runner, spec, cfg, pos, settle, ports, ctrl.sensors)
             judged.records.append(record)
-            if ctrl is not BASELINE and not ports:
+            if ctrl is not BASELINE and not ports and not record.failed:
                 ports = answered_ports(open_bag(record.bag), ctrl.sources)
                 say(f'{ctrl.label} answers on {", ".join(ports)}')
         analyse(cfg, pos, result, judged, sections, say)
@@ -164,7 +165,11 @@ def analyse(cfg: JudgeConfig, pos: PositionModel, result: PositionResult, judged
     ctrl, dt = judged.controller, cfg.dt
     band = cfg.multisine.band
     t0 = time.perf_counter()
-    by_kind = {(r.spec.kind, r.spec.direction): r for r in judged.records}
+    # a run that ended early is judged by its faults only; a multisine section needs every
+    # direction, so one failed multisine run leaves them all out
+    by_kind = {(r.spec.kind, r.spec.direction): r for r in judged.records if not r.failed}
+    if any(r.failed and r.spec.kind == MULTISINE for r in judged.records):
+        by_kind = {k: r for k, r in by_kind.items() if k[0] != MULTISINE}
     if ctrl is BASELINE:
         judged.models = []
     elif by_kind:
@@ -187,7 +192,8 @@ def analyse(cfg: JudgeConfig, pos: PositionModel, result: PositionResult, judged
             judged.machining = stable_depth(
                 judged.multisine, {d: by_kind[(MULTISINE, d)].bag for d in ('x', 'y')},
                 milling_cut(cfg.operation), band, ctrl.label, analytic)
-    judged.faults = [faults(r.bag, r.spec.name, r.spec.steps, ctrl.sources, dt)
+    judged.faults = [dataclasses.replace(faults(r.bag, r.spec.name, r.spec.steps,
+                                                ctrl.sources, dt), error=r.failed)
                      for r in judged.records]
     if (ROBUSTNESS, '') in by_kind:
         judged.robustness = assess(by_kind[(ROBUSTNESS, '')].bag, ctrl.sources, ctrl.sensors,

@@ -34,7 +34,7 @@ class Multisine:
                                    description='lines of the Schroeder multisine at the TCP')
     period: float = spec('s', POSITIVE, description='period (line spacing 1 / period)')
     amplitude: float = spec('N', POSITIVE, description='peak force of the multisine')
-    periods: int = spec('-', POSITIVE, description='periods averaged after settling')
+    periods: int = spec('-', POSITIVE, description='periods averaged after settling (>= 2)')
     time_constants: float = spec('-', POSITIVE, description='settling time in decay times of '
                                  "the slowest of the baseline's strongest modes")
     settle_modes: int = spec('-', POSITIVE, description='strongest modes of the baseline in '
@@ -43,6 +43,9 @@ class Multisine:
     def __post_init__(self) -> None:
         if not self.band[0] < self.band[1]:
             raise ConfigError(f'band = {list(self.band)} Hz must increase')
+        if self.periods < 2:
+            raise ConfigError(f'periods = {self.periods}: at least 2 are averaged (the '
+                              'settling error compares them)')
 
 
 @dataclass(frozen=True)

@@ -107,6 +107,7 @@ class RunFaults:
     late_steps: int           # steps the plant published again (an answer was late)
     repeated_answers: int     # answers recorded twice for a step
     absent_answers: int       # steps without an answer between the first and the last
+    error: str = ''           # why the run ended early ('' if it did not)
 
 
 def faults(bag_path: Path, run: str, planned: int, sources: Sequence[str],

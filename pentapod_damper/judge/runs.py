@@ -92,6 +92,7 @@ class RunRecord:
     scenario_file: Path
     wall_time: float
     reused: bool
+    failed: str = ''        # why the run ended early (a controller's run only), '' if it did not
 
 
 def settle_time(plant: Any, direction: str, band: tuple[float, ...], count: int) -> float:
@@ -265,10 +266,19 @@ class Runner:
         t0 = time.perf_counter()
         code = self._start(spec.controller, path, folder, spec.steps)
         wall = time.perf_counter() - t0
+        has_bag = (bag / 'metadata.yaml').is_file()
         if code != 0:
-            raise RunError(f'run {spec.name} failed (exit code {code}): {_errors(folder)}; '
-                           f'scenario {path}, node logs in {folder / "logs"}')
-        if not (bag / 'metadata.yaml').is_file():
+            why = (f'run {spec.name} failed (exit code {code}): {_errors(folder)}; '
+                   f'scenario {path}, node logs in {folder / "logs"}')
+            if spec.controller.how == 'baseline' or not has_bag or shutdown.requested():
+                raise RunError(why)
+            # the controller's fault (an unstable loop, efforts over the plant's limit, a
+            # silent node): a verdict, not an error; its bag shows what happened until then
+            self.done += 1
+            self.say(f'run {index}/{len(self.plan)} {spec.name}: ended early: {_errors(folder)}'
+                     f'; {self.left()}')
+            return RunRecord(spec, bag, path, wall, False, _errors(folder))
+        if not has_bag:
             raise RunError(f'run {spec.name}: the recorder left no complete bag in {bag}')
         done.write_text(json.dumps({'wall_time': wall, 'steps': spec.steps}))
         self.done += 1

@@ -274,6 +274,11 @@ class Summary:
                      judge(value <= limit))
         self.add(res, 'steps published again (an answer was late)', '-',
                  lambda j: total(j, 'late_steps'), '-', INFO)
+        for f in mine:
+            if f.error:
+                self.add(res, f'run {f.run} ended early at step {f.steps} of {f.planned}: '
+                         f'{f.error}', '-', lambda j: '-',
+                         'every run ends', FAIL)
         ended = all(_complete(f) for f in mine)
         self.add(res, 'runs that finished every planned step', '-',
                  lambda j: (f'{sum(_complete(f) for f in j.faults)}/{len(j.faults)}'
