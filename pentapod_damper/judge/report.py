@@ -28,7 +28,7 @@ from pentapod_damper.judge.document import (
     Paragraph,
     Table,
 )
-from pentapod_damper.judge.verdict import overall, Summary
+from pentapod_damper.judge.verdict import overall, Row, Summary
 from pentapod_sim.machining.lobe_plot import lobe_diagram
 from pentapod_sim.machining.materials import load_machining
 
@@ -83,7 +83,7 @@ def intro(cfg: JudgeConfig, ctrl: Controller, ref: str | None,
             Paragraph(' '.join(rests))]
 
 
-def summary_table(rows: list, ctrl: str, ref: str | None) -> Table:
+def summary_table(rows: list[Row], ctrl: str, ref: str | None) -> Table:
     """The summary: criterion, baseline, controller, reference, threshold, verdict."""
     table = Table('summary', [Column('position'), Column('criterion'), Column('unit'),
                               Column('baseline'), Column(ctrl),
@@ -108,10 +108,11 @@ def position_blocks(res: PositionResult, labels: list[str], cfg: JudgeConfig,
                        f'{name}: TCP compliance per direction')]
         machining = tables.machining_table(res, labels)
         if machining is not None:
-            limits = [res.judged[lb].machining.limit for lb in labels
-                      if lb in res.judged and res.judged[lb].machining is not None]
+            depths = [res.judged[lb].machining for lb in labels if lb in res.judged]
+            limits = [d.limit for d in depths if d is not None]
             table = load_machining()
-            diagram = lobe_diagram(limits, np.linspace(*table.spindle_speeds, 2000),
+            low, high = table.spindle_speeds
+            diagram = lobe_diagram(limits, np.linspace(low, high, 2000),
                                    folder / f'lobes_{name}', title=f'{name}: {cfg.operation}, '
                                    'identified TCP FRF')
             out += [Heading('Machining', 3), machining,
@@ -137,7 +138,7 @@ def position_blocks(res: PositionResult, labels: list[str], cfg: JudgeConfig,
 
 
 def write_page(cfg: JudgeConfig, ctrl: Controller, ref: str | None,
-               results: Sequence[PositionResult], folder: Path) -> tuple[Path, str, list]:
+               results: Sequence[PositionResult], folder: Path) -> tuple[Path, str, list[Row]]:
     """Write one controller's page; return the Markdown path, the verdict and the rows."""
     folder.mkdir(parents=True, exist_ok=True)
     summary = Summary(cfg, ctrl.label, ref)

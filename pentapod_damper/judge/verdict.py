@@ -9,6 +9,7 @@ names), ``info`` (no threshold) and ``not judged`` (the value could not be measu
 from __future__ import annotations
 
 from dataclasses import dataclass
+import functools
 import math
 from typing import Callable, Sequence
 
@@ -189,7 +190,7 @@ class Summary:
             if key == 'stroke_per_n' and not any(math.isfinite(p.stroke_per_n)
                                                  for p in mine.demand):
                 continue
-            self.add(res, text, unit, lambda j, key=key: worst(j, key), '-', INFO)
+            self.add(res, text, unit, functools.partial(worst, key=key), '-', INFO)
         share = max((p.share_at_limit for p in mine.demand), default=math.nan)
         self.add(res, f'share of the steps at the force limit ({t.force_limit:g}, multisine of '
                  f'{self.cfg.multisine.amplitude:g} N peak)', '-',
@@ -270,7 +271,7 @@ class Summary:
                                   t.missing_max),
                                  ('absent_answers', 'steps without an answer', t.missing_max)):
             value = sum(getattr(f, key) for f in mine)
-            self.add(res, text, '-', lambda j, key=key: total(j, key), f'<= {limit}',
+            self.add(res, text, '-', functools.partial(total, key=key), f'<= {limit}',
                      judge(value <= limit))
         self.add(res, 'steps published again (an answer was late)', '-',
                  lambda j: total(j, 'late_steps'), '-', INFO)
