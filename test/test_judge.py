@@ -127,6 +127,8 @@ def lab(tmp_path_factory):
     (package / '__init__.py').write_text('')
     (package / 'plain.py').write_text(CONTROLLER)
     (tmp / 'judge.yaml').write_text(SETTINGS)
+    (tmp / 'judge_1k.yaml').write_text(SETTINGS.replace(f'sample_rate: {RATE}',
+                                                        'sample_rate: 1000.0'))
     demo = demo_model(4, f_min=40.0, f_max=160.0, zeta=0.02)
     demo.save(tmp / 'demo.npz')
     fe = small_model()
@@ -276,9 +278,6 @@ def test_a_strut_damper_stable_only_thanks_to_truncation_fails(lab):
                                      [[-gain]])
     exact = check_loop(models['struts'], models['struts_check'], [ctrl], 1e-3, policy='warn')
     assert exact.verdict == TRUNCATION
-    settings = (tmp / 'judge.yaml').read_text().replace(f'sample_rate: {RATE}',
-                                                        'sample_rate: 1000.0')
-    (tmp / 'judge_1k.yaml').write_text(settings)
     proc, _, numbers = _judge(lab, 'strut', {'gain': gain, 'port': 'strut1_bending_moment_2',
                                              'sensor': 'strut1_bending_rate_2'},
                               '--sections', 'robustness', '--ports', 'strut1_bending_moment_2',
@@ -301,3 +300,32 @@ def test_a_strut_damper_stable_only_thanks_to_truncation_fails(lab):
                               model='struts', config='judge_1k.yaml')
     row = _summary(numbers, 'sampled loop with the identified')
     assert row['PlainDamper'] == STABLE and row['verdict'] == 'pass', proc.stdout + proc.stderr
+
+
+def test_a_built_in_law_gets_the_black_box_and_the_exact_check_and_they_agree(lab):
+    """The damper node publishes its model: identified and exact verdicts and margins agree."""
+    from pentapod_damper.laws import strut_bending_damper
+    from pentapod_sim.sim.stability import controller_of
+    tmp, env, models = lab
+    gain = 3000.0
+    law = controller_of(strut_bending_damper([1], gain))
+    exact = check_loop(models['struts'], models['struts_check'], [law], 1e-3, policy='warn')
+    (tmp / 'damper.yaml').write_text(f'bending_struts: [1]\nbending_gain: {gain}\n')
+    proc = subprocess.run(
+        [sys.executable, '-m', 'pentapod_damper.judge', 'damper', '--params',
+         str(tmp / 'damper.yaml'), '--config', str(tmp / 'judge_1k.yaml'), '--sections',
+         'robustness', '--ports', ','.join(law.actuator_ports),
+         '--model-file', str(tmp / 'struts.npz'), '--check-model',
+         str(tmp / 'struts_check.npz'), '--out', str(tmp / 'damper')],
+        env=env, capture_output=True, text=True, timeout=600, cwd=tmp)
+    assert (tmp / 'damper' / 'damper' / 'numbers.csv').exists(), proc.stdout + proc.stderr
+    with open(tmp / 'damper' / 'damper' / 'numbers.csv', newline='') as f:
+        numbers = list(csv.DictReader(f))
+    assert proc.returncode == (0 if exact.verdict == STABLE else 3), proc.stdout + proc.stderr
+    assert _summary(numbers, 'black box and exact check agree')['verdict'] == 'pass'
+    assert _summary(numbers, 'sampled loop with the identified')['damper'] == exact.verdict
+    loops = {(r['row'], r['column']): r['value'] for r in numbers
+             if r['table'].endswith('loop checks')}
+    for name in ('damper, plant (38 modes)', 'damper, check (156 modes)'):
+        assert float(loops[(name, 'margin')]) == pytest.approx(
+            float(loops[(name, 'model margin')]), rel=0.05, abs=0.01), name
