@@ -329,3 +329,20 @@ def test_a_built_in_law_gets_the_black_box_and_the_exact_check_and_they_agree(la
     for name in ('damper, plant (38 modes)', 'damper, check (156 modes)'):
         assert float(loops[(name, 'margin')]) == pytest.approx(
             float(loops[(name, 'model margin')]), rel=0.05, abs=0.01), name
+
+
+def test_compare_judges_two_controllers_side_by_side(lab):
+    """``--compare A B``: one page each, the other in its reference column."""
+    tmp, env, _ = lab
+    proc = subprocess.run(
+        [sys.executable, '-m', 'pentapod_damper.judge', '--compare', 'my_lab.plain:PlainDamper',
+         'example_controller', '--config', str(tmp / 'judge.yaml'), '--sections', 'robustness',
+         '--ports', 'tcp_force_x', '--model-file', str(tmp / 'demo.npz'),
+         '--out', str(tmp / 'compare')],
+        env=env, capture_output=True, text=True, timeout=600, cwd=tmp)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    for page, other in (('PlainDamper', 'example_controller'),
+                        ('example_controller', 'PlainDamper')):
+        text = (tmp / 'compare' / page / 'report.md').read_text()
+        header = next(line for line in text.splitlines() if line.startswith('| position'))
+        assert f'| {page} | {other} |' in header, header

@@ -64,7 +64,7 @@ def parser() -> CommandParser:
                    'or a plain mapping)')
     p.add_argument('--source', help='source name of its answers (/pentapod/forces/<source>)')
     p.add_argument('--ports', help='input ports it answers, comma-separated (default: from '
-                   'its first recording)')
+                   'its first recording; with --compare, of both)')
     p.add_argument('--sensors', help='output ports it reads, comma-separated (default: its '
                    'published model, else the velocities collocated with its ports)')
     p.add_argument('--config', help='settings and thresholds (default config/judge.yaml)')
@@ -87,7 +87,7 @@ def judged_controllers(args: argparse.Namespace, reference: str) -> list[Control
     """The controller under judgement and its reference column, from the command line."""
     ports, sensors = _names(args.ports), _names(args.sensors)
     if args.compare:
-        pair = [controllers.parse(spec) for spec in args.compare]
+        pair = [controllers.parse(spec, ports=ports, sensors=sensors) for spec in args.compare]
         if pair[0].label == pair[1].label or set(pair[0].sources) & set(pair[1].sources):
             raise ConfigError(f'--compare {" ".join(args.compare)}: the two controllers need '
                               'distinct names and source names')

@@ -98,6 +98,12 @@ def _params_file(path: str | None) -> dict[str, Any]:
     return merged
 
 
+def _topic_name(label: str) -> str:
+    """A source name (a ROS name token) from a label: ``LabDamper`` -> ``labdamper``."""
+    text = ''.join(c if c.isalnum() else '_' for c in label.lower()).strip('_')
+    return text if text and text[0].isalpha() else DEFAULT_NAME
+
+
 def from_class(target: str, params_file: str | None = None, source: str | None = None,
                ports: tuple[str, ...] = (), sensors: tuple[str, ...] = (),
                label: str | None = None) -> Controller:
@@ -112,13 +118,17 @@ def from_class(target: str, params_file: str | None = None, source: str | None =
     kind = next((k.name for k in registry.NODES if k.node == target), None)
     cls = load_class(target)
     params = _params_file(params_file)
-    name = source or str(params.get('source_name') or DEFAULT_NAME)
+    label = label or target.split(':')[-1]
+    # two controllers of --compare answer on distinct topics unless told otherwise
+    name = source or str(params.get('source_name') or _topic_name(label))
     schema = getattr(cls, 'Params', None)
     if isinstance(schema, type) and issubclass(schema, NodeParams):
         if any(p.field == 'source_name' for p in schema.ros_params()):
             params['source_name'] = name
         schema.build(params, f'{target} with {params_file or "its defaults"}')
-    return Controller(label or target.split(':')[-1], 'class',
+    else:           # a plain node gets it as an override; it uses it if it declares it
+        params['source_name'] = name
+    return Controller(label, 'class',
                       {name: {**params, NODE_CLASS: kind or target}}, (name,), (),
                       tuple(ports), tuple(sensors))
 

@@ -110,6 +110,23 @@ class RunFaults:
     error: str = ''           # why the run ended early ('' if it did not)
 
 
+#: Rejections that are no fault: copies of an answer to a step the plant published again.
+EXPECTED = ('stale', 'duplicate')
+
+
+def _refused(status: dict[str, str]) -> int:
+    """Answers the plant refused, less the expected copies (older bags: every rejection)."""
+    by_reason = status.get('rejected_by_reason')
+    if by_reason is None:
+        return int(status.get('rejected_messages', 0) or 0)
+    total = 0
+    for item in filter(None, by_reason.split(',')):
+        what, count = item.rsplit('=', 1)
+        if what.rsplit('/', 1)[-1] not in EXPECTED:
+            total += int(count)
+    return total
+
+
 def faults(bag_path: Path, run: str, planned: int, sources: Sequence[str],
            dt: float) -> RunFaults:
     """The faults one run's bag shows (module docstring)."""
@@ -119,7 +136,7 @@ def faults(bag_path: Path, run: str, planned: int, sources: Sequence[str],
     report = recording_report(bag)
     state = last.get('state', 'no run status')
     steps = int(last.get('steps', 0) or 0)
-    rejected = int(last.get('rejected_messages', 0) or 0)
+    rejected = _refused(last)
     missing = sum(report['missing'].values())
     state_steps = step_answers(bag, TCP_STATE, dt)
     repeated = absent = 0
