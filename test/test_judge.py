@@ -346,3 +346,14 @@ def test_compare_judges_two_controllers_side_by_side(lab):
         text = (tmp / 'compare' / page / 'report.md').read_text()
         header = next(line for line in text.splitlines() if line.startswith('| position'))
         assert f'| {page} | {other} |' in header, header
+
+
+def test_refused_answers_leave_out_the_expected_copies_of_a_re_sent_step():
+    """``rejected_by_reason``: stale and duplicate copies are no fault; older bags count all."""
+    from pentapod_damper.judge.demand import _refused
+    assert _refused({'rejected_messages': '25', 'rejected_by_reason':
+                     'disturbance/duplicate=22,lab/limit=3'}) == 3
+    assert _refused({'rejected_messages': '2', 'rejected_by_reason':
+                     'disturbance/duplicate=1,plaindamper/stale=1'}) == 0
+    assert _refused({'rejected_messages': '0', 'rejected_by_reason': ''}) == 0
+    assert _refused({'rejected_messages': '4'}) == 4
