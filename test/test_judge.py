@@ -357,3 +357,26 @@ def test_refused_answers_leave_out_the_expected_copies_of_a_re_sent_step():
                      'disturbance/duplicate=1,plaindamper/stale=1'}) == 0
     assert _refused({'rejected_messages': '0', 'rejected_by_reason': ''}) == 0
     assert _refused({'rejected_messages': '4'}) == 4
+
+
+def test_a_command_in_its_own_process_is_judged_as_the_composed_class(lab):
+    """``--command``: separate processes, the same lockstep loop: the same identified margin."""
+    tmp, env, _ = lab
+    command = (f'{sys.executable} -m pentapod_sim.nodes.component my_lab.plain:PlainDamper '
+               f'--ros-args -p gain:={TCP_GAIN} -p source_name:=lab')
+    runs = {}
+    for how, args in (('command', ['--command', command]),
+                      ('class', ['my_lab.plain:PlainDamper', '--params',
+                                 str(tmp / 'gain.yaml')])):
+        (tmp / 'gain.yaml').write_text(f'gain: {TCP_GAIN}\n')
+        proc = subprocess.run(
+            [sys.executable, '-m', 'pentapod_damper.judge', *args, '--source', 'lab',
+             '--config', str(tmp / 'judge.yaml'), '--sections', 'robustness', '--ports',
+             'tcp_force_x', '--model-file', str(tmp / 'demo.npz'), '--out', str(tmp / how)],
+            env=env, capture_output=True, text=True, timeout=600, cwd=tmp)
+        assert proc.returncode == 0, proc.stdout + proc.stderr
+        page = next((tmp / how).glob('*/numbers.csv'))
+        with open(page, newline='') as f:
+            runs[how] = _summary(list(csv.DictReader(f)), 'return-difference margin')
+    assert 'separate processes' in (tmp / 'command' / 'lab' / 'report.md').read_text()
+    assert runs['command']['lab'] == runs['class']['PlainDamper']
