@@ -62,6 +62,8 @@ LOG = logging.getLogger(__name__)
 
 MULTISINE, ROBUSTNESS = 'multisine', 'robustness'
 DIRECTIONS = {'x': [1.0, 0.0, 0.0], 'y': [0.0, 1.0, 0.0], 'z': [0.0, 0.0, 1.0]}
+#: Wall time [s] a run takes besides its steps (start-up and drain), for the time left.
+START_UP = 8.0
 #: Steps per second assumed for the time left before a run of that kind was measured.
 GUESS_RATE = {True: 1500.0, False: 700.0}
 
@@ -228,7 +230,9 @@ class Runner:
         self.fresh = fresh
         self.say = say
         self.done = 0
-        self.rate: dict[bool, list[float]] = {True: [], False: []}
+        # steps per second of each controller's long runs (speeds differ tenfold: a law on the
+        # in-process hand-off against a plain node answering over DDS)
+        self.rate: dict[str, list[float]] = {}
         self.warm = WarmStarter()
 
     def left(self) -> str:
@@ -236,9 +240,9 @@ class Runner:
         todo = self.plan[self.done:]
         seconds = 0.0
         for spec in todo:
-            rates = self.rate[spec.controller.composed]
+            rates = self.rate.get(spec.controller.label, [])
             rate = float(np.median(rates)) if rates else GUESS_RATE[spec.controller.composed]
-            seconds += spec.steps / rate + 8.0              # start-up and drain
+            seconds += spec.steps / rate + START_UP
         return (f'{len(todo)} run{"s" * (len(todo) != 1)} left, about '
                 f'{seconds / 60:.0f} min' if todo else 'no run left')
 
@@ -282,7 +286,9 @@ class Runner:
             raise RunError(f'run {spec.name}: the recorder left no complete bag in {bag}')
         done.write_text(json.dumps({'wall_time': wall, 'steps': spec.steps}))
         self.done += 1
-        self.rate[spec.controller.composed].append(spec.steps / max(wall - 5.0, 1e-3))
+        if wall > 4 * START_UP:                 # short runs measure the start-up only
+            self.rate.setdefault(spec.controller.label, []).append(
+                spec.steps / (wall - START_UP))
         self.say(f'run {index}/{len(self.plan)} {spec.name}: {wall:.1f} s '
                  f'({spec.steps / wall:.0f} steps/s); {self.left()}')
         return RunRecord(spec, bag, path, wall, False)
