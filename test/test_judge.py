@@ -380,3 +380,16 @@ def test_a_command_in_its_own_process_is_judged_as_the_composed_class(lab):
             runs[how] = _summary(list(csv.DictReader(f)), 'return-difference margin')
     assert 'separate processes' in (tmp / 'command' / 'lab' / 'report.md').read_text()
     assert runs['command']['lab'] == runs['class']['PlainDamper']
+
+
+def test_the_csv_names_the_unit_of_a_row_that_has_its_own():
+    """'xx peak at [Hz]' in a table of um/N columns: its cells are in Hz."""
+    from pentapod_damper.judge.document import Column, csv_text, Table
+    table = Table('compliance', [Column('quantity'), Column('a', 'um/N'), Column('b', '-')])
+    table.add('xx peak', 1.5, 2.0)
+    table.add('xx peak at [Hz]', 26.7, None)
+    rows = list(csv.reader(csv_text([table]).splitlines()))
+    assert rows == [['compliance', 'xx peak', 'a', '1.5', 'um/N'],
+                    ['compliance', 'xx peak', 'b', '2.0', '-'],
+                    ['compliance', 'xx peak at [Hz]', 'a', '26.7', 'Hz'],
+                    ['compliance', 'xx peak at [Hz]', 'b', '', '-']]

@@ -161,10 +161,13 @@ def csv_text(blocks: Sequence[Block], prefix: Sequence[str] = ()) -> str:
             continue
         for row in block.rows:
             name = show(row[0], block.columns[0].fmt)
+            # a row of another unit than its columns names it: 'xx peak at [Hz]'
+            own = name.rsplit(' [', 1)[1].rstrip(']') if name.endswith(']') else None
             for value, col in zip(row[1:], block.columns[1:]):
                 text = ('' if value is None else repr(value) if isinstance(value, float)
                         else str(value))
-                writer.writerow([*prefix, block.name, name, col.title, text, col.unit])
+                unit = own if own is not None and col.unit not in ('', '-') else col.unit
+                writer.writerow([*prefix, block.name, name, col.title, text, unit])
     return buf.getvalue()
 
 
