@@ -133,3 +133,29 @@ def test_table_in_statespace_md_is_what_the_code_computes():
     stated = text[text.index(begin) + len(begin):text.index(end)]
     assert stated == markdown_table(rows(['P1', 'P2'], ['strut_damping_12', 'tcp_damping'],
                                          CHECK_CACHE, directions='x'))
+
+
+def test_rows_name_each_mode_by_its_fe_number_and_cause():
+    """At P1 the reduction leaves a low FE mode out, so the plant's numbers are not the FE's."""
+    from pentapod_sim.fe.machine_data import load_machine, load_positions
+    from pentapod_sim.modes.causes import analyse_causes
+    from pentapod_sim.modes.frame_reduction import build_model
+    from pentapod_sim.modes.solver import solve_modes
+    from pentapod_sim.plant.build import plant_from_fe, reduce_plant
+    cfg = load_reduction_config()
+    fe = build_model(load_machine(), load_positions()['P1'])
+    modes = solve_modes(fe.K, fe.M, f_max=cfg.modes_f_max)
+    plant_all, keep = plant_from_fe(fe, cfg, modes=modes, progress=lambda msg: None)
+    plant = reduce_plant(plant_all, keep)
+    causes = analyse_causes(fe, modes, neuber=False).cause
+    named = [plant.fe_mode(i) for i in range(1, plant.n_modes + 1)]
+    numbers = [n for n, _ in named]
+    assert numbers != list(range(1, plant.n_modes + 1))
+    for i, (n, cause) in enumerate(named):
+        # the same mode: the FE model's frequency and the cause analysis' verdict
+        assert plant.frequencies_hz[i] == pytest.approx(modes.frequencies[n - 1], rel=1e-12)
+        assert cause == causes[n - 1]
+    rows = damping_rows(plant, [], 1 / 3000, directions='x')
+    assert rows and all((r.fe_mode, r.cause) == named[r.mode - 1] for r in rows)
+    # a plant made from modal data has no FE model behind it: its own numbers, no cause
+    assert tcp_plant(0.001).fe_mode(3) == (3, '')

@@ -12,4 +12,5 @@ cd "$ROOT"
 # the ecosystem's lint rules (ruff.toml: ament's flake8/pep257 settings) and the core's types
 ruff check --no-cache -q .
 mypy --no-incremental --cache-dir=/dev/null
-exec python -m pytest -q -p no:cacheprovider "$@"
+# the slowest tests are listed at the end: CI must stay under 30 minutes
+exec python -m pytest -q -p no:cacheprovider --durations=30 "$@"

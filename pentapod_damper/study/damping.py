@@ -50,10 +50,13 @@ class ModeDamping:
     One dominant mode of TCP aa in one loop.
 
     ``direction`` is aa (xx, ...), ``rank`` 1 for the highest peak, ``mode`` the open-loop mode
-    (1-based) paired by MAC, ``open_*`` its frequency [Hz] and ζ; ``sampled_*`` and
-    ``continuous_*`` the pole's frequency, ζ and MAC in the sampled and the continuous loop
-    (NaN where the continuous loop has no pole paired with the mode); ``peak_um_per_N`` the
-    sampled-loop pole's term at its peak and ``decay_time_s`` 1 / (ζ ω) of that pole.
+    of the reduced plant (1-based) paired by MAC, ``fe_mode`` the same mode's number in the FE
+    model (they differ once the reduction left a lower mode out) and ``cause`` the stiffness
+    group with the largest share of its strain energy, ``open_*`` its frequency [Hz] and ζ;
+    ``sampled_*`` and ``continuous_*`` the pole's frequency, ζ and MAC in the sampled and the
+    continuous loop (NaN where the continuous loop has no pole paired with the mode);
+    ``peak_um_per_N`` the sampled-loop pole's term at its peak and ``decay_time_s``
+    1 / (ζ ω) of that pole.
     """
 
     position: str
@@ -61,6 +64,8 @@ class ModeDamping:
     direction: str
     rank: int
     mode: int
+    fe_mode: int
+    cause: str
     open_freq_hz: float
     open_zeta: float
     sampled_freq_hz: float
@@ -149,7 +154,8 @@ def damping_rows(plant: PlantModel, laws: Sequence[Any], dt: float,
             i = int(sampled.mode[j])
             decay = 1.0 / (sampled.zeta[j] * 2 * np.pi * f[j])
             rows.append(ModeDamping(
-                position, scenario, a + a, rank, i + 1, float(plant.frequencies_hz[i]),
+                position, scenario, a + a, rank, i + 1, *plant.fe_mode(i + 1),
+                float(plant.frequencies_hz[i]),
                 float(plant.zeta[i]), *_pole(sampled, int(j)),
                 *_pole(continuous, continuous.of_mode(i)), float(peaks[j] * 1e6),
                 float(decay)))
@@ -192,12 +198,14 @@ def rows(positions: Sequence[str], scenarios: Sequence[str], cache_dir: Path,
 
 def format_table(table: Sequence[ModeDamping]) -> str:
     """Plain-text table of :func:`damping_rows` rows."""
-    lines = [f'{"pos":4} {"scenario":18} {"dir":3} {"#":>1} {"mode":>4} {"f open":>8} '
+    lines = [f'{"pos":4} {"scenario":18} {"dir":3} {"#":>1} {"mode":>4} {"FE":>4} {"cause":10} '
+             f'{"f open":>8} '
              f'{"ζ open":>8} {"f sampled":>9} {"ζ sampled":>9} {"MAC":>5} {"f cont.":>8} '
              f'{"ζ cont.":>8} {"MAC":>5} {"peak um/N":>9} {"tau s":>7}']
     for r in table:
         lines.append(f'{r.position:4} {r.scenario:18} {r.direction:3} {r.rank:1d} '
-                     f'{r.mode:4d} {r.open_freq_hz:8.3f} {r.open_zeta:8.5f} '
+                     f'{r.mode:4d} {r.fe_mode:4d} {r.cause:10} '
+                     f'{r.open_freq_hz:8.3f} {r.open_zeta:8.5f} '
                      f'{r.sampled_freq_hz:9.3f} {r.sampled_zeta:9.5f} '
                      f'{r.sampled_mac:5.3f} {r.continuous_freq_hz:8.3f} '
                      f'{r.continuous_zeta:8.5f} {r.continuous_mac:5.3f} '
@@ -207,11 +215,13 @@ def format_table(table: Sequence[ModeDamping]) -> str:
 
 def markdown_table(table: Sequence[ModeDamping]) -> str:
     """Markdown table of :func:`damping_rows` rows (docs/statespace.md holds one)."""
-    lines = ['| position | scenario | TCP | mode | f open [Hz] | ζ open | f sampled [Hz] | '
-             'ζ sampled | MAC | f continuous [Hz] | ζ continuous | MAC | peak [µm/N] |',
+    lines = ['| position | scenario | TCP | mode (FE mode, cause) | f open [Hz] | ζ open '
+             '| f sampled [Hz] | ζ sampled | MAC | f continuous [Hz] | ζ continuous | MAC '
+             '| peak [µm/N] |',
              '|---|---|---|---|---|---|---|---|---|---|---|---|---|']
     for r in table:
-        lines.append(f'| {r.position} | `{r.scenario}` | {r.direction} | {r.mode} '
+        lines.append(f'| {r.position} | `{r.scenario}` | {r.direction} '
+                     f'| {r.mode} ({r.fe_mode}, {r.cause or "-"}) '
                      f'| {r.open_freq_hz:.2f} | {r.open_zeta:.4f} '
                      f'| {r.sampled_freq_hz:.2f} | {r.sampled_zeta:.4f} '
                      f'| {r.sampled_mac:.2f} | {r.continuous_freq_hz:.2f} '

@@ -17,10 +17,10 @@ from pentapod_damper.study.pma import bounded_stroke, PmaDesign, requirement_row
 from pentapod_damper.study.records import as_row, FrfRun, Row, ScenarioAnalytic, StudyResults
 
 #: Columns of damping.csv: the analytic mode, then what its damping run identified.
-DAMPING_COLUMNS = ('position', 'scenario', 'direction', 'rank', 'mode', 'open_freq_hz',
-                   'open_zeta', 'sampled_freq_hz', 'sampled_zeta', 'continuous_zeta',
-                   'sampled_mac', 'measured_freq_hz', 'measured_zeta', 'zeta_error',
-                   'freq_error', 'peak_analytic_um_per_N', 'peak_measured_um_per_N',
+DAMPING_COLUMNS = ('position', 'scenario', 'direction', 'rank', 'mode', 'fe_mode', 'cause',
+                   'open_freq_hz', 'open_zeta', 'sampled_freq_hz', 'sampled_zeta',
+                   'continuous_zeta', 'sampled_mac', 'measured_freq_hz', 'measured_zeta',
+                   'zeta_error', 'freq_error', 'peak_analytic_um_per_N', 'peak_measured_um_per_N',
                    'peak_error_db', 'decay_time_s')
 
 

@@ -243,8 +243,9 @@ def _sampled_loop_check(args: argparse.Namespace, position: str, plant: PlantMod
     return result
 
 
-POLE_COLUMNS = ('mode', 'open_freq_hz', 'open_zeta', 'sampled_freq_hz', 'sampled_zeta',
-                'sampled_mac', 'continuous_freq_hz', 'continuous_zeta', 'continuous_mac')
+POLE_COLUMNS = ('mode', 'fe_mode', 'cause', 'open_freq_hz', 'open_zeta', 'sampled_freq_hz',
+                'sampled_zeta', 'sampled_mac', 'continuous_freq_hz', 'continuous_zeta',
+                'continuous_mac')
 
 
 def _loop_poles(args: argparse.Namespace, position: str, plant: PlantModel,
@@ -256,7 +257,8 @@ def _loop_poles(args: argparse.Namespace, position: str, plant: PlantModel,
     cont = continuous_loop_poles(plant, laws)
     rows = []
     for i in map(int, np.flatnonzero(plant.frequencies_hz <= args.cfg.frequency.f_max)):
-        row: list[float] = [i + 1, plant.frequencies_hz[i], plant.zeta[i]]
+        row: list[float | str] = [i + 1, *plant.fe_mode(i + 1), plant.frequencies_hz[i],
+                                  plant.zeta[i]]
         for poles in (sampled, cont):
             j = poles.of_mode(i)
             row += ([poles.freq_hz[j], poles.zeta[j], poles.mac[j]] if j >= 0
@@ -264,11 +266,11 @@ def _loop_poles(args: argparse.Namespace, position: str, plant: PlantModel,
         rows.append(row)
     print(f'{position}: poles per mode, sampled loop at {rate:g} Hz and continuous loop '
           f'(frequency [Hz], damping ratio, MAC with the open-loop mode)')
-    print(f'{"mode":>4} {"f open":>9} {"ζ open":>8} {"f sampled":>9} {"ζ sampled":>10} '
-          f'{"MAC":>5} {"f cont.":>9} {"ζ cont.":>9} {"MAC":>5}')
+    print(f'{"mode":>4} {"FE":>4} {"cause":12} {"f open":>9} {"ζ open":>8} {"f sampled":>9} '
+          f'{"ζ sampled":>10} {"MAC":>5} {"f cont.":>9} {"ζ cont.":>9} {"MAC":>5}')
     for r in rows:
-        print(f'{r[0]:4d} {r[1]:9.3f} {r[2]:8.5f} {r[3]:9.3f} {r[4]:10.5f} {r[5]:5.3f} '
-              f'{r[6]:9.3f} {r[7]:9.5f} {r[8]:5.3f}')
+        print(f'{r[0]:4d} {r[1]:4d} {r[2]:12} {r[3]:9.3f} {r[4]:8.5f} {r[5]:9.3f} {r[6]:10.5f} '
+              f'{r[7]:5.3f} {r[8]:9.3f} {r[9]:9.5f} {r[10]:5.3f}')
     for name, poles in (('sampled', sampled), ('continuous', cont)):
         ctrl = np.flatnonzero(~poles.structural)
         listed = ', '.join(f'{poles.freq_hz[j]:.4g} Hz ζ {poles.zeta[j]:.3g}' for j in ctrl)

@@ -20,6 +20,7 @@ from pentapod_sim import __version__
 from pentapod_sim.errors import ConfigError, ModelFileError
 from pentapod_sim.fe.machine_data import load_machine, MachineParams
 from pentapod_sim.fe.model import FEModel
+from pentapod_sim.modes.causes import strain_energy_shares
 from pentapod_sim.modes.frame_reduction import build_model
 from pentapod_sim.modes.slicing import Progress
 from pentapod_sim.modes.solver import ModalResult, solve_modes
@@ -211,8 +212,24 @@ def plant_from_fe(fe: FEModel, reduction_cfg: ReductionConfig,
     plant_all.meta.update({
         'pose': [float(v) for v in fe.pose], 'params_sha256': fe.meta.get('params_sha256'),
         'package_version': __version__, 'n_dof': fe.n_dof, 'n_modes_computed': modes.n_modes,
-        'modes_f_max_hz': float(cfg.modes_f_max), 'static_compliance_full': g_full.tolist()})
+        'modes_f_max_hz': float(cfg.modes_f_max), 'static_compliance_full': g_full.tolist(),
+        'mode_causes': mode_causes(fe, modes)})
     return plant_all, keep
+
+
+def mode_causes(fe: FEModel, modes: ModalResult) -> list[str]:
+    """
+    Each mode's cause: the stiffness group with the largest share of its strain energy.
+
+    The same rule as :func:`pentapod_sim.modes.causes.analyse_causes`' ``cause`` column (names
+    of ``fe.stiffness_groups``: struts, joints, frame, ...); empty strings for a model without
+    stiffness groups. :meth:`PlantModel.fe_mode` reads them back per plant mode.
+    """
+    if not fe.stiffness_groups:
+        return [''] * modes.n_modes
+    names = list(fe.stiffness_groups)
+    shares = strain_energy_shares(fe.stiffness_groups, modes)
+    return [names[k] for k in np.argmax(shares, axis=1)]
 
 
 def reduce_plant(plant_all: PlantModel, keep: npt.ArrayLike,
@@ -275,15 +292,20 @@ def build_plant(position: str | npt.ArrayLike, machine: MachineParams | None = N
     return plant
 
 
+#: What a built plant records beyond the matrices; a new item gives older cache files a new key.
+CACHE_CONTENT = 'kept_modes,mode_causes'
+
+
 def model_cache_key(position: str) -> str:
     """
     SHA-256 (hex, 16 chars) over the configuration a built model depends on.
 
     Covers machine.yaml, positions.yaml and reduction.yaml of
     :func:`pentapod_sim.paths.config_dir` (and the damping file reduction.yaml names), the
-    position name and the package version, so any edit gives a new cache file.
+    position name, the package version and :data:`CACHE_CONTENT`, so any edit gives a new
+    cache file.
     """
-    digest = hashlib.sha256(f'{position}|{__version__}'.encode())
+    digest = hashlib.sha256(f'{position}|{__version__}|{CACHE_CONTENT}'.encode())
     for name in ('machine.yaml', 'positions.yaml', 'reduction.yaml'):
         path = config_dir() / name
         digest.update(path.read_bytes() if path.exists() else b'')

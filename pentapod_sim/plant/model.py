@@ -258,6 +258,21 @@ class PlantModel:
                           [self.input_descriptions[i] for i in ii],
                           [self.output_descriptions[o] for o in oo], meta)
 
+    def fe_mode(self, mode: int) -> tuple[int, str]:
+        """
+        FE mode number (1-based) and cause of this plant's mode ``mode`` (1-based).
+
+        A reduced plant keeps some of the FE model's modes (``meta['kept_modes']``), so its
+        mode numbers differ from the FE model's once a lower mode was left out; the cause is
+        the stiffness group with the largest share of the mode's strain energy
+        (``meta['mode_causes']``, :func:`pentapod_sim.plant.build.mode_causes`). A plant
+        without these records (made from modal data) gives its own number and no cause.
+        """
+        kept = self.meta.get('kept_modes')
+        fe_mode = int(kept[mode - 1]) if kept else mode
+        causes = self.meta.get('mode_causes') or []
+        return fe_mode, str(causes[fe_mode - 1]) if fe_mode - 1 < len(causes) else ''
+
     def content_hash(self) -> str:
         """SHA-256 over all numbers and names (hex); identical models give identical hashes."""
         digest = hashlib.sha256()

@@ -227,14 +227,21 @@ class LoopPoles:
             width = (np.abs(self.lam.real) if self.dt is None else 1.0 - np.abs(self.lam))
             return np.where(width > 0, np.abs(r) / width, np.inf)
 
-    def rows(self, plant: PlantModel) -> list[dict[str, float]]:
-        """One dict per pole by frequency: class, frequency, damping, mode (1-based), MAC."""
-        out = []
+    def rows(self, plant: PlantModel) -> list[dict[str, float | str]]:
+        """
+        One dict per pole by frequency: class, frequency, damping, mode, MAC.
+
+        ``mode``: the plant's mode paired by MAC (1-based, 0 for none); ``fe_mode`` and
+        ``cause``: the same mode's number in the FE model and its cause
+        (:meth:`PlantModel.fe_mode`).
+        """
+        out: list[dict[str, float | str]] = []
         for j in np.argsort(self.freq_hz):
             i = int(self.mode[j])
+            fe_mode, cause = plant.fe_mode(i + 1) if i >= 0 else (0, '')
             out.append({'structural': bool(self.structural[j]),
                         'freq_hz': float(self.freq_hz[j]), 'zeta': float(self.zeta[j]),
-                        'mode': i + 1 if i >= 0 else 0,
+                        'mode': i + 1 if i >= 0 else 0, 'fe_mode': fe_mode, 'cause': cause,
                         'open_freq_hz': float(plant.frequencies_hz[i]) if i >= 0 else np.nan,
                         'open_zeta': float(plant.zeta[i]) if i >= 0 else np.nan,
                         'mac': float(self.mac[j])})
