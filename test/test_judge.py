@@ -393,3 +393,17 @@ def test_the_csv_names_the_unit_of_a_row_that_has_its_own():
                     ['compliance', 'xx peak', 'b', '2.0', '-'],
                     ['compliance', 'xx peak at [Hz]', 'a', '26.7', 'Hz'],
                     ['compliance', 'xx peak at [Hz]', 'b', '', '-']]
+
+
+def test_mode_labels_give_the_fe_number_its_cause_and_the_tcp_direction():
+    """A plant that left FE mode 3 out: its third mode is FE mode 4, with that mode's cause."""
+    from pentapod_damper.judge.models import mode_labels
+    plant = demo_model(3, inputs=['tcp_force_x', 'tcp_force_y', 'tcp_force_z'])
+    plant.meta.update(kept_modes=[1, 2, 4], mode_causes=['frame', 'struts', 'feed_drives',
+                                                         'bp_joints'])
+    rows = [plant.output_names.index(f'tcp_displacement_{a}') for a in 'xyz']
+    plant.c_disp[rows, 2] = [0.1, -0.7, 0.3]
+    third = mode_labels(plant)[2]
+    assert (third.plant_mode, third.fe_mode, third.cause, third.tcp_direction) == (
+        3, 4, 'bp_joints', 'y')
+    assert third.text() == 'FE 4 (plant 3), bp_joints, y'

@@ -11,16 +11,17 @@ given (``--check-model``).
 **Mode numbers.** The reduced plant keeps the modes that matter at its ports, so its index of a
 mode is not the FE model's (at P1 plant mode 20 is FE mode 21: FE mode 4 is dropped). Every
 table of the judge names a mode by both, with its cause: the stiffness group with the largest
-share of the mode's strain energy and the mode's dominant direction at the TCP
-(:func:`pentapod_sim.modes.causes.analyse_causes`, without the one-elasticity-at-a-time
-models), computed once per position configuration and kept next to the cached plants.
+share of the mode's strain energy, as the built plant records it
+(:meth:`pentapod_sim.plant.model.PlantModel.fe_mode`), and the mode's dominant translation at
+the TCP (the largest of its TCP displacement components in the plant).
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
-import json
 import logging
 from pathlib import Path
+
+import numpy as np
 
 from pentapod_sim.plant.build import load_or_build_model, model_cache_key
 from pentapod_sim.plant.check_model import check_f_max, load_or_build_check_model
@@ -66,43 +67,17 @@ class PositionModel:
         return self.labels[plant_mode]
 
 
-def _causes(position: str, plant: PlantModel, cache_dir: Path) -> tuple[list[str], list[str]]:
-    """Cause and TCP direction of every FE mode up to the plant's cut (cached as JSON)."""
-    path = cache_dir / f'mode_causes_{position}_{model_cache_key(position)}.json'
-    try:
-        doc = json.loads(path.read_text())
-        return list(doc['cause']), list(doc['tcp_direction'])
-    except (OSError, ValueError, KeyError):
-        pass
-    from pentapod_sim.fe.machine_data import load_machine  # FE code only when needed
-    from pentapod_sim.modes.causes import analyse_causes
-    from pentapod_sim.modes.frame_reduction import build_model
-    from pentapod_sim.modes.solver import solve_modes
-    LOG.info('mode causes of %s: FE model and modes below %g Hz', position,
-             plant.meta.get('modes_f_max_hz', 750.0))
-    fe = build_model(load_machine(), position)
-    modes = solve_modes(fe.K, fe.M, f_max=float(plant.meta.get('modes_f_max_hz', 750.0)))
-    table = analyse_causes(fe, modes, neuber=False)
-    cause, direction = list(table.cause), list(table.tcp_direction)
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps({'cause': cause, 'tcp_direction': direction}))
-    except OSError as err:
-        LOG.warning('mode causes not kept: %s', err)
-    return cause, direction
-
-
-def mode_labels(plant: PlantModel, position: str | None, cache_dir: Path) -> list[ModeLabel]:
-    """Labels of every plant mode; a plant without an FE model behind it gets '-' causes."""
-    kept = plant.meta.get('kept_modes')
-    fe = [int(k) for k in kept] if kept is not None and len(kept) == plant.n_modes else \
-        list(range(1, plant.n_modes + 1))
-    cause = direction = ['-'] * (max(fe, default=0))
-    if position is not None and kept is not None:
-        cause, direction = _causes(position, plant, cache_dir)
-    return [ModeLabel(i + 1, n, float(f), cause[n - 1] if n <= len(cause) else '-',
-                      direction[n - 1] if n <= len(direction) else '-')
-            for i, (n, f) in enumerate(zip(fe, plant.frequencies_hz))]
+def mode_labels(plant: PlantModel) -> list[ModeLabel]:
+    """Labels of every plant mode (a plant without FE records: its own numbers, no cause)."""
+    axes = [a for a in 'xyz' if f'tcp_displacement_{a}' in plant.output_names]
+    rows = [plant.output_names.index(f'tcp_displacement_{a}') for a in axes]
+    labels = []
+    for i, freq in enumerate(plant.frequencies_hz):
+        fe_mode, cause = plant.fe_mode(i + 1)
+        shape = np.abs(plant.c_disp[rows, i]) if rows else np.zeros(0)
+        direction = axes[int(np.argmax(shape))] if shape.size and shape.max() > 0 else '-'
+        labels.append(ModeLabel(i + 1, fe_mode, float(freq), cause or '-', direction))
+    return labels
 
 
 def position_model(position: str, sample_rate: float, check_f_min: float, cache_dir: Path,
@@ -118,7 +93,7 @@ def position_model(position: str, sample_rate: float, check_f_min: float, cache_
         check = PlantModel.load(check_file) if (check_file and with_check) else None
         name = Path(model_file).stem
         return PositionModel(name, plant, Path(model_file), check,
-                             mode_labels(plant, None, cache_dir))
+                             mode_labels(plant))
     plant, origin = load_or_build_model(position=position, cache_dir=cache_dir)
     LOG.info('plant of %s: %s', position, origin)
     path = cache_dir / f'plant_{position}_{model_cache_key(position)}.npz'
@@ -127,4 +102,4 @@ def position_model(position: str, sample_rate: float, check_f_min: float, cache_
         check, origin = load_or_build_check_model(
             position, check_f_max(sample_rate, check_f_min), cache_dir)
         LOG.info('check model of %s: %s', position, origin)
-    return PositionModel(position, plant, path, check, mode_labels(plant, position, cache_dir))
+    return PositionModel(position, plant, path, check, mode_labels(plant))
