@@ -314,14 +314,15 @@ def test_a_built_in_law_gets_the_black_box_and_the_exact_check_and_they_agree(la
     proc = subprocess.run(
         [sys.executable, '-m', 'pentapod_damper.judge', 'damper', '--params',
          str(tmp / 'damper.yaml'), '--config', str(tmp / 'judge_1k.yaml'), '--sections',
-         'robustness', '--ports', ','.join(law.actuator_ports),
-         '--model-file', str(tmp / 'struts.npz'), '--check-model',
+         'robustness', '--model-file', str(tmp / 'struts.npz'), '--check-model',
          str(tmp / 'struts_check.npz'), '--out', str(tmp / 'damper')],
         env=env, capture_output=True, text=True, timeout=600, cwd=tmp)
     assert (tmp / 'damper' / 'damper' / 'numbers.csv').exists(), proc.stdout + proc.stderr
     with open(tmp / 'damper' / 'damper' / 'numbers.csv', newline='') as f:
         numbers = list(csv.DictReader(f))
     assert proc.returncode == (0 if exact.verdict == STABLE else 3), proc.stdout + proc.stderr
+    assert 'white noise on ' + ', '.join(law.actuator_ports) + ' (' in (
+        tmp / 'damper' / 'damper' / 'report.md').read_text()   # its ports, known without a run
     assert _summary(numbers, 'black box and exact check agree')['verdict'] == 'pass'
     assert _summary(numbers, 'sampled loop with the identified')['damper'] == exact.verdict
     loops = {(r['row'], r['column']): r['value'] for r in numbers

@@ -19,7 +19,7 @@ from typing import Callable, Sequence
 
 from pentapod_damper.judge import damping
 from pentapod_damper.judge.config import JudgeConfig
-from pentapod_damper.judge.controller import BASELINE, Controller
+from pentapod_damper.judge.controller import BASELINE, Controller, law_ports
 from pentapod_damper.judge.damping import DominantMode, Pole
 from pentapod_damper.judge.demand import demand, faults, PortDemand, RunFaults
 from pentapod_damper.judge.machining import (
@@ -138,7 +138,7 @@ def run_position(cfg: JudgeConfig, pos: PositionModel, controllers: Sequence[Con
     for ctrl in (BASELINE, *controllers):
         judged = Judged(ctrl)
         result.judged[ctrl.label] = judged
-        ports = ctrl.ports
+        ports = ctrl.ports or (law_ports(ctrl, cfg.dt) if ctrl is not BASELINE else ())
         for spec in [s for s in specs if s.position == pos.name and s.controller is ctrl]:
             if spec.kind == ROBUSTNESS and not ports:
                 raise_no_ports(ctrl)

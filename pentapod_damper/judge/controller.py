@@ -186,3 +186,27 @@ def parse(spec: str, params_file: str | None = None, source: str | None = None,
         raise ConfigError(f'{spec!r} is a scenario: its file holds the parameters and source '
                           'names (--params and --source are for a class or a command)')
     return from_scenario(spec, ports, sensors)
+
+
+def law_ports(ctrl: Controller, dt: float) -> tuple[str, ...]:
+    """
+    Input ports of a controller made of this package's damper and PMA nodes, without a run.
+
+    Built with the nodes' own functions (:mod:`pentapod_damper.scenario_laws`); () for any
+    other node (its ports are learned from its first recording, or given with ``--ports``).
+    """
+    from pentapod_damper.node_parameters import damper_laws, pma_law
+    from pentapod_sim.scenario.files import executable_of
+    ports: list[str] = []
+    for name, section in ctrl.nodes.items():
+        kind = str(section.get(NODE_CLASS) or executable_of(name))
+        params = {k: v for k, v in section.items() if k != NODE_CLASS}
+        laws: list[Any]
+        if kind == 'damper':
+            laws = list(damper_laws(params, f'node {name!r}', dt).values())
+        elif kind == 'pma':
+            laws = [pma_law(params, dt, f'node {name!r}')]
+        else:
+            return ()
+        ports += [p for law in laws for p in law.actuator_ports]
+    return tuple(dict.fromkeys(ports))
