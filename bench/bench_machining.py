@@ -10,13 +10,19 @@ aluminium_half_down of config/machining.yaml:
   speeds that does the same interpolation one speed at a time (numpy over the frequencies);
   both give the same envelope (checked to 1e-9);
 * the plant stepped offline with the cutting process as its force source, against the same
-  plant with a TCP damper law (the cost a cutting node adds to a lockstep step, without ROS).
+  plant with a TCP damper law (the cost a cutting node adds to a lockstep step, without ROS);
+* lockstep runs of the plant node with the cutting node, against the plant node with the
+  exciter node (random force), in separate processes and composed (one process): best of
+  interleaved rounds, steps/s of the plant's loop (its trace's wall time). The cutting node
+  reads the TCP state, so the plant publishes /pentapod/tcp_state every step, which the
+  exciter (answering /clock) does not need: part of what a closed-loop source costs.
 """
 from __future__ import annotations
 
 import math
 from pathlib import Path
 import sys
+import tempfile
 import time
 
 import numpy as np
@@ -28,6 +34,8 @@ from pentapod_sim.machining.lobes import milling_limit, StabilityLimit  # noqa: 
 from pentapod_sim.machining.materials import load_machining  # noqa: E402
 from pentapod_sim.machining.tcp_frf import plant_poles, resonance_grid, tcp_frf  # noqa: E402
 from pentapod_sim.plant.build import build_plant  # noqa: E402
+from pentapod_sim.scenario.files import dump_params  # noqa: E402
+from pentapod_sim.scenario.runner import run_scenario  # noqa: E402
 from pentapod_sim.sim.closed_loop import simulate  # noqa: E402
 from pentapod_sim.sim.stepping import DiscretePlant  # noqa: E402
 
@@ -104,6 +112,53 @@ def run(quick: bool = False) -> list[dict]:
                      'offline plant + TCP damper law', 'steps/s',
                      f'P1, {plant.n_modes} modes, {n_steps} steps at 5 kHz, {OPERATION} at '
                      f'{speed:.0f} rpm, 0.2 mm deep (pentapod_sim.sim.closed_loop.simulate)'))
+    rows += lockstep_rows(plant, cond, quick)
+    return rows
+
+
+def _lockstep(folder: Path, model_file: Path, source: str, params: dict, steps: int,
+              composed: bool) -> float:
+    """Steps/s of one lockstep run: the plant node and one source node."""
+    trace = folder / f'trace_{source}_{int(composed)}.npz'
+    doc = {'/**': {'ros__parameters': {'sample_rate': 5000.0}},
+           source: {'ros__parameters': params},
+           'plant': {'ros__parameters': {'model_file': str(model_file), 'steps': steps,
+                                         'sources': [source], 'output_file': str(trace),
+                                         'startup_timeout': 60.0, 'loop_check': 'off'}}}
+    path = folder / f'{source}.yaml'
+    path.write_text(dump_params(doc))
+    code = run_scenario(path, {}, 600.0, log_dir=folder / f'logs_{source}', composed=composed)
+    if code != 0:
+        raise RuntimeError(f'{source} run failed; logs in {folder}')
+    with np.load(trace) as data:
+        return steps / float(data['wall_time'])
+
+
+def lockstep_rows(plant, cond, quick: bool) -> list[dict]:
+    """Plant + cutting node against plant + exciter node, separate processes and composed."""
+    steps, rounds = (3000, 1) if quick else (20000, 3)
+    cutting = {'operation': OPERATION, 'spindle_speed': cond.spindle_speed,
+               'axial_depth': cond.axial_depth}
+    exciter = {'kind': 'random', 'amplitude': 100.0, 'direction': [1.0, 0.0, 0.0],
+               'f_start': 2.0, 'f_end': 400.0, 'duration': steps / 5000.0}
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp)
+        model_file = plant.save(folder / 'plant_P1.npz')
+        for composed in (False, True):
+            best = {'cutting': 0.0, 'exciter': 0.0}
+            for _ in range(rounds):
+                for source, params in (('cutting', cutting), ('exciter', exciter)):
+                    rate = _lockstep(folder, model_file, source, params, steps, composed)
+                    best[source] = max(best[source], rate)
+            where = 'composed (one process)' if composed else 'separate processes'
+            rows.append(_row(f'lockstep plant + cutting node, {where}', best['cutting'],
+                             best['exciter'], f'lockstep plant + exciter node, {where}',
+                             'steps/s', f'P1, {plant.n_modes} modes, {steps} steps at 5 kHz, '
+                             f'{OPERATION} at {cond.spindle_speed:.0f} rpm, '
+                             f'{cond.axial_depth * 1e3:g} mm deep; best of {rounds} '
+                             'interleaved rounds; the cutting node needs the TCP state '
+                             'every step, the exciter only /clock'))
     return rows
 
 

@@ -13,9 +13,14 @@ from dataclasses import dataclass
 from typing import Any, Mapping
 
 from pentapod_damper.laws import (
+    band_pass_velocity,
     chord_damper,
     Dynamics,
+    integral_force_feedback,
+    lag_displacement_feedback,
+    positive_position_feedback,
     ProofMassActuator,
+    SteppedLaw,
     strut_axial_damper,
     strut_bending_damper,
     tcp_damper,
@@ -51,13 +56,111 @@ class DynamicsParams(NodeParams):
                         self.delay_steps, self.filter_hold)
 
 
-@dataclass(frozen=True)
-class DamperParams(Sampled, DynamicsParams, SourceParams):
-    """
-    Viscous velocity feedback u = -b * rate on struts and the TCP.
+_PORT_KINDS = ('bending', 'chord')
 
-    Optionally through a low-pass and a delay (the same for every damper of the node); the
-    gains may be changed while running.
+
+@dataclass(frozen=True)
+class ActiveLawParams(NodeParams):
+    """
+    The active strut laws of docs/dampers.md: IFF, lag displacement, band-pass velocity, PPF.
+
+    Each law runs on the struts its ``*_struts`` list names (none by default); its ``*_gain``
+    may be changed while running.
+    """
+
+    iff_struts: tuple[int, ...] = param((), 'struts (1..5) with integral force feedback from the '
+                                        'load cell between nut and gimbal (strut<i>_force) to a '
+                                        'force actuator in series with the nut '
+                                        '(strut<i>_drive_force); [] or [0] = none')
+    iff_gain: float = param(100.0, 'IFF gain g of u = -g / (s + omega_i) F', '1/s',
+                            bounds=(0.0, MAX_GAIN), read_only=False)
+    iff_omega: float = param(10.0, 'IFF corner omega_i (0: pure integrator)', 'rad/s',
+                             bounds=(0.0, 1.0e6))
+    lag_struts: tuple[int, ...] = param((), 'struts (1..5) with lag displacement feedback '
+                                        'u = +K w_c / (s + w_c) y on both axes of their lag_port '
+                                        'ports; [] or [0] = none')
+    lag_port: str = param('bending', 'bending (end-rotation difference, moment pair) or chord '
+                          '(chord deflection, chord force)', choices=_PORT_KINDS)
+    lag_stiffness: tuple[float, ...] = param((), 'K per port (strut by strut, axes 2 then 3) or '
+                                             'one for all [N m/rad for bending, N/m for chord]; '
+                                             'keep it well below the port stiffness')
+    lag_gain: float = param(1.0, 'scale of every lag_stiffness', bounds=(0.0, 10.0),
+                            read_only=False)
+    lag_corner_hz: float = param(50.0, 'corner w_c / 2 pi of the lag', 'Hz',
+                                 bounds=(1.0e-3, 1.0e5))
+    bandpass_struts: tuple[int, ...] = param((), 'struts (1..5) with relative velocity feedback '
+                                             'through a first-order band-pass on both axes of '
+                                             'their bandpass_port ports; [] or [0] = none')
+    bandpass_port: str = param('bending', 'bending or chord', choices=_PORT_KINDS)
+    bandpass_gain: float = param(50.0, 'damping b of the band-pass law [N m s/rad for bending, '
+                                 'N s/m for chord]', bounds=(0.0, MAX_GAIN), read_only=False)
+    bandpass_highpass_hz: float = param(5.0, 'high-pass corner', 'Hz', bounds=(1.0e-3, 1.0e5))
+    bandpass_lowpass_hz: float = param(100.0, 'low-pass corner (above the high-pass one)', 'Hz',
+                                       bounds=(1.0e-3, 1.0e5))
+    ppf_struts: tuple[int, ...] = param((), 'struts (1..5) with positive position feedback on '
+                                        'both axes of their ppf_port ports; [] or [0] = none')
+    ppf_port: str = param('bending', 'bending or chord', choices=_PORT_KINDS)
+    ppf_stiffness: tuple[float, ...] = param((), 'g per port (strut by strut, axes 2 then 3) or '
+                                             'one for all [N m/rad or N/m]; g G(0) < 1 on each '
+                                             'port')
+    ppf_gain: float = param(1.0, 'scale of every ppf_stiffness', bounds=(0.0, 10.0),
+                            read_only=False)
+    ppf_frequency_hz: float = param(27.0, 'filter frequency w_f / 2 pi (near the mode)', 'Hz',
+                                    bounds=(1.0e-3, 1.0e5))
+    ppf_damping: float = param(0.3, 'filter damping ratio zeta_f', bounds=(1.0e-3, 10.0))
+
+    def active_laws(self, dyn: Dynamics, dt: float, source: str = '') -> dict[str, SteppedLaw]:
+        """
+        The active laws configured, keyed by the name of their gain parameter.
+
+        ``iff_gain``, ``lag_gain``, ``bandpass_gain``, ``ppf_gain`` -> law, in this order, with
+        the dynamics ``dyn`` at the sample time ``dt`` [s]. ConfigError (naming ``source``) for
+        a combination the laws refuse.
+        """
+        laws: dict[str, SteppedLaw] = {}
+        try:
+            if self.iff_struts:
+                laws['iff_gain'] = integral_force_feedback(list(self.iff_struts), self.iff_gain,
+                                                           self.iff_omega, dt, dyn)
+            if self.lag_struts:
+                laws['lag_gain'] = lag_displacement_feedback(
+                    self.lag_port, list(self.lag_struts),
+                    _per_port(self.lag_stiffness, self.lag_struts, 'lag_stiffness'),
+                    self.lag_corner_hz, dt, dyn)
+                laws['lag_gain'].set_gain(self.lag_gain)
+            if self.bandpass_struts:
+                laws['bandpass_gain'] = band_pass_velocity(
+                    self.bandpass_port, list(self.bandpass_struts), self.bandpass_gain,
+                    self.bandpass_highpass_hz, self.bandpass_lowpass_hz, dt, dyn)
+            if self.ppf_struts:
+                laws['ppf_gain'] = positive_position_feedback(
+                    self.ppf_port, list(self.ppf_struts),
+                    _per_port(self.ppf_stiffness, self.ppf_struts, 'ppf_stiffness'),
+                    self.ppf_frequency_hz, self.ppf_damping, dt, dyn)
+                laws['ppf_gain'].set_gain(self.ppf_gain)
+        except ConfigError as err:
+            raise ConfigError(f'{source}: {err}' if source else str(err)) from None
+        return laws
+
+
+def _per_port(values: tuple[float, ...], struts: tuple[int, ...], name: str) -> list[float]:
+    """One value per port (2 per strut) from a list of that length or of one value."""
+    if len(values) == 1:
+        return list(values) * (2 * len(struts))
+    if len(values) != 2 * len(struts):
+        raise ConfigError(f'{name} has {len(values)} values; give one, or one per port '
+                          f'({2 * len(struts)} for struts {list(struts)})')
+    return list(values)
+
+
+@dataclass(frozen=True)
+class DamperParams(Sampled, ActiveLawParams, DynamicsParams, SourceParams):
+    """
+    Viscous velocity feedback u = -b * rate on struts and the TCP, and active strut laws.
+
+    The active strut laws are those of docs/dampers.md (IFF, lag displacement, band-pass
+    velocity, PPF); every law of the node runs through the same low-pass and delay; the gains
+    may be changed while running.
     """
 
     bending_struts: tuple[int, ...] = param((), 'struts (1..5) with rotational bending dampers '
@@ -81,21 +184,23 @@ class DamperParams(Sampled, DynamicsParams, SourceParams):
     tcp_gain: float = param(20000.0, 'TCP damping b', 'N s/m', bounds=(0.0, MAX_GAIN),
                             read_only=False)
 
-    def laws(self, source: str = '', dt: float | None = None) -> dict[str, ViscousDamper]:
+    def laws(self, source: str = '',
+             dt: float | None = None) -> dict[str, ViscousDamper | SteppedLaw]:
         """
-        The viscous dampers of the node, keyed by the name of their gain parameter.
+        The laws of the node, keyed by the name of their gain parameter.
 
-        ``bending_gain``, ``chord_gain``, ``axial_gain``, ``tcp_gain`` -> law, for the dampers
-        configured, in this order (the order of the node's actuator ports); their dynamics
+        ``bending_gain``, ``chord_gain``, ``axial_gain``, ``tcp_gain``, then the active laws
+        (:meth:`ActiveLawParams.active_laws`) -> law, for the laws configured, in this order
+        (the order of the node's actuator ports; two laws on one port add up); their dynamics
         are discretised with ``dt`` [s] (default :attr:`dt`). ConfigError (naming ``source``)
-        for dynamics the laws refuse.
+        for dynamics or options the laws refuse.
         """
         try:
             dyn = self.dynamics()
         except ConfigError as err:
             raise ConfigError(f'{source}: {err}' if source else str(err)) from None
         step = self.dt if dt is None else dt
-        laws = {}
+        laws: dict[str, ViscousDamper | SteppedLaw] = {}
         if self.bending_struts:
             laws['bending_gain'] = strut_bending_damper(list(self.bending_struts),
                                                         self.bending_gain, dyn, step)
@@ -107,7 +212,12 @@ class DamperParams(Sampled, DynamicsParams, SourceParams):
                                                     dyn, step)
         if self.tcp_directions:
             laws['tcp_gain'] = tcp_damper(list(self.tcp_directions), self.tcp_gain, dyn, step)
+        laws.update(self.active_laws(dyn, step, source))
         return laws
+
+    def loop_laws(self, dt: float | None = None) -> list[ViscousDamper]:
+        """Every damper of the node (:meth:`laws`), for offline analyses of a scenario."""
+        return list(self.laws(dt=dt).values())
 
 
 @dataclass(frozen=True)
@@ -132,6 +242,10 @@ class PmaParams(Sampled, SourceParams):
                                  highpass_hz=self.highpass_hz, stroke_limit=self.stroke_limit,
                                  force_limit=self.force_limit)
 
+    def loop_laws(self, dt: float | None = None) -> list[ProofMassActuator]:
+        """The proof-mass actuator (:meth:`law`), for offline analyses of a scenario."""
+        return [self.law(dt)]
+
 
 @dataclass(frozen=True)
 class ExampleControllerParams(NodeParams):
@@ -140,11 +254,15 @@ class ExampleControllerParams(NodeParams):
     gain: float = param(1000.0, 'damping of the TCP in x', 'N s/m', bounds=(0.0, MAX_GAIN))
     source_name: str = param('example', 'answers on /pentapod/forces/<source_name>')
 
+    def loop_laws(self, dt: float | None = None) -> list[ViscousDamper]:
+        """The node's law u = -gain * v_x, for offline analyses of a scenario."""
+        return [tcp_damper(['x'], self.gain)]
+
 
 def damper_laws(params: Mapping[str, Any] | DamperParams, source: str = '',
-                dt: float | None = None) -> dict[str, ViscousDamper]:
+                dt: float | None = None) -> dict[str, ViscousDamper | SteppedLaw]:
     """
-    The viscous dampers of one damper node's parameters (:meth:`DamperParams.laws`).
+    The laws of one damper node's parameters (:meth:`DamperParams.laws`).
 
     ``params`` may be a section of a scenario file (checked, ConfigError naming ``source``);
     ``dt`` [s], if given, replaces the one of its ``sample_rate``.

@@ -22,6 +22,12 @@ messages (docs/architecture.md, docs/nodes.md):
   source's topic, M steps (the plant's ``display_batch_period``) in one JointState, stamp of
   the first step, joints ``<joint>@j`` for step j of the batch (:func:`batch_layout`), the
   fields of the per-step topic, header.frame_id the step dt [s] as ``repr(dt)``.
+* ``/pentapod/cutting/state`` (the cutting-process node, one message per step, stamp t_k):
+  joints ``tooth_{j}`` (j = 1..N, :func:`cutting_joints`), position = immersion angle phi_j
+  [rad, 0..2 pi], velocity = chip thickness h_j [m] (<= 0: the tooth cuts no chip), effort =
+  tangential force F_t of the tooth [N] (0 out of the cut). A tooth cuts when its angle lies
+  between the entry and exit angles of :data:`CUTTING_SPEC` and h_j > 0. The force on the TCP
+  is the node's answer on its force topic.
 
 A quantity the model lacks is published as NaN.
 """
@@ -47,6 +53,14 @@ STATE_TOPICS = (TCP_STATE, STRUT_STATES, PMA_MOUNT_STATE)
 TCP_STATE_FULLRATE = '/pentapod/tcp_state_fullrate'
 EXCITATION = '/pentapod/excitation'
 PMA_STATE = '/pentapod/pma/state'
+#: State of the cutting process, one message per step (layout in the module docstring).
+CUTTING_STATE = '/pentapod/cutting/state'
+#: The cutting run's operation, published once (std_msgs/String, reliable, transient local,
+#: depth 1): the JSON text of :func:`pentapod_sim.machining.cutting_spec.spec_message`.
+#: One cutting node per run (one spindle): both topics have one writer.
+CUTTING_SPEC = '/pentapod/cutting/spec'
+#: Joint-name prefix of the teeth on :data:`CUTTING_STATE` (``tooth_1`` ... ``tooth_N``).
+TOOTH_PREFIX = 'tooth_'
 #: Run status of the plant (diagnostic_msgs/DiagnosticStatus, reliable, transient local):
 #: ``running`` at the start and every ``status_period`` s of wall time during the run,
 #: ``finished`` or ``stopped`` with the steps run at the end; see :data:`RUN_STATUS_KEYS`,
@@ -93,10 +107,12 @@ STRING = 'std_msgs/msg/String'
 #: DIAGNOSTIC_STATUS).
 TOPIC_TYPES = {CLOCK: CLOCK_TYPE, TCP_STATE: JOINT_STATE, STRUT_STATES: JOINT_STATE,
                TCP_STATE_FULLRATE: JOINT_STATE, PMA_MOUNT_STATE: JOINT_STATE,
-               EXCITATION: WRENCH_STAMPED, PMA_STATE: JOINT_STATE}
+               EXCITATION: WRENCH_STAMPED, PMA_STATE: JOINT_STATE,
+               CUTTING_STATE: JOINT_STATE, CUTTING_SPEC: STRING}
 #: Topics that carry one message per plant step (stamp t_k) when they are published at all;
 #: force topics (:data:`FORCE_PREFIX`) do too. The recorder expects one message per step on them.
-STEP_TOPICS = (CLOCK, *STATE_TOPICS, TCP_STATE_FULLRATE, EXCITATION, PMA_STATE)
+STEP_TOPICS = (CLOCK, *STATE_TOPICS, TCP_STATE_FULLRATE, EXCITATION, PMA_STATE,
+               CUTTING_STATE)
 
 #: Values of the ``state`` key of a run-status message (DiagnosticStatus.message holds it too).
 RUN_RUNNING, RUN_FINISHED, RUN_STOPPED = 'running', 'finished', 'stopped'
@@ -133,6 +149,11 @@ def excitation_spec_topic(source: str) -> str:
 def is_step_topic(topic: str) -> bool:
     """True for a topic that carries one message per step (:data:`STEP_TOPICS`, forces)."""
     return topic in STEP_TOPICS or topic.startswith(FORCE_PREFIX)
+
+
+def cutting_joints(teeth: int) -> list[str]:
+    """Joint names of the teeth on :data:`CUTTING_STATE`: ``tooth_1`` ... ``tooth_<teeth>``."""
+    return [f'{TOOTH_PREFIX}{j}' for j in range(1, teeth + 1)]
 
 
 def tcp_spectrum_topic(name: str) -> str:
@@ -226,11 +247,11 @@ def qos_class(topic: str) -> str | None:
         return 'state'
     if topic.startswith(FORCE_PREFIX):
         return 'force'
-    if topic in (EXCITATION, PMA_STATE):
+    if topic in (EXCITATION, PMA_STATE, CUTTING_STATE):
         return 'info'
     if topic.startswith(CONTROLLER_MODEL_PREFIX):
         return 'model'
-    if topic.startswith(EXCITATION_SPEC_PREFIX):
+    if topic.startswith(EXCITATION_SPEC_PREFIX) or topic == CUTTING_SPEC:
         return 'spec'
     if batched_topic(topic) is not None:
         return 'display'

@@ -372,3 +372,21 @@ class SourceParams(NodeParams):
     wait_for_subscribers: tuple[str, ...] = param(
         (), "node names (e.g. a recorder) that must be subscribed and matched to this node's "
         'information topics before it answers step 0 (the plant re-sends step 0 meanwhile)')
+
+    def loop_laws(self, dt: float | None = None) -> list[Any]:
+        """
+        The control laws the node closes around the plant, built as it runs them.
+
+        For offline analyses of a scenario (its sampled closed loop, the lobes of
+        ``statespace lobes``; :mod:`pentapod_sim.scenario.laws`): laws with ``sensor_ports``,
+        ``actuator_ports`` and a linear model (``discrete_model()`` or ``linear_gain()``,
+        :func:`pentapod_sim.sim.controllers.controller_of`), sampled with ``dt`` [s] (default:
+        the node's own sample time); an empty list for a node that closes no loop.
+
+        Raises
+        ------
+        ConfigError
+            Here, for a node class that does not say: its law cannot be modelled offline.
+        """
+        raise ConfigError(f'{type(self).__name__} does not say which laws it runs '
+                          '(no loop_laws method): it cannot be modelled offline')

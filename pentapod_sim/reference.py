@@ -6,7 +6,8 @@ kind of :data:`pentapod_sim.registry.NODES` from its parameter class;
 ``python -m pentapod_sim.reference config > docs/config.md`` one table per file of
 :data:`pentapod_sim.registry.CONFIG_FILES` from its schema; ``python -m pentapod_sim.reference
 NODE`` prints one node's parameters as ``--help`` does. test/test_parameters.py checks that the
-committed pages are what this module makes.
+committed pages are what this module makes. :func:`replace_section` puts a generated block
+between its markers in a page written by hand.
 """
 from __future__ import annotations
 
@@ -149,6 +150,26 @@ def config_markdown() -> str:
                   '| key | type | unit | range | default | description |',
                   '|---|---|---|---|---|---|', *config_rows(cls), '']
     return '\n'.join(parts)
+
+
+def replace_section(text: str, name: str, body: str) -> str:
+    """
+    Replace what stands between ``<!-- name:begin -->`` and ``<!-- name:end -->`` by ``body``.
+
+    Raises ValueError naming the marker if either is missing or appears more than once.
+    """
+    begin, end = f'<!-- {name}:begin -->', f'<!-- {name}:end -->'
+    for marker in (begin, end):
+        if text.count(marker) != 1:
+            raise ValueError(f'{marker} must appear exactly once (found {text.count(marker)})')
+    head, rest = text.split(begin)
+    _, tail = rest.split(end)
+    return f'{head}{begin}\n{body.strip()}\n{end}{tail}'
+
+
+def section_of(text: str, name: str) -> str:
+    """What stands between ``<!-- name:begin -->`` and ``<!-- name:end -->`` (stripped)."""
+    return text.split(f'<!-- {name}:begin -->')[1].split(f'<!-- {name}:end -->')[0].strip()
 
 
 def main(argv: list[str] | None = None) -> int:

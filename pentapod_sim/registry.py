@@ -58,6 +58,8 @@ NODES = (
              'pentapod_sim.nodes.parameter_tables:PlantParams', PLANT),
     NodeKind('exciter', 'pentapod_sim.nodes.exciter_node:ExciterNode',
              'pentapod_sim.nodes.parameter_tables:ExciterParams'),
+    NodeKind('cutting', 'pentapod_sim.nodes.cutting_node:CuttingNode',
+             'pentapod_sim.nodes.parameter_tables:CuttingParams'),
     NodeKind('disturbance', 'pentapod_sim.nodes.disturbance_node:DisturbanceNode',
              'pentapod_sim.nodes.parameter_tables:DisturbanceParams'),
     NodeKind('recorder', 'pentapod_sim.nodes.recorder_node:RecorderNode',

@@ -59,10 +59,51 @@ def small_model(seed: int = 0, n_extra_nodes: int = 4) -> FEModel:
     for name, node in named:
         points[name] = sp.csr_matrix((np.ones(6), (np.arange(6), 6 * node + np.arange(6))),
                                      shape=(6, n))
+    frames = random_frames(rng)
+    k, m, drives = _with_gimbals(k, m, points, frames)
+    n = k.shape[0]
+    points = {name: sp.csr_matrix((t.data, t.indices, t.indptr), shape=(6, n))
+              for name, t in points.items()}
+    for i in range(1, 6):
+        node = n // 6 - 6 + i
+        points[f'gimbal{i}'] = sp.csr_matrix((np.ones(6), (np.arange(6),
+                                                           6 * node + np.arange(6))),
+                                             shape=(6, n))
     K = sp.csr_matrix(k)
-    return FEModel(K=K, M=sp.csr_matrix(m), stiffness_groups={'frame': K}, points=points,
-                   point_positions={p: np.zeros(3) for p in points},
-                   strut_frames=random_frames(rng))
+    return FEModel(K=K, M=sp.csr_matrix(m),
+                   stiffness_groups={'frame': K - sp.csr_matrix(drives),
+                                     'feed_drives': sp.csr_matrix(drives)},
+                   points=points, point_positions={p: np.zeros(3) for p in points},
+                   strut_frames=frames)
+
+
+def _with_gimbals(k: np.ndarray, m: np.ndarray, points: dict, frames: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """
+    Append five gimbal nodes with feed-drive links.
+
+    Each hangs on its strut's ``at_bp`` node by a feed-drive link
+    (axial spring k_a along e1 and stiff lateral/rotational springs, the 'feed_drives' group)
+    and on the model's first node by a spring; returns K, M and the feed-drive stiffness.
+    """
+    rng = np.random.default_rng(99)
+    n0 = k.shape[0]
+    n = n0 + 30
+    k_all, m_all, drives = np.zeros((n, n)), np.zeros((n, n)), np.zeros((n, n))
+    k_all[:n0, :n0], m_all[:n0, :n0] = k, m
+    for i in range(1, 6):
+        g = slice(n0 + 6 * (i - 1), n0 + 6 * i)
+        s = slice(*(points[f'strut{i}_at_bp'].indices[[0, -1]] + [0, 1]))
+        big = np.kron(np.eye(2), frames[i - 1])
+        link = big.T @ np.diag([rng.uniform(2e6, 8e6)] + [5e7] * 5) @ big
+        for a, b, sign in ((s, s, 1), (g, g, 1), (s, g, -1), (g, s, -1)):
+            drives[a, b] += sign * link
+        k_all[g, g] += 3e6 * np.eye(6)
+        k_all[g, :6] -= 3e6 * np.eye(6)
+        k_all[:6, g] -= 3e6 * np.eye(6)
+        k_all[:6, :6] += 3e6 * np.eye(6)
+        m_all[g, g] = np.diag(rng.uniform(1.0, 3.0, 6))
+    return k_all + drives, m_all, drives
 
 
 def all_modes(model: FEModel) -> tuple[np.ndarray, np.ndarray]:

@@ -19,6 +19,7 @@ from pentapod_sim.errors import ConfigError
 from pentapod_sim.fe.machine_data import load_machine, load_positions
 from pentapod_sim.machining.materials import load_machining
 from pentapod_sim.plant.build import load_reduction_config
+from pentapod_sim.plant.drives import load_drives
 from pentapod_sim.plant.ports import INPUT_NAMES, OUTPUT_NAMES
 from pentapod_sim.schema import build, NON_NEGATIVE, POSITIVE, read_mapping, spec
 
@@ -26,7 +27,7 @@ ROOT = Path(__file__).resolve().parents[1]
 CONFIG = ROOT / 'config'
 LOADERS = {'machine.yaml': load_machine, 'positions.yaml': load_positions,
            'reduction.yaml': load_reduction_config, 'study.yaml': load_study_config,
-           'machining.yaml': load_machining}
+           'machining.yaml': load_machining, 'drives.yaml': load_drives}
 
 
 def _raw(name: str) -> dict:
@@ -55,6 +56,7 @@ def _write(tmp_path: Path, name: str, doc) -> Path:
     ('study.yaml', ['step_response'], 'step_respons', 'step_response'),
     ('machining.yaml', ['materials', 'steel', 'kienzle', 'exponent'], 'exponnt', 'exponent'),
     ('machining.yaml', ['operations', 'steel_half_down', 'milling'], 'miling', 'milling'),
+    ('drives.yaml', ['position_gain'], 'position_gian', 'position_gain'),
 ])
 def test_misspelt_key_is_refused_naming_file_path_and_closest_key(tmp_path, name, keys, wrong,
                                                                   right):

@@ -21,12 +21,14 @@ def _displacement(model, moves: dict) -> np.ndarray:
 
 
 def test_names_match_architecture_counts():
-    assert len(ports.INPUT_NAMES) == 3 + 5 * 5 + 3
-    assert len(ports.OUTPUT_NAMES) == 6 + 5 * 10 + 3
-    assert len(set(ports.INPUT_NAMES + ports.OUTPUT_NAMES)) == 31 + 59
-    kinds = {n: ports.port(small_model(0).points, small_model(0).strut_frames, n).kind
-             for n in ports.OUTPUT_NAMES}
-    assert set(kinds.values()) == {'displacement', 'velocity'}
+    assert len(ports.INPUT_NAMES) == 3 + 5 * 6 + 3
+    assert len(ports.OUTPUT_NAMES) == 6 + 5 * 13 + 3
+    assert len(set(ports.INPUT_NAMES + ports.OUTPUT_NAMES)) == 36 + 74
+    model = small_model(0)
+    points = {**model.points, **ports.load_points(model.points, model.stiffness_groups)}
+    kinds = {n: ports.port(points, model.strut_frames, n).kind for n in ports.OUTPUT_NAMES}
+    assert set(kinds.values()) == {'displacement', 'velocity', 'load'}
+    assert [n for n, k in kinds.items() if k == 'load'] == [f'strut{i}_force' for i in range(1, 6)]
 
 
 @pytest.mark.parametrize('axis', [0, 1, 2])

@@ -26,9 +26,9 @@ from typing import Any
 
 from pentapod_sim import registry
 from pentapod_sim.errors import ConfigError
-from pentapod_sim.parameters import load_class, NODE_CLASS, NodeParams
+from pentapod_sim.parameters import load_class, NODE_CLASS, NodeParams, params_of
 from pentapod_sim.registry import SOURCE
-from pentapod_sim.scenario.files import read_scenario, resolve
+from pentapod_sim.scenario.files import executable_of, read_scenario, resolve
 from pentapod_sim.schema import read_mapping
 
 #: Node kinds of a scenario that excite rather than control.
@@ -190,23 +190,22 @@ def parse(spec: str, params_file: str | None = None, source: str | None = None,
 
 def law_ports(ctrl: Controller, dt: float) -> tuple[str, ...]:
     """
-    Input ports of a controller made of this package's damper and PMA nodes, without a run.
+    Input ports of a controller whose nodes say which laws they run, without a run.
 
-    Built with the nodes' own functions (:mod:`pentapod_damper.scenario_laws`); () for any
-    other node (its ports are learned from its first recording, or given with ``--ports``).
+    Each node's parameter class builds its laws (``loop_laws``, as the offline analyses of a
+    scenario do: :mod:`pentapod_sim.scenario.laws`); () if one of them cannot say (a plain
+    node: its ports are learned from its first recording, or given with ``--ports``).
     """
-    from pentapod_damper.node_parameters import damper_laws, pma_law
-    from pentapod_sim.scenario.files import executable_of
     ports: list[str] = []
     for name, section in ctrl.nodes.items():
-        kind = str(section.get(NODE_CLASS) or executable_of(name))
-        params = {k: v for k, v in section.items() if k != NODE_CLASS}
-        laws: list[Any]
-        if kind == 'damper':
-            laws = list(damper_laws(params, f'node {name!r}', dt).values())
-        elif kind == 'pma':
-            laws = [pma_law(params, dt, f'node {name!r}')]
-        else:
+        try:
+            target = str(section.get(NODE_CLASS) or executable_of(name))
+            cls: Any = load_class(target) if ':' in target else None
+            schema = cls.Params if cls is not None else params_of(target)
+            params = {k: v for k, v in section.items() if k != NODE_CLASS}
+            built: Any = schema.build(params, f'node {name!r}')
+            laws = built.loop_laws(dt)
+        except (AttributeError, ConfigError, KeyError):
             return ()
         ports += [p for law in laws for p in law.actuator_ports]
     return tuple(dict.fromkeys(ports))

@@ -1,10 +1,12 @@
 """
-Damper node: viscous velocity feedback u = -b * rate on struts and the TCP.
+Damper node: viscous velocity feedback u = -b * rate on struts and the TCP, and active strut laws.
 
 One node may serve several dampers: strut bending dampers (moment pairs about e2 and e3 from
 the bending rates, b [N m s/rad]), strut chord dampers (lateral force pairs along e2 and e3 at
 the chord point against the chord, b [N s/m]), strut axial dampers (force from the axial
 velocity, b [N s/m]) and TCP dampers against ground (force from the TCP velocity, b [N s/m]),
+and the active strut laws of docs/dampers.md (integral force feedback from the load cells,
+lag displacement, band-pass velocity and positive position feedback on the strut ports),
 all optionally through the same low-pass and delay (``filter_order``, ``bandwidth_hz``,
 ``filter_damping``, ``delay_steps``; controller states reset with every new plant run). It answers
 every plant step on /pentapod/forces/<source_name> (lockstep contract, docs/nodes.md). The
@@ -25,7 +27,7 @@ from pentapod_sim.sim.controllers import controller_of, DiscreteController, para
 
 
 class DamperNode(LockstepSource):
-    """Viscous dampers on selected struts and TCP directions."""
+    """Viscous dampers and active strut laws on selected struts and TCP directions."""
 
     Params = DamperParams
 
@@ -34,7 +36,8 @@ class DamperNode(LockstepSource):
         self.laws = self.params.laws()
         if not self.laws:
             raise ConfigError('damper node has no damper: set bending_struts, chord_struts, '
-                              'axial_struts or tcp_directions')
+                              'axial_struts, tcp_directions, iff_struts, lag_struts, '
+                              'bandpass_struts or ppf_struts')
         laws = list(self.laws.values())
         self.setup([p for law in laws for p in law.sensor_ports],
                    [p for law in laws for p in law.actuator_ports])

@@ -131,7 +131,7 @@ def cmd_scenario(args: argparse.Namespace) -> int:
     g = study_graph(cfg, res.out_dir, res.freq, runs, _lane(runs, args.jobs), fe_model)
     pos = cfg.positions[0]
     # the scenario's stages and what they need (dask leaves the rest of the graph out)
-    wanted = {'models': g.models, 'analytic': g.analytic,
+    wanted = {'models': g.models, 'analytic': g.analytic, 'lobes': g.lobes,
               **{name: {k: v for k, v in getattr(g, name).items() if k[1] == args.scenario}
                  for name in ('frf_runs', 'damping_runs')}}
     values, _ = compute(wanted, g.graph.stage_of, args.jobs, _say)
@@ -190,11 +190,12 @@ def cmd_dynamics(args: argparse.Namespace) -> int:
 
 def _print_rows(rows: list[tables.SummaryRow]) -> None:
     print(f'{"pos":4} {"scenario":18} {"peak um/N":>10} {"peak red.":>9} {"rms red.":>8} '
-          f'{"meas. dev dB":>12} {"steps/s":>8}')
+          f'{"depth gain":>10} {"meas. dev dB":>12} {"steps/s":>8}')
     for r in rows:
         dev = r.deviation_db if r.deviation_db is not None else float('nan')
         print(f'{r.position:4} {r.scenario:18} {r.peak_um_per_N:10.4f} {r.peak_reduction:9.2f} '
-              f'{r.rms_reduction:8.2f} {dev:12.2f} {r.steps_per_s or 0:8.0f}')
+              f'{r.rms_reduction:8.2f} {r.stable_depth_gain:10.2f} {dev:12.2f} '
+              f'{r.steps_per_s or 0:8.0f}')
 
 
 def _print_summary(res: StudyResults, path: Path) -> None:

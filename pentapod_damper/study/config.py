@@ -16,6 +16,7 @@ from typing import Any
 
 from pentapod_sim.errors import ConfigError
 from pentapod_sim.fe.machine_data import load_positions
+from pentapod_sim.machining.materials import load_machining
 from pentapod_sim.parameters import sample_time
 from pentapod_sim.paths import config_dir
 from pentapod_sim.plant.config import FrequencyGrid
@@ -101,6 +102,12 @@ class StudyConfig:
         Periods averaged after settling.
     damping_time_constants : float
         Settling time in decay time constants of the slowest dominant mode of the loop.
+    machining_operations : tuple of str
+        Operations of config/machining.yaml whose stability lobes the study draws; the first
+        sets the summary's stable depth gain and the cutting runs.
+    cutting_runs : tuple of str
+        Scenarios cut on the testbed at every position at 0.8x and 1.2x of the predicted
+        limiting depth (empty: none); those not among ``scenarios`` are not run.
     """
 
     positions: tuple[str, ...]
@@ -130,6 +137,8 @@ class StudyConfig:
     damping_amplitude: float
     damping_periods: int
     damping_time_constants: float
+    machining_operations: tuple[str, ...]
+    cutting_runs: tuple[str, ...]
 
     @property
     def dt(self) -> float:
@@ -210,6 +219,18 @@ class DampingRuns:
 
 
 @dataclass(frozen=True)
+class MachiningStudy:
+    """Stability lobes of every scenario and recorded cuts that check them."""
+
+    operations: tuple[str, ...] = spec(min_length=1, description='operations of config/'
+                                       'machining.yaml; the first sets the stable depth gain '
+                                       'and the cutting runs')
+    cutting_runs: tuple[str, ...] = spec(description='scenarios cut on the testbed at 0.8x and '
+                                         '1.2x of the predicted limit, at every position (those '
+                                         'not among scenarios are not run)')
+
+
+@dataclass(frozen=True)
 class StudyFile:
     """config/study.yaml; see that file for the meaning of each key."""
 
@@ -226,6 +247,7 @@ class StudyFile:
     truncation_check: TruncationCheck = spec(description='truncation check of the loops')
     pma_requirements: PmaRequirements = spec(description='PMA requirements')
     damping: DampingRuns = spec(description='damping runs (multisine, modal identification)')
+    machining: MachiningStudy = spec(description='stability lobes and recorded cuts')
 
     def __post_init__(self) -> None:
         exc, fs = self.excitation, self.sample_rate
@@ -263,7 +285,9 @@ FILE_KEYS = {'positions': 'positions', 'scenarios': 'scenarios', 'sample_rate': 
              'damping_scenarios': 'damping.scenarios', 'damping_band': 'damping.band',
              'damping_period': 'damping.period', 'damping_amplitude': 'damping.amplitude',
              'damping_periods': 'damping.periods',
-             'damping_time_constants': 'damping.time_constants'}
+             'damping_time_constants': 'damping.time_constants',
+             'machining_operations': 'machining.operations',
+             'cutting_runs': 'machining.cutting_runs'}
 
 
 def _get(obj: Any, key_path: str) -> Any:
@@ -298,6 +322,13 @@ def _check_names(study: StudyFile, source: str) -> None:
         for i, name in enumerate(study.damping.scenarios):
             check_choice(name, scenarios, f'damping.scenarios[{i}]',
                          'scenario of config/scenarios')
+        for i, name in enumerate(study.machining.cutting_runs):
+            check_choice(name, scenarios, f'machining.cutting_runs[{i}]',
+                         'scenario of config/scenarios')
+        table = load_machining()
+        for i, name in enumerate(study.machining.operations):
+            check_choice(name, sorted(table.operations), f'machining.operations[{i}]',
+                         'operation of config/machining.yaml')
     except ConfigError as err:
         raise ConfigError(f'{source}: {err}') from None
 

@@ -38,6 +38,7 @@ COLUMNS: dict[str, Columns] = {
                 ('peak_um_per_N', 'peak [um/N]', '.3g'), ('peak_hz', 'at [Hz]', '.3g'),
                 ('peak_reduction', 'peak reduction', '.3g'),
                 ('rms_reduction', 'RMS reduction', '.3g'),
+                ('stable_depth_gain', 'stable depth gain', '.3g'),
                 ('sampled_loop', 'sampled loop', 's'),
                 ('deviation_db', 'testbed dev. [dB]', '.2f'),
                 ('compared_share', 'bins compared', '%')),

@@ -23,8 +23,10 @@ from pentapod_damper.study.damping import ModeDamping
 from pentapod_damper.study.measured_damping import Identified, IdentifiedMode, SETTLE_MODES
 from pentapod_damper.study.pma import PmaDesign
 from pentapod_damper.study.runs import RunResult
+from pentapod_sim.machining.loop_lobes import LoopLobes
 from pentapod_sim.plant.frf_peaks import Peak, PoleResidueFrf
 from pentapod_sim.plant.model import PlantModel
+from pentapod_sim.scenario.cutting import RecordedCut
 from pentapod_sim.sim.stability import LoopCheck
 
 FloatArray = npt.NDArray[np.float64]
@@ -251,6 +253,24 @@ class Figures:
 
 
 @dataclass
+class CuttingCheck:
+    """The recorded cuts of one (position, scenario) at the speed of the check."""
+
+    position: str
+    scenario: str
+    operation: str
+    speed: float
+    depth: float
+    chatter_freq: float
+    cuts: list[RecordedCut]
+
+    def describe(self) -> str:
+        runs = ', '.join(f'{c.run.factor:g}x {c.verdict.verdict}' for c in self.cuts)
+        return (f'{self.position} {self.scenario}: cuts at {self.speed:.0f} rpm around the '
+                f'limit {self.depth * 1e3:.4g} mm: {runs}')
+
+
+@dataclass
 class Table:
     """
     A table a stage adds to the report as it is: CSV ``<name>.csv`` and a Markdown section.
@@ -282,6 +302,8 @@ class StudyResults:
     step_runs: dict[str, StepRun] = field(default_factory=dict)
     bending: dict[str, BendingComparison] = field(default_factory=dict)
     pma: dict[str, PmaRequirements] = field(default_factory=dict)
+    lobes: dict[Pair, LoopLobes] = field(default_factory=dict)
+    cutting: dict[Pair, CuttingCheck] = field(default_factory=dict)
     figures: list[Figures] = field(default_factory=list)
     tables: list[Table] = field(default_factory=list)
     #: stage -> seconds (busy time and first start to last end), and the total

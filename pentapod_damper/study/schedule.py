@@ -38,7 +38,7 @@ from dask.base import compute as dask_compute
 from dask.callbacks import Callback
 from dask.delayed import Delayed, delayed
 
-from pentapod_damper.study import figures, stages
+from pentapod_damper.study import figures, machining, stages
 from pentapod_damper.study.config import StudyConfig
 from pentapod_damper.study.pipeline import scenario_pma
 from pentapod_damper.study.records import Figures, FloatArray, Pair, StudyResults
@@ -48,6 +48,7 @@ from pentapod_sim import shutdown
 MODELS, ANALYTIC, BENDING, PMA = ('models', 'analytic FRFs, checks and poles',
                                   'bending dampers', 'PMA requirements')
 FRF_RUNS, DAMPING_RUNS, FIGURES = 'FRF and step runs', 'damping runs', 'figures'
+LOBES, CUTTING_RUNS = 'stability lobes', 'cutting runs'
 
 
 class Interrupted(Exception):
@@ -113,6 +114,8 @@ class StudyGraph:
     step_runs: dict[str, Delayed] = field(default_factory=dict)
     bending: dict[str, Delayed] = field(default_factory=dict)
     pma: dict[str, Delayed] = field(default_factory=dict)
+    lobes: dict[Pair, Delayed] = field(default_factory=dict)
+    cutting: dict[Pair, Delayed] = field(default_factory=dict)
     figures: list[Delayed] = field(default_factory=list)
     tables: list[Delayed] = field(default_factory=list)
     graph: Graph = field(default_factory=Graph)
@@ -156,6 +159,16 @@ def study_graph(cfg: StudyConfig, out_dir: Path, freq: FloatArray, runs: bool = 
                          g.analytic[step, scn])
     for pos in cfg.positions:
         g.bending[pos] = add(BENDING, pos, stages.bending_dampers, cfg, freq, g.models[pos])
+    for pos, scn in pairs:
+        g.lobes[pos, scn] = add(LOBES, f'{pos} {scn}', machining.scenario_lobes, cfg,
+                                g.models[pos], g.analytic[pos, scn])
+    g.tables.append(add(LOBES, 'table', machining.lobes_table, cfg, g.lobes))
+    for pos, scn in [(p, s) for p, s in pairs if s in cfg.cutting_runs] if runs else []:
+        g.cutting[pos, scn] = run(CUTTING_RUNS, f'{pos} {scn}', machining.cutting_check, cfg,
+                                  out_dir, g.models[pos], g.analytic[pos, scn],
+                                  g.lobes[pos, scn])
+    if g.cutting:
+        g.tables.append(add(CUTTING_RUNS, 'table', machining.cuts_table, list(g.cutting.values())))
     for pos in cfg.positions:
         g.figures.append(add(FIGURES, pos, figures.position_figures, cfg, out_dir, freq,
                              g.models[pos], _of(g.analytic, pos), _of(g.frf_runs, pos)))
@@ -168,6 +181,9 @@ def study_graph(cfg: StudyConfig, out_dir: Path, freq: FloatArray, runs: bool = 
     if g.step_runs:
         g.figures.append(add(FIGURES, 'PMA steps', figures.step_figure, cfg, out_dir,
                              g.step_runs))
+    for pos in cfg.positions:
+        g.figures.append(add(FIGURES, f'lobes {pos}', machining.lobe_figures, cfg, out_dir, pos,
+                             _of(g.lobes, pos)))
     return g
 
 

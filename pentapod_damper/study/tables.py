@@ -30,7 +30,9 @@ class SummaryRow:
     One (position, scenario): exact peak, reductions, truncation check, testbed check.
 
     Peaks and peak reductions are exact (searched at the resonances); the RMS reduction is
-    taken on the frequency grid; the margins are the truncation check's. The testbed columns
+    taken on the frequency grid; the stable depth gain is the minimum stable depth of the
+    study's first machining operation over the baseline's (NaN without the lobes stage); the
+    margins are the truncation check's. The testbed columns
     (None without a run): the run's peak on its bins, the largest deviation from the sampled
     loop and the share of bins compared, and the run's speed.
     """
@@ -41,6 +43,7 @@ class SummaryRow:
     peak_hz: float
     peak_reduction: float
     rms_reduction: float
+    stable_depth_gain: float
     plant_margin: float
     check_margin: float
     sampled_loop: str
@@ -86,6 +89,13 @@ def _peak(ana: ScenarioAnalytic) -> float:
     return ana.peak.value
 
 
+def _depth_gain(res: StudyResults, pos: str, scn: str) -> float:
+    lobes, base = res.lobes.get((pos, scn)), res.lobes.get((pos, 'baseline'))
+    if lobes is None or base is None:
+        return math.nan
+    return lobes.gain_over(base, res.cfg.machining_operations[0])
+
+
 def summary_rows(res: StudyResults) -> list[SummaryRow]:
     """One row per (position, scenario) of the study file."""
     rows = []
@@ -99,7 +109,8 @@ def summary_rows(res: StudyResults) -> list[SummaryRow]:
             _, rms = peak_and_rms(ana.continuous, res.freq, lo, hi)
             row = SummaryRow(pos, scn, ana.peak.value * 1e6, ana.peak.freq_hz,
                              _peak(base) / ana.peak.value, base_rms / rms,
-                             ana.loop.plant_margin, ana.loop.check_margin, ana.loop.verdict)
+                             _depth_gain(res, pos, scn), ana.loop.plant_margin,
+                             ana.loop.check_margin, ana.loop.verdict)
             run = res.frf_runs.get((pos, scn))
             if run is not None:
                 mes = run.measured

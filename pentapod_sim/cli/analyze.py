@@ -12,6 +12,7 @@ Examples::
     analyze modes BAG [--band F1 F2] [--outputs TOPIC.FIELD ...]
     analyze recover BAG [--to DIR | --in-place]
     analyze lobes BAG[,BAG2] [BAG[,BAG2] ...] [--operation NAME] [--speeds MIN MAX]
+    analyze chatter BAG [BAG ...] [--settle S]
 """
 import argparse
 import csv
@@ -35,6 +36,8 @@ from pentapod_sim.analysis.frf.estimation import (
 from pentapod_sim.analysis.frf.export import write_csv, write_uff58
 from pentapod_sim.analysis.frf.peaks import find_resonances, peak_reductions, Resonance
 from pentapod_sim.cli import CommandParser, run_command
+from pentapod_sim.cli.analyze_chatter import add_parser as add_chatter_parser
+from pentapod_sim.cli.analyze_chatter import cmd_chatter
 from pentapod_sim.cli.analyze_ema import add_parser as add_modes_parser
 from pentapod_sim.cli.analyze_ema import cmd_modes
 from pentapod_sim.cli.analyze_lobes import add_parser as add_lobes_parser
@@ -247,6 +250,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_modes_parser(subs)
     add_recover_parser(subs)
     add_lobes_parser(subs)
+    add_chatter_parser(subs)
     return parser
 
 
@@ -257,7 +261,7 @@ def main(argv: list[str] | None = None) -> int:
                         format='%(levelname)s %(name)s: %(message)s')
     commands = {'info': cmd_info, 'frf': cmd_frf, 'time': cmd_time,
                 'amplitudes': cmd_amplitudes, 'modes': cmd_modes, 'recover': cmd_recover,
-                'lobes': cmd_lobes,
+                'lobes': cmd_lobes, 'chatter': cmd_chatter,
                 'peaks': lambda a: cmd_frf(a, plot=False)}
     return run_command('analyze', commands[args.command], args, errors=(ValueError,))
 

@@ -12,6 +12,8 @@ All subcommands read config/reduction.yaml (``--config``) and write to ``--out``
     statespace build --position P1         # out/statespace/plant_P1.npz
     statespace build --modal-data modes.csv --strut-frames frames.yaml
     statespace build --fe-model machine.yaml --config my_reduction.yaml   # imported FE model
+    statespace tune --position P1 --family lag-bending,iff   # gains under the machine's limits
+    statespace lobes --position P1,P2 --scenario baseline,tcp_damping   # chatter lobes
 """
 from __future__ import annotations
 
@@ -36,6 +38,8 @@ from pentapod_sim.cli import (
     model_label,
     run_command,
 )
+from pentapod_sim.cli.statespace_lobes import add_lobes_parser
+from pentapod_sim.cli.statespace_tune import add_tune_parser
 from pentapod_sim.errors import ConfigError
 from pentapod_sim.fe.model import FEModel
 from pentapod_sim.parameters import sample_time
@@ -372,6 +376,8 @@ def _parser() -> argparse.ArgumentParser:
         if name == 'build':
             p.add_argument('--modal-data', default=None, help='external modal data .npz/.csv')
             p.add_argument('--strut-frames', default=None, help='YAML with strut_frames')
+    add_tune_parser(sub)
+    add_lobes_parser(sub)
     return parser
 
 

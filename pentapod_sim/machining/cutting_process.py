@@ -98,9 +98,9 @@ class CuttingProcess:
 
     Attributes
     ----------
-    angles, chip, in_cut : (N,) ndarray
-        Immersion angle [rad, in 0..2 pi], chip thickness [m] and whether each tooth cuts,
-        at the last step.
+    angles, chip, in_cut, tooth_force : (N,) ndarray
+        Immersion angle [rad, in 0..2 pi], chip thickness [m], whether each tooth cuts and
+        its tangential force ``F_t`` [N] (0 out of the cut), at the last step.
     force : (2,) ndarray
         Force on the TCP in machine x-y [N] at the last step.
     """
@@ -140,7 +140,7 @@ class CuttingProcess:
         teeth = self.conditions.cut.teeth
         self.angles = np.mod(np.array(self._pitch), _TWO_PI)
         self.chip, self.in_cut = np.zeros(teeth), np.zeros(teeth, dtype=bool)
-        self.force = np.zeros(2)
+        self.tooth_force, self.force = np.zeros(teeth), np.zeros(2)
 
     def step(self, sensors: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
         """Force (x, y) [N] answering the TCP displacement (x, y) [m] of the next step."""
@@ -169,8 +169,8 @@ class CuttingProcess:
         k_tc, k_rc = cut.tangential_coefficient, cut.radial_ratio * cut.tangential_coefficient
         f_x = f_y = 0.0
         teeth = cut.teeth
-        angles, chips, cuts, engaged = [0.0] * teeth, [0.0] * teeth, [False] * teeth, [
-            False] * teeth
+        angles, chips, tangential = [0.0] * teeth, [0.0] * teeth, [0.0] * teeth
+        cuts, engaged = [False] * teeth, [False] * teeth
         for j in range(teeth):
             phi = (theta + self._pitch[j]) % _TWO_PI
             sin, cos = math.sin(phi), math.cos(phi)
@@ -186,9 +186,11 @@ class CuttingProcess:
                 f_r = depth * (k_rc * chip + cond.edge_radial)
                 f_x -= f_t * cos + f_r * sin
                 f_y += f_t * sin - f_r * cos
+                tangential[j] = f_t
             angles[j], chips[j], cuts[j], engaged[j] = phi, chip, cutting, inside
         self.angles, self.chip, self.in_cut = (np.array(angles), np.array(chips),
                                                np.array(cuts))
+        self.tooth_force = np.array(tangential)
         self.force = np.array([c_f * f_x + m_s * f_y, s_f * f_x + m_c * f_y])
         if k < self.record_steps:
             self.recorded_chip[k], self.recorded_in_cut[k] = chips, cuts

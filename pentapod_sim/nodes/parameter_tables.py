@@ -1,16 +1,22 @@
 """
-Parameters of the plant, exciter and recorder nodes (ROS-free; docs/parameters.md).
+Parameters of the plant, exciter, cutting and recorder nodes (ROS-free; docs/parameters.md).
 
 Each is a :class:`pentapod_sim.parameters.NodeParams` dataclass: the nodes declare them and
 read their typed values, scenario files are checked against them. The exciter's signal
 defaults are those of :class:`pentapod_sim.sim.excitation.ExcitationSpec`;
-:meth:`ExciterParams.spec` turns its values into that spec.
+:meth:`ExciterParams.spec` turns its values into that spec; :meth:`CuttingParams.spec` turns
+the cutting node's into its operation (config/machining.yaml and the overrides).
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 import math
 
+from pentapod_sim.errors import ConfigError
+from pentapod_sim.machining.cutting_process import CuttingConditions
+from pentapod_sim.machining.cutting_spec import CuttingSpec
+from pentapod_sim.machining.materials import load_machining
+from pentapod_sim.machining.milling_cut import MILLING_MODES, MillingCut
 from pentapod_sim.parameters import NodeParams, param, Sampled, SourceParams
 from pentapod_sim.plant.check_band import DEFAULT_CHECK_F_MIN
 from pentapod_sim.sim.excitation import ExcitationSpec, KINDS, PHASES, PULSE_SHAPES
@@ -155,6 +161,81 @@ class ExciterParams(Sampled, SourceParams):
             pulse_shape=self.pulse_shape)
 
 
+    def loop_laws(self, dt: float | None = None) -> list:
+        """No law: the exciter reads no plant output, it closes no loop."""
+        return []
+
+
+#: Value of a cutting override that means "from the operation" (``milling``).
+FROM_OPERATION = 'operation'
+
+
+@dataclass(frozen=True)
+class CuttingParams(Sampled, SourceParams):
+    """
+    Regenerative milling at the TCP, answering every plant step with the cutting force.
+
+    An operation of the machining table (config/machining.yaml: material, end mill, radial
+    immersion, up or down milling, feed) at a spindle speed and axial depth; any of its values
+    may be overridden. The helix is ignored: every tooth engages the whole axial depth at one
+    angle (pentapod_sim.machining.cutting_process).
+    """
+
+    operation: str = param('aluminium_half_down', 'operation of the machining table (material, '
+                           'end mill, immersion, up/down milling, feed per tooth and direction)')
+    machining_file: str = param('', 'machining table; empty: config/machining.yaml')
+    spindle_speed: float = param(1500.0, 'spindle speed n', 'rpm', bounds=(1.0, 1.0e6))
+    axial_depth: float = param(2.0e-4, 'axial depth of cut a', 'm', bounds=(1.0e-9, 1.0))
+    teeth: int = param(0, "number of teeth N; 0: the operation's end mill", bounds=(0, 1000))
+    feed_per_tooth: float = param(0.0, "feed per tooth f_t; 0: the operation's", 'm',
+                                  bounds=(0.0, 0.1))
+    radial_immersion: float = param(0.0, "radial depth over diameter a_e / D; 0: the "
+                                    "operation's", bounds=(0.0, 1.0))
+    milling: str = param(FROM_OPERATION, "up or down milling; operation: the operation's",
+                         choices=(FROM_OPERATION, *MILLING_MODES))
+    tangential_coefficient: float = param(0.0, "cutting coefficient K_tc; 0: the material's",
+                                          'N/m^2', bounds=(0.0, 1.0e12))
+    radial_ratio: float = param(-1.0, "K_rc / K_tc; negative: the material's",
+                                bounds=(-1.0, 100.0))
+    edge_tangential: float = param(-1.0, "edge coefficient K_te; negative: the material's",
+                                   'N/m', bounds=(-1.0, 1.0e9))
+    edge_radial: float = param(-1.0, "edge coefficient K_re; negative: the material's", 'N/m',
+                               bounds=(-1.0, 1.0e9))
+
+    def spec(self, source: str = '') -> CuttingSpec:
+        """
+        The operation as run: the table's operation with the overrides (ConfigError).
+
+        ``source`` is the node's ``source_name`` recorded with it.
+        """
+        table = load_machining(self.machining_file or None)
+        op = table.operation(self.operation)
+        tool = table.tools[op.tool]
+        k_tc, k_rc, k_te, k_re = table.materials[op.material].coefficients()
+        tangential = self.tangential_coefficient or k_tc
+        try:
+            cut = MillingCut.from_immersion(
+                self.teeth or tool.teeth, tangential,
+                self.radial_ratio if self.radial_ratio >= 0 else k_rc / k_tc,
+                self.radial_immersion or op.radial_immersion,
+                op.milling if self.milling == FROM_OPERATION else self.milling, op.feed_angle)
+            conditions = CuttingConditions(
+                cut, self.spindle_speed, self.axial_depth, self.feed_per_tooth or
+                op.feed_per_tooth, self.edge_tangential if self.edge_tangential >= 0 else k_te,
+                self.edge_radial if self.edge_radial >= 0 else k_re)
+        except ConfigError as err:
+            raise ConfigError(f'cutting operation {self.operation!r}: {err}') from None
+        return CuttingSpec(conditions, self.sample_rate, self.operation, source)
+
+    def loop_laws(self, dt: float | None = None) -> list:
+        """
+        No law: the cut is the process whose stability the lobes judge, not a control law.
+
+        Its linear model for the plant's truncation check is
+        :func:`pentapod_sim.machining.cutting_model.regenerative_controller`.
+        """
+        return []
+
 
 @dataclass(frozen=True)
 class DisturbanceParams(Sampled, SourceParams):
@@ -169,6 +250,11 @@ class DisturbanceParams(Sampled, SourceParams):
     amplitude: float = param(10.0, 'RMS of the noise on each port', 'N or N m',
                              bounds=(0.0, 1e9))
     seed: int = param(0, 'random seed', bounds=(0, 2 ** 31))
+
+    def loop_laws(self, dt: float | None = None) -> list:
+        """No law: the noise reads no plant output, it closes no loop."""
+        return []
+
 
 @dataclass(frozen=True)
 class RecorderParams(NodeParams):

@@ -67,7 +67,8 @@ RECORDING_RECORD = 'pentapod_recording'
 # recorder started before the plant misses no step; others are found by discovery
 KNOWN_TOPICS = {t: interface.TOPIC_TYPES[t] for t in (
     interface.CLOCK, interface.TCP_STATE, interface.STRUT_STATES, interface.PMA_MOUNT_STATE,
-    interface.TCP_STATE_FULLRATE, interface.EXCITATION, interface.PMA_STATE)}
+    interface.TCP_STATE_FULLRATE, interface.EXCITATION, interface.PMA_STATE,
+    interface.CUTTING_STATE)}
 KNOWN_TOPICS[interface.RUN_STATUS] = interface.DIAGNOSTIC_STATUS
 
 

@@ -36,9 +36,13 @@ from pentapod_sim.plant.config import (
 from pentapod_sim.plant.model import PlantModel
 from pentapod_sim.plant.ports import (
     check_names,
+    direct_matrix,
     input_matrix,
+    INPUT_NAMES,
+    load_points,
     modal_points,
     output_matrices,
+    OUTPUT_NAMES,
 )
 from pentapod_sim.plant.ports import ports as port_list
 from pentapod_sim.plant.reduction import (
@@ -106,7 +110,8 @@ def from_modal_data(frequencies_hz: npt.ArrayLike, point_shapes: Mapping[str, np
     zeta : float or (m,) array_like
         Modal damping ratio(s) [-].
     d : (n_out, n_in) array_like, optional
-        Feed-through (static correction); default zero.
+        Feed-through (static correction and the direct terms of load outputs); default the
+        direct terms alone (:func:`pentapod_sim.plant.ports.direct_matrix`).
     meta : dict, optional
         Provenance stored with the model.
     chord_position : float
@@ -122,7 +127,7 @@ def from_modal_data(frequencies_hz: npt.ArrayLike, point_shapes: Mapping[str, np
         if not np.all(np.isfinite(p.vector)):
             raise ModelFileError(f'port {p.name!r} needs strut frames, none were given')
     c_disp, c_vel = output_matrices(out_ports)
-    d = np.zeros((len(outputs), len(inputs))) if d is None else np.asarray(d, dtype=float)
+    d = direct_matrix(out_ports, inputs) if d is None else np.asarray(d, dtype=float)
     zeta = np.asarray(zeta, float)
     if zeta.ndim > 0 and zeta.shape != omega.shape:
         raise ConfigError(f'damping ratios: {zeta.size} given for {omega.size} modes')
@@ -201,12 +206,15 @@ def plant_from_fe(fe: FEModel, reduction_cfg: ReductionConfig,
     inputs, outputs = list(cfg.inputs), list(cfg.outputs)
     chord = cfg.chord_position
     zeta = config_damping(modes.frequencies, cfg)
-    plant_all = from_modal_data(modes.frequencies, modal_points(fe.points, modes.shapes),
+    points = {**fe.points, **load_points(fe.points, fe.stiffness_groups)}
+    plant_all = from_modal_data(modes.frequencies, modal_points(points, modes.shapes),
                                 fe.strut_frames, inputs, outputs, zeta, chord_position=chord)
     keep = keep_by_relevance(plant_all, cfg.relevance)
-    c_disp_full, _ = output_matrices(port_list(fe.points, fe.strut_frames, outputs, chord))
-    g_full = static_compliance(fe.K, input_matrix(port_list(fe.points, fe.strut_frames, inputs,
+    out_ports = port_list(points, fe.strut_frames, outputs, chord)
+    c_disp_full, _ = output_matrices(out_ports)
+    g_full = static_compliance(fe.K, input_matrix(port_list(points, fe.strut_frames, inputs,
                                                             chord)), c_disp_full)
+    g_full = g_full + direct_matrix(out_ports, inputs)
     plant_all.d = g_full - modal_dc_gains(plant_all.omega, plant_all.b,
                                           plant_all.c_disp).sum(axis=0)
     plant_all.meta.update({
@@ -302,10 +310,11 @@ def model_cache_key(position: str) -> str:
 
     Covers machine.yaml, positions.yaml and reduction.yaml of
     :func:`pentapod_sim.paths.config_dir` (and the damping file reduction.yaml names), the
-    position name, the package version and :data:`CACHE_CONTENT`, so any edit gives a new
-    cache file.
+    position name, the package version, :data:`CACHE_CONTENT` and the port names (a model
+    built before a port was added lacks it), so any edit gives a new cache file.
     """
-    digest = hashlib.sha256(f'{position}|{__version__}|{CACHE_CONTENT}'.encode())
+    digest = hashlib.sha256(
+        f'{position}|{__version__}|{CACHE_CONTENT}|{INPUT_NAMES}|{OUTPUT_NAMES}'.encode())
     for name in ('machine.yaml', 'positions.yaml', 'reduction.yaml'):
         path = config_dir() / name
         digest.update(path.read_bytes() if path.exists() else b'')

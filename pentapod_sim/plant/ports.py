@@ -11,8 +11,11 @@ two kinds of coordinates:
   same formulas then give the modal input column ``Phi^T B`` and modal output row ``C Phi``.
   This is how external modal data (ANSYS, Abaqus) enters, see :func:`modal_points`.
 
-Names, units and definitions follow docs/architecture.md. Every output is collocated with an
-input (same vector), so velocity feedback ``u = -g * rate`` through a pair dissipates energy.
+Names, units and definitions follow docs/architecture.md
+(:mod:`pentapod_sim.plant.port_definitions`). Every output is collocated with an input (same
+vector), so velocity feedback ``u = -g * rate`` through a pair dissipates energy. The strut
+force outputs are loads: the force of the feed-drive link computed from displacements through
+its stiffness (the load points of :func:`load_points`), plus the drive force as a direct term.
 """
 from __future__ import annotations
 
@@ -24,12 +27,31 @@ import numpy.typing as npt
 import scipy.sparse as sp
 
 from pentapod_sim.errors import PortError
+from pentapod_sim.plant.port_definitions import (  # noqa: F401 (re-exported)
+    AXES as AXES,
+)
+from pentapod_sim.plant.port_definitions import (
+    CHORD_POSITION as CHORD_POSITION,
+)
+from pentapod_sim.plant.port_definitions import (
+    COLLOCATED,
+    definitions,
+    drive_link_point,
+)
+from pentapod_sim.plant.port_definitions import (
+    INPUT_NAMES as INPUT_NAMES,
+)
+from pentapod_sim.plant.port_definitions import (
+    KINDS as KINDS,
+)
+from pentapod_sim.plant.port_definitions import (
+    N_STRUTS as N_STRUTS,
+)
+from pentapod_sim.plant.port_definitions import (
+    OUTPUT_NAMES as OUTPUT_NAMES,
+)
 
-N_STRUTS = 5
-AXES = ('x', 'y', 'z')
-#: Default chord point of the chord ports: share of the way from the BP joint to the WP joint.
-CHORD_POSITION = 0.5
-KINDS = ('force', 'displacement', 'velocity')
+_COLLOCATED = COLLOCATED
 
 
 @dataclass(frozen=True)
@@ -46,11 +68,14 @@ class Port:
     description : str
         What the port acts on or measures.
     kind : str
-        'force' for inputs, 'displacement' or 'velocity' for outputs.
+        'force' for inputs; 'displacement', 'velocity' or 'load' (a force measured in the
+        structure: computed from displacements, plus direct terms) for outputs.
     vector : (n,) ndarray
         Input: generalised load vector per unit input [1/N or 1/(N m) times DOF load];
-        output: observation row applied to displacements (kind 'displacement') or to
-        velocities (kind 'velocity').
+        output: observation row applied to displacements (kinds 'displacement' and 'load') or
+        to velocities (kind 'velocity').
+    direct : tuple of (str, float)
+        Output's feed-through from inputs: (input port, coefficient); only 'load' outputs.
     """
 
     name: str
@@ -58,151 +83,12 @@ class Port:
     description: str
     kind: str
     vector: npt.NDArray[np.float64]
+    direct: tuple[tuple[str, float], ...] = ()
 
     @property
     def is_input(self) -> bool:
         """True for force inputs."""
         return self.kind == 'force'
-
-
-#: (point name, 3-vector direction, 'translation' or 'rotation', sign)
-_Term = tuple[str, npt.NDArray[np.float64], str, float]
-
-
-@dataclass(frozen=True)
-class _Definition:
-    """Geometric definition of a port: ((point, component rows, sign), ...) and metadata."""
-
-    unit: str
-    description: str
-    kind: str
-    terms: tuple[_Term, ...]
-
-
-def _strut_terms(i: int, what: str, k: int, frames: npt.NDArray[np.float64]
-                 ) -> tuple[_Term, ...]:
-    """Terms of the strut bending (what='bending', axis k=2/3) or axial (what='axial') ports."""
-    if what == 'bending':
-        e = frames[i - 1, k - 1]
-        return ((f'strut{i}_wp_end', e, 'rotation', 1.0),
-                (f'strut{i}_rear_end', e, 'rotation', -1.0))
-    e1 = frames[i - 1, 0]
-    return ((f'strut{i}_at_bp', e1, 'translation', 1.0),
-            (f'bp_ring{i}', e1, 'translation', -1.0))
-
-
-def _chord_terms(i: int, k: int, frames: npt.NDArray[np.float64], n_span: int,
-                 position: float) -> tuple[_Term, ...]:
-    """
-    Terms of strut i's chord port along e_k: the chord point minus the chord between joints.
-
-    The active span (BP joint ``strut<i>_at_bp`` to WP joint ``strut<i>_wp_end``) has
-    ``n_span`` equal elements with the inner nodes ``strut<i>_span<j>``; the point at
-    ``position`` (0..1) is interpolated linearly between its neighbouring nodes, the chord
-    point linearly between the joints. As an input: a force at the point and the reactions
-    ``-(1 - s)`` and ``-s`` of it at the joints (no net force or moment).
-    """
-    e = frames[i - 1, k - 1]
-    nodes = ([f'strut{i}_at_bp'] + [f'strut{i}_span{j}' for j in range(1, n_span)]
-             + [f'strut{i}_wp_end'])
-    q = position * n_span
-    j0 = min(int(np.floor(q)), n_span - 1)
-    t = q - j0
-    return ((nodes[j0], e, 'translation', 1.0 - t), (nodes[j0 + 1], e, 'translation', t),
-            (nodes[0], e, 'translation', -(1.0 - position)),
-            (nodes[-1], e, 'translation', -position))
-
-
-def _definitions(frames: npt.NDArray[np.float64], n_span: dict[int, int] | None = None,
-                 chord_position: float = CHORD_POSITION) -> dict[str, _Definition]:
-    """
-    All port definitions for the given strut frames (5, 3, 3), keyed by name.
-
-    ``n_span`` gives each strut's number of elements on its active span (chord ports); without
-    it the chord ports have no terms (names and metadata only).
-    """
-    defs: dict[str, _Definition] = {}
-    unit_vectors = np.eye(3)
-    for a, axis in enumerate(AXES):
-        tcp = (('tcp', unit_vectors[a], 'translation', 1.0),)
-        defs[f'tcp_force_{axis}'] = _Definition('N', f'force at the TCP along global {axis}',
-                                                'force', tcp)
-        defs[f'tcp_displacement_{axis}'] = _Definition(
-            'm', f'TCP displacement along global {axis}', 'displacement', tcp)
-        defs[f'tcp_velocity_{axis}'] = _Definition(
-            'm/s', f'TCP velocity along global {axis}', 'velocity', tcp)
-    for i in range(1, N_STRUTS + 1):
-        for k in (2, 3):
-            terms = _strut_terms(i, 'bending', k, frames)
-            defs[f'strut{i}_bending_moment_{k}'] = _Definition(
-                'N m', f'moment pair about e{k} of strut {i}: +M at the WP end, -M at the rear '
-                'end', 'force', terms)
-            defs[f'strut{i}_bending_{k}'] = _Definition(
-                'rad', f'strut {i} bending about e{k}: rotation of the WP end minus the rear end',
-                'displacement', terms)
-            defs[f'strut{i}_bending_rate_{k}'] = _Definition(
-                'rad/s', f'rate of strut {i} bending about e{k}', 'velocity', terms)
-        terms = _strut_terms(i, 'axial', 1, frames)
-        defs[f'strut{i}_axial_force'] = _Definition(
-            'N', f'axial force pair along e1 of strut {i}: +F on the strut at the BP joint, '
-            '-F on the outer cardan ring', 'force', terms)
-        defs[f'strut{i}_axial_displacement'] = _Definition(
-            'm', f'strut {i} axial motion relative to its BP cardan ring', 'displacement', terms)
-        defs[f'strut{i}_axial_velocity'] = _Definition(
-            'm/s', f'strut {i} axial velocity relative to its BP cardan ring', 'velocity', terms)
-    for a, axis in enumerate(AXES):
-        pma = (('pma_mount', unit_vectors[a], 'translation', 1.0),)
-        defs[f'pma_force_{axis}'] = _Definition(
-            'N', f'proof-mass actuator force at the PMA mount along global {axis}', 'force', pma)
-        defs[f'pma_mount_velocity_{axis}'] = _Definition(
-            'm/s', f'PMA mount velocity along global {axis}', 'velocity', pma)
-    for i in range(1, N_STRUTS + 1):
-        for k in (2, 3):
-            terms = (_chord_terms(i, k, frames, n_span[i], chord_position)
-                     if n_span and i in n_span else ())
-            defs[f'strut{i}_chord_force_{k}'] = _Definition(
-                'N', f'lateral force along e{k} on strut {i} at its chord point, reacted at its '
-                'two joints in proportion to the chord interpolation', 'force', terms)
-            defs[f'strut{i}_chord_{k}'] = _Definition(
-                'm', f'strut {i} lateral displacement along e{k} of its chord point relative to '
-                'the chord between its joints', 'displacement', terms)
-            defs[f'strut{i}_chord_velocity_{k}'] = _Definition(
-                'm/s', f'rate of strut {i} chord displacement along e{k}', 'velocity', terms)
-    return defs
-
-
-_NAMES = _definitions(np.tile(np.eye(3), (N_STRUTS, 1, 1)))
-INPUT_NAMES: tuple[str, ...] = tuple(n for n, d in _NAMES.items() if d.kind == 'force')
-OUTPUT_NAMES: tuple[str, ...] = tuple(
-    [f'tcp_displacement_{a}' for a in AXES] + [f'tcp_velocity_{a}' for a in AXES]
-    + [f'strut{i}_{what}' for i in range(1, N_STRUTS + 1)
-       for what in ('bending_2', 'bending_3', 'bending_rate_2', 'bending_rate_3',
-                    'axial_displacement', 'axial_velocity')]
-    + [f'pma_mount_velocity_{a}' for a in AXES]
-    + [f'strut{i}_{what}_{k}' for i in range(1, N_STRUTS + 1)
-       for what in ('chord', 'chord_velocity') for k in (2, 3)])
-
-
-def _collocated_table() -> dict[tuple[str, str], str]:
-    """Map (input name, output kind) to the collocated output name."""
-    table = {}
-    for axis in AXES:
-        table[(f'tcp_force_{axis}', 'displacement')] = f'tcp_displacement_{axis}'
-        table[(f'tcp_force_{axis}', 'velocity')] = f'tcp_velocity_{axis}'
-        table[(f'pma_force_{axis}', 'velocity')] = f'pma_mount_velocity_{axis}'
-    for i in range(1, N_STRUTS + 1):
-        for k in (2, 3):
-            table[(f'strut{i}_bending_moment_{k}', 'displacement')] = f'strut{i}_bending_{k}'
-            table[(f'strut{i}_bending_moment_{k}', 'velocity')] = f'strut{i}_bending_rate_{k}'
-        table[(f'strut{i}_axial_force', 'displacement')] = f'strut{i}_axial_displacement'
-        table[(f'strut{i}_axial_force', 'velocity')] = f'strut{i}_axial_velocity'
-        for k in (2, 3):
-            table[(f'strut{i}_chord_force_{k}', 'displacement')] = f'strut{i}_chord_{k}'
-            table[(f'strut{i}_chord_force_{k}', 'velocity')] = f'strut{i}_chord_velocity_{k}'
-    return table
-
-
-_COLLOCATED = _collocated_table()
 
 
 def check_names(names: Sequence[str], direction: str = 'any') -> None:
@@ -262,6 +148,11 @@ def _point_rows(points: Mapping[str, Any], name: str) -> npt.NDArray[np.float64]
     try:
         matrix = points[name]
     except KeyError:
+        if name.endswith('_drive_link'):
+            raise PortError(f'the model has no load point {name!r}: the strut force outputs '
+                            "need the FE model's stiffness group 'feed_drives' (load_points) "
+                            'or, for modal data, the point given as the force of the drive '
+                            'link on the strut per unit modal coordinate') from None
         raise PortError(f'the model has no point {name!r} needed by a port; known points: '
                         + ', '.join(sorted(points))) from None
     return matrix.toarray() if sp.issparse(matrix) else np.asarray(matrix, dtype=float)
@@ -306,7 +197,7 @@ def port(points: Mapping[str, Any], strut_frames: npt.ArrayLike, name: str,
         raise PortError(f'chord_position must be within 0..1, got {chord_position!r}')
     frames = np.asarray(strut_frames, dtype=float)
     counts = _span_counts(points) if '_chord' in name else None
-    definition = _definitions(frames, counts, chord_position)[name]
+    definition = definitions(frames, counts, chord_position)[name]
     if '_chord' in name and not definition.terms:
         raise PortError(f"port {name!r} needs the points of the strut's active span "
                         f'(strut<i>_span<j>); the model has none')
@@ -318,7 +209,8 @@ def port(points: Mapping[str, Any], strut_frames: npt.ArrayLike, name: str,
         vector = term if vector is None else vector + term
     if vector is None:
         raise PortError(f'port {name!r} has no terms')
-    return Port(name, definition.unit, definition.description, definition.kind, vector)
+    return Port(name, definition.unit, definition.description, definition.kind, vector,
+                definition.direct)
 
 
 def ports(points: Mapping[str, Any], strut_frames: npt.ArrayLike, names: Sequence[str],
@@ -350,8 +242,9 @@ def output_matrices(port_list: Sequence[Port]
     Returns
     -------
     C_disp, C_vel : (n_out, n) ndarray
-        ``y = C_disp u + C_vel du/dt``; a displacement port has its row in ``C_disp`` and
-        zeros in ``C_vel``, a velocity port the reverse.
+        ``y = C_disp u + C_vel du/dt``; a displacement (or load) port has its row in
+        ``C_disp`` and zeros in ``C_vel``, a velocity port the reverse. The direct terms of
+        load ports are :func:`direct_matrix`.
 
     Raises
     ------
@@ -364,7 +257,7 @@ def output_matrices(port_list: Sequence[Port]
     for row, p in enumerate(port_list):
         if p.is_input:
             raise PortError(f'{p.name!r} is an input, not an output')
-        (c_disp if p.kind == 'displacement' else c_vel)[row] = p.vector
+        (c_vel if p.kind == 'velocity' else c_disp)[row] = p.vector
     return c_disp, c_vel
 
 
@@ -387,3 +280,46 @@ def modal_points(points: Mapping[str, Any], shapes: npt.ArrayLike
     """
     phi = np.asarray(shapes, dtype=float)
     return {name: np.asarray(matrix @ phi) for name, matrix in points.items()}
+
+
+def direct_matrix(output_ports: Sequence[Port], input_names: Sequence[str]
+                  ) -> npt.NDArray[np.float64]:
+    """
+    Feed-through (n_out, n_in) of the outputs' direct terms from the named inputs.
+
+    Only load outputs have direct terms (``strut<i>_force``: 1 from ``strut<i>_drive_force``);
+    an input that is not among ``input_names`` contributes nothing.
+    """
+    index = {name: j for j, name in enumerate(input_names)}
+    d = np.zeros((len(output_ports), len(input_names)))
+    for row, p in enumerate(output_ports):
+        for name, coefficient in p.direct:
+            if name in index:
+                d[row, index[name]] += coefficient
+    return d
+
+
+def load_points(points: Mapping[str, Any], stiffness_groups: Mapping[str, Any],
+                group: str = 'feed_drives') -> dict[str, sp.csr_matrix]:
+    """
+    Load points of the feed-drive links: the force on each strut at its BP joint from the link.
+
+    ``strut<i>_drive_link`` is ``-T K_g`` (6, n) with ``T`` the observation matrix of
+    ``strut<i>_at_bp`` and ``K_g`` the stiffness of the element group ``group`` (the FE
+    model's ``stiffness_groups``): its rows give the force [N] and moment [N m] that the
+    group's elements exert on the strut node per unit DOF displacement. Only the link between
+    strut and gimbal (the feed drive's nut spring) of that group touches the strut node, so
+    along e1 this is ``-k_a (u_at_bp - u_gimbal) . e1``. Returns {} when the model has no such
+    group or no strut points (an imported FE model may lack them); the ``strut<i>_force``
+    ports then cannot be built.
+    """
+    k_group = stiffness_groups.get(group)
+    if k_group is None:
+        return {}
+    out = {}
+    for i in range(1, N_STRUTS + 1):
+        name = f'strut{i}_at_bp'
+        if name in points:
+            out[drive_link_point(i)] = sp.csr_matrix(-(sp.csr_matrix(points[name])
+                                                       @ sp.csr_matrix(k_group)))
+    return out

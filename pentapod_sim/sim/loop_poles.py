@@ -34,6 +34,7 @@ from scipy.optimize import linear_sum_assignment
 from pentapod_sim.errors import ConfigError
 from pentapod_sim.plant.model import PlantModel
 from pentapod_sim.sim.controllers import controller_blocks, DiscreteController, loop_system
+from pentapod_sim.sim.loop_frf import LinearPlant
 
 #: Uniform gain steps of the pole following (refined where ambiguous).
 FOLLOW_STEPS = 16
@@ -64,7 +65,7 @@ def _scaled(ctrl: DiscreteController, t: float) -> DiscreteController:
                               t * ctrl.c, t * ctrl.d)
 
 
-def continuous_loop_system(plant: PlantModel, controllers: Sequence[DiscreteController]
+def continuous_loop_system(plant: LinearPlant, controllers: Sequence[DiscreteController]
                            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """
     The continuous plant closed with continuous controllers: ``(a, b, c_y)``.

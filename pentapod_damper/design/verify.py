@@ -1,0 +1,66 @@
+"""
+The verdict's laws checked on the full check model.
+
+The tuner checks every design on a check model it can afford (:func:`pentapod_sim.sim.
+design_models.load_design_model`'s ``check_subset_hz``: the check modes below a frequency,
+with the static correction of the others); the laws the verdict names (the best strut-only
+law, and the best one without the feed drives' loops) are then checked on every mode of the
+full check model, with the law's delay and with one more sample. A law that fails there loses
+its place and the next best is checked. ROS-free.
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+import logging
+from typing import Callable
+
+import numpy as np
+
+from pentapod_damper.design.report import best_strut_law, records
+from pentapod_damper.design.rows import default_rows
+from pentapod_damper.design.table import DamperTable
+from pentapod_sim.sim.design_models import DesignModel
+from pentapod_sim.sim.tuning import Judge
+
+LOG = logging.getLogger(__name__)
+
+
+def verify_best(table: DamperTable, model: DesignModel, attempts: int = 3,
+                progress: Callable[[str], None] | None = None) -> DamperTable:
+    """
+    ``table`` with the full check model's margins of the laws its verdict names.
+
+    Checks the best strut-only law, the best without the drives and the best that keeps the
+    low-band compliance (:func:`~pentapod_damper.design.report.best_strut_law`) until they
+    pass on ``model.full_check`` or ``attempts`` laws per kind have failed (a failed row keeps
+    its negative margins, so the verdict passes it over).
+    """
+    say = progress or (lambda msg: LOG.info('%s', msg))
+    full = model.full_check
+    if full is None:
+        return table
+    checked = replace(model, check=full, driven={})
+    specs = {spec.name: spec for spec in default_rows()}
+    table = replace(table, full_check_modes=full.n_modes,
+                    full_check_f_max_hz=float(full.meta.get('check_f_max_hz', np.nan)))
+    for drives, low_band in ((True, False), (False, False), (True, True)):
+        for _ in range(attempts):
+            best = best_strut_law(records(table), drives=drives, low_band=low_band)
+            if best is None:
+                break
+            index = next(i for i, r in enumerate(table.rows) if r.law == best['law'])
+            row = table.rows[index]
+            if np.isfinite(row.full_check_margin):
+                break                                    # verified and passed
+            judge = Judge(checked, specs[row.law].family, replace(table.settings,
+                                                                  refine_iterations=0))
+            radii = judge.check(dict(row.gains))
+            say(f'{table.position}: {row.law}: full check model ({full.n_modes} modes) radius '
+                f'{radii[0]:.6f} / {radii[1]:.6f} (extra delay)')
+            rows = list(table.rows)
+            rows[index] = replace(row, full_check_margin=1.0 - radii[0],
+                                  full_check_margin_extra=1.0 - radii[1])
+            table = replace(table, rows=tuple(rows))
+            if radii[0] < 1.0 and radii[1] < 1.0:
+                break
+    return table
