@@ -10,7 +10,7 @@ config/study.yaml: the verdict and the spectral radius of the sampled loop on th
 Writes the table between the frame-convergence markers of docs/model.md; reduced frames are
 cached in out/frames.
 
-Usage: ``python bench/frame_convergence.py [--sizes 0.3,0.2,0.12]``.
+Usage: ``python bench/frame_convergence.py [--sizes 0.3,0.2,0.12] [--print-only]``.
 """
 from __future__ import annotations
 
@@ -71,13 +71,45 @@ def frame_modes(fe, modes) -> tuple[float, float]:
     return out[0], out[1]
 
 
-def one(size: float | None, position: str, study, cfg) -> dict:
+def pose_modes(size: float | None, position: str, causes: bool = True
+               ) -> tuple[dict, object, object]:
+    """The model and its modes below 750 Hz at one pose: figures, model, modes.
+
+    ``causes``: count the local frame modes (:func:`analyse_causes`; -1 if not).
+    """
+    from pentapod_sim.fe.assembly import build_model as build_cached
+    from pentapod_sim.modes.causes import analyse_causes
     machine = machine_for(size)
+    build_model(machine, position, progress=lambda msg: print(f'  {msg}', flush=True))
     t0 = time.perf_counter()
-    fe = build_model(machine, position, progress=lambda msg: print(f'  {msg}', flush=True))
+    fe = build_cached(machine, position)        # the reduced frame read from the cache
     t_build = time.perf_counter() - t0
     modes = solve_modes(fe.K, fe.M, f_max=F_BAND)
+    t_modes = time.perf_counter() - t0 - t_build
     fx, fz = frame_modes(fe, modes)
+    local = (int(np.count_nonzero(analyse_causes(fe, modes, neuber=False).local_frame))
+             if causes else -1)
+    return ({'size': size, 'position': position, 'n_dof': fe.n_dof, 'modes': modes.n_modes,
+             'local': local, 'fx': fx, 'fz': fz, 'build_s': t_build, 'modes_s': t_modes},
+            fe, modes)
+
+
+def modes_table(rows: list[dict]) -> str:
+    """Markdown table of :func:`pose_modes` rows."""
+    lines = ['| frame | position | model DOF | modes < 750 Hz | local frame modes | '
+             'frame x / z mode [Hz] | model build [s] | modes [s] |', '|' + '---|' * 8]
+    for r in rows:
+        frame = 'beams' if r['size'] is None else f'shells {r["size"]:g} m'
+        lines.append(f'| {frame} | {r["position"]} | {r["n_dof"]:,} | {r["modes"]} | '
+                     f'{r["local"]} | {r["fx"]:.1f} / {r["fz"]:.1f} | {r["build_s"]:.2f} | '
+                     f'{r["modes_s"]:.2f} |')
+    return '\n'.join(lines)
+
+
+def one(size: float | None, position: str, study, cfg) -> dict:
+    figures, fe, modes = pose_modes(size, position, causes=False)
+    fx, fz, t_build = figures['fx'], figures['fz'], figures['build_s']
+    machine = machine_for(size)
     plant_all, keep = plant_from_fe(fe, cfg, progress=lambda msg: None)
     plant = reduce_plant(plant_all, keep, cfg.static_correction)
     f_check = check_f_max(study.sample_rate, study.check_f_min)
@@ -121,9 +153,18 @@ def main() -> None:
     parser.add_argument('--positions', default='P1,P2')
     parser.add_argument('--doc', default=str(ROOT / 'docs' / 'model.md'),
                         help='markdown file with the frame-convergence markers')
+    parser.add_argument('--print-only', action='store_true',
+                        help='print the table, leave the markdown file alone (a partial run)')
+    parser.add_argument('--modes-only', action='store_true',
+                        help='only the modes below 750 Hz, local frame modes, frame modes and '
+                             'times per pose (no check model; implies --print-only)')
     args = parser.parse_args()
     study, cfg = load_study_config(), load_reduction_config()
     sizes: list[float | None] = [None] + [float(s) for s in args.sizes.split(',')]
+    if args.modes_only:
+        print(modes_table([pose_modes(size, position)[0] for size in sizes
+                           for position in args.positions.split(',')]))
+        return
     results = []
     for size in sizes:
         for position in args.positions.split(','):
@@ -138,11 +179,13 @@ def main() -> None:
             'it through its Craig-Bampton basis: frame modes above shell_frame.mode_multiple '
             'x f_interest are there only statically (constraint modes).\n\n'
             + table(results, list(study.scenarios)) + '\n')
+    print(text)
+    if args.print_only:
+        return
     doc = Path(args.doc)
     head, rest = doc.read_text(encoding='utf-8').split(BEGIN)
     tail = rest.split(END)[1]
     doc.write_text(f'{head}{BEGIN}\n{text}{END}{tail}', encoding='utf-8')
-    print(text)
 
 
 if __name__ == '__main__':

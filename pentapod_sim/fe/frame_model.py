@@ -54,7 +54,7 @@ PART_GROUP = {'column': 'frame', 'ring': 'frame', 'spoke': 'frame', 'hub': 'fram
               'wall': 'frame_walls'}
 FRAME_GROUPS = ('frame', 'frame_walls')
 #: Version of the reduction's file format and method; part of the cache key.
-FORMAT = 1
+FORMAT = 2
 #: Environment variable naming the folder of reduced frames (default ``out/frames``).
 CACHE_ENV = 'PENTAPOD_FRAME_CACHE'
 #: Triangles whose element matrices are computed at once (bounds the memory: ~20 kB each).
@@ -158,7 +158,8 @@ class ReducedFrame:
     M : (r, r) ndarray
         Reduced mass [kg, ...]; the modal block is the identity.
     frequencies : (m,) ndarray
-        Fixed-interface natural frequencies [Hz].
+        Frequencies of the modal coordinates [Hz]: the fixed-interface modes, then the
+        residual pseudo-modes (``meta['n_residual']`` of them).
     masses : dict of str to float
         Plate mass per group [kg].
     meta : dict
@@ -180,7 +181,7 @@ class ReducedFrame:
 
     @property
     def n_modes(self) -> int:
-        """Fixed-interface modes kept."""
+        """Modal coordinates (fixed-interface modes and residual pseudo-modes)."""
         return int(self.frequencies.size)
 
 

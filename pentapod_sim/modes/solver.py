@@ -28,6 +28,7 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 
 from pentapod_sim.modes.slicing import LANCZOS_TOL, Progress, slice_spectrum, Slicer
+from pentapod_sim.modes.sturm import choose_backend
 from pentapod_sim.modes.window_pool import default_workers, WindowPool
 from pentapod_sim.modes.windows import DEFAULT_METHOD, mass_normalise, METHODS
 
@@ -171,7 +172,8 @@ def _edge_orthogonality(M: sp.spmatrix, phi: Array, blocks: list[tuple[int, int]
 def solve_modes(K: sp.spmatrix, M: sp.spmatrix, *, n_modes: int | None = None,
                 f_max: float | None = None, modes_per_window: int = 30,
                 progress: Progress | None = None, tol_check: float = 1e-6,
-                method: str = DEFAULT_METHOD, workers: int | None = None) -> ModalResult:
+                method: str = DEFAULT_METHOD, workers: int | None = None,
+                factorisation: str = 'auto') -> ModalResult:
     """
     Compute the lowest undamped modes of ``K phi = omega^2 M phi``.
 
@@ -201,6 +203,9 @@ def solve_modes(K: sp.spmatrix, M: sp.spmatrix, *, n_modes: int | None = None,
         core for problems of at least 100,000 DOF, else 1
         (:func:`pentapod_sim.modes.window_pool.default_workers`). Each window process uses
         the BLAS threads its environment allows (``OPENBLAS_NUM_THREADS``).
+    factorisation : {'auto', 'superlu', 'pardiso'}
+        Factorisation of the shifted pencils (:func:`pentapod_sim.modes.sturm.choose_backend`:
+        'auto' takes MKL PARDISO's LDL^T from 20,000 DOF where it is installed).
 
     Returns
     -------
@@ -230,7 +235,8 @@ def solve_modes(K: sp.spmatrix, M: sp.spmatrix, *, n_modes: int | None = None,
     else:
         per_window = modes_per_window if n_modes is None else min(modes_per_window, n_modes)
         workers = default_workers(n) if workers is None else workers
-        with WindowPool(K, M, method, LANCZOS_TOL, workers) as pool:
+        backend = choose_backend(n, factorisation)
+        with WindowPool(K, M, method, LANCZOS_TOL, workers, backend) as pool:
             sl = Slicer(pool, max(per_window, 4), progress,
                         math.inf if lam_max is None else lam_max)
             slice_spectrum(sl, n_modes, lam_max)
@@ -243,6 +249,7 @@ def solve_modes(K: sp.spmatrix, M: sp.spmatrix, *, n_modes: int | None = None,
         stats = {'method': f'{METHODS[method]}, spectrum slicing', 'windows': sl.windows,
                  'retries': sl.retries, 'windows_unused': sl.unused,
                  'window_processes': workers, 'factorisations': len(sl.factors),
+                 'factorisation': backend,
                  'factorisation_time_s': float(sum(sl.factors)),
                  'eigensolver_time_s': float(sum(sl.solve_times))}
     if lam.size and lam[0] < -tol_check * abs(lam).max():

@@ -84,8 +84,9 @@ class _Solver:
     """Solves windows in whichever process holds it; keeps the last factorisation."""
 
     def __init__(self, K: sp.spmatrix, M: sp.spmatrix, method: str, tol: float,
-                 stop: Any = None) -> None:
+                 stop: Any = None, backend: str = 'auto') -> None:
         self.K, self.M, self.method, self.tol, self.stop = K, M, method, tol, stop
+        self.backend = backend
         self._last: ShiftedFactor | None = None
 
     def _checkpoint(self) -> None:
@@ -94,7 +95,7 @@ class _Solver:
 
     def __call__(self, sigma: float, k: int) -> Window:
         reused = self._last is not None and self._last.sigma == sigma
-        factor = self._last if reused else factor_at(self.K, self.M, sigma)
+        factor = self._last if reused else factor_at(self.K, self.M, sigma, self.backend)
         assert factor is not None
         self._last = factor
         n = self.K.shape[0]
@@ -115,7 +116,7 @@ _PROCESS_SOLVER: _Solver | None = None
 
 
 def _start_process(K: sp.spmatrix, M: sp.spmatrix, method: str, tol: float,
-                   stop: Any) -> None:
+                   stop: Any, backend: str) -> None:
     """
     Set up a window process: its solver, and signals that end it.
 
@@ -130,7 +131,7 @@ def _start_process(K: sp.spmatrix, M: sp.spmatrix, method: str, tol: float,
         signal.signal(sig, signal.SIG_DFL)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     shutdown.die_with_parent()
-    _PROCESS_SOLVER = _Solver(K, M, method, tol, stop)
+    _PROCESS_SOLVER = _Solver(K, M, method, tol, stop, backend)
 
 
 def _solve_in_process(sigma: float, k: int) -> Window | None:
@@ -166,21 +167,21 @@ class WindowPool:
     """
 
     def __init__(self, K: sp.spmatrix, M: sp.spmatrix, method: str, tol: float,
-                 workers: int) -> None:
+                 workers: int, backend: str = 'auto') -> None:
         if workers < 1:
             raise ValueError(f'workers={workers} must be at least 1')
         self.K, self.M, self.workers = K, M, workers
         self._inline: _Solver | None = None
         self._executor: ProcessPoolExecutor | None = None
         if workers == 1:
-            self._inline = _Solver(K, M, method, tol)
+            self._inline = _Solver(K, M, method, tol, backend=backend)
             return
         # fork: the processes share K and M with this one instead of receiving copies
         ctx = multiprocessing.get_context('fork')
         self._stop = ctx.Event()
         self._executor = ProcessPoolExecutor(workers, mp_context=ctx,
                                              initializer=_start_process,
-                                             initargs=(K, M, method, tol, self._stop))
+                                             initargs=(K, M, method, tol, self._stop, backend))
 
     def submit(self, sigma: float, k: int) -> Future[Window | None]:
         """Solve the window at shift ``sigma`` [rad^2/s^2] for ``k`` modes (0: count only)."""

@@ -1,0 +1,99 @@
+"""
+Symmetric indefinite LDL^T of ``K - sigma M`` with Intel MKL PARDISO, and its inertia.
+
+SuperLU (scipy) orders by minimum degree and keeps L and U: on the plate frame's shell
+meshes that is 4-5 times PARDISO's fill (METIS nested dissection, one triangle) and 5 times
+its factorisation time (``bench/bench_frame.py``, row ``factorisation``). PARDISO (matrix
+type -2, Bunch-Kaufman pivoting in supernodes) also reports the inertia of the factorisation
+(numbers of positive and negative pivots), which is the Sturm count the spectrum slicing
+needs. It comes with the ``pypardiso`` package (MKL's wheels; x86-64 only); where it is not
+installed the solver stays with SuperLU (:func:`pentapod_sim.modes.sturm.factorize_shifted`).
+
+Only the public interface of ``pypardiso.PyPardisoSolver`` is used (``set_iparm``,
+``factorize``, ``solve``, ``get_iparm``, ``free_memory``). Parameters set (1-based iparm, as
+MKL's documentation): 1 = 1 (own settings), 2 = 2 (METIS ordering), 8 = 0 (iterative
+refinement only after perturbed pivots), 10 = 8 (pivot perturbation 1e-8), 11 = 13 = 0 (no
+scaling or matching: the pencils here are well scaled), 18 = -1 (report the factors'
+non-zeros), 21 = 1 (Bunch-Kaufman 1x1 and 2x2 pivots). A pivot PARDISO had to perturb
+(iparm 14) is one within 1e-8 of zero: the shift sits on an eigenvalue, which the count may
+then put on either side, as SuperLU's at such a shift; the spectrum slicing checks every
+interval's count and moves such a shift (:mod:`pentapod_sim.modes.slicing`).
+
+MKL's threads (``MKL_NUM_THREADS``, default: one per core) work in the factorisation; the
+solves of one vector are memory-bound and gain little from them.
+"""
+from __future__ import annotations
+
+import numpy as np
+import numpy.typing as npt
+import scipy.sparse as sp
+
+Array = npt.NDArray[np.float64]
+_SETTINGS = {1: 1, 2: 2, 8: 0, 10: 8, 11: 0, 13: 0, 18: -1, 21: 1}
+
+
+def available() -> bool:
+    """True if MKL PARDISO can be loaded (``pypardiso`` and MKL's runtime installed)."""
+    try:
+        import pypardiso
+        pypardiso.PyPardisoSolver(mtype=-2)
+    except (ImportError, OSError):
+        return False
+    return True
+
+
+class PardisoLDLT:
+    """
+    ``A = P L D L^T P^T`` of a symmetric matrix, kept for repeated solves.
+
+    Parameters
+    ----------
+    A : (n, n) sparse matrix
+        Symmetric (only its upper triangle is read).
+
+    Attributes
+    ----------
+    n_negative, n_positive : int
+        Negative and positive pivots of D (the inertia; a zero pivot counts in neither).
+    perturbed : int
+        Pivots PARDISO perturbed (> 0: the shift is on an eigenvalue to about 1e-8).
+    factor_nnz : int
+        Non-zeros of the factor L (the fill).
+    """
+
+    def __init__(self, A: sp.spmatrix) -> None:
+        import pypardiso  # optional: MKL's wheels (requirements.txt, x86-64 only)
+        self._upper = sp.triu(A, format='csr').astype(np.float64)
+        self._upper.sort_indices()
+        self.shape = self._upper.shape
+        self._solver = pypardiso.PyPardisoSolver(mtype=-2)
+        for index, value in _SETTINGS.items():
+            self._solver.set_iparm(index, value)
+        # pypardiso keeps a copy of the matrix to recognise it in solve(); ours never changes
+        self._solver.factorize(self._upper)
+        self.n_positive = int(self._solver.get_iparm(22))
+        self.n_negative = int(self._solver.get_iparm(23))
+        self.perturbed = int(self._solver.get_iparm(14))
+        self.factor_nnz = int(self._solver.get_iparm(18))
+
+    def solve(self, b: npt.ArrayLike) -> Array:
+        """``A^-1 b`` for a vector (n,) or a block of vectors (n, k)."""
+        rhs = np.asarray(b, dtype=np.float64)
+        if rhs.ndim == 2:
+            # pypardiso passes the block column by column (Fortran order)
+            return np.asarray(self._solver.solve(self._upper, np.asfortranarray(rhs)))
+        return np.asarray(self._solver.solve(self._upper, rhs))
+
+    def negative_pivots(self) -> int:
+        """Number of negative pivots (Sylvester: eigenvalues of the pencil below the shift)."""
+        return self.n_negative
+
+    def free(self) -> None:
+        """Release MKL's memory of this factorisation."""
+        self._solver.free_memory(everything=False)
+
+    def __del__(self) -> None:
+        try:
+            self.free()
+        except Exception:           # interpreter shutting down: MKL may be gone already
+            pass
