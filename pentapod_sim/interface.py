@@ -134,8 +134,9 @@ RUN_STATUS_KEYS = ('state', 'steps', 'dt', 'last_stamp_ns', 'step_topics')
 #: them): ``step_rate`` (steps per second of wall time since the previous status message; 0 in
 #: the first), ``deadline_misses`` (realtime: answers of a source that missed the end of their
 #: period so far, summed over the sources; 0 in lockstep) and ``rejected_messages`` (force
-#: messages the plant rejected so far, every source and reason).
-RUN_PROGRESS_KEYS = ('step_rate', 'deadline_misses', 'rejected_messages')
+#: messages the plant rejected so far) and ``rejected_by_reason`` (``source/reason=count``,
+#: comma-separated; ``stale`` and ``duplicate``: expected copies of re-published steps).
+RUN_PROGRESS_KEYS = ('step_rate', 'deadline_misses', 'rejected_messages', 'rejected_by_reason')
 
 
 def force_topic(source: str) -> str:

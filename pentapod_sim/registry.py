@@ -60,6 +60,8 @@ NODES = (
              'pentapod_sim.nodes.parameter_tables:ExciterParams'),
     NodeKind('cutting', 'pentapod_sim.nodes.cutting_node:CuttingNode',
              'pentapod_sim.nodes.parameter_tables:CuttingParams'),
+    NodeKind('disturbance', 'pentapod_sim.nodes.disturbance_node:DisturbanceNode',
+             'pentapod_sim.nodes.parameter_tables:DisturbanceParams'),
     NodeKind('recorder', 'pentapod_sim.nodes.recorder_node:RecorderNode',
              'pentapod_sim.nodes.parameter_tables:RecorderParams', RECORDER),
     NodeKind('live_view', 'pentapod_sim.nodes.live_view_node:LiveViewNode',
@@ -81,11 +83,12 @@ COMMANDS = {
     'analyze': 'pentapod_sim.cli.analyze:main',
     'calibrate': 'pentapod_sim.cli.calibrate:main',
     'study': 'pentapod_damper.study.__main__:main',
+    'judge': 'pentapod_damper.judge.__main__:main',
     'sweep': 'pentapod_damper.sweep.__main__:main',
 }
 
 #: Files validated by a schema (:mod:`pentapod_sim.schema`): name -> ``module:Class`` of the
-#: schema, in the order docs/config.md documents them. The first five are in config/; the
+#: schema, in the order docs/config.md documents them. The first six are in config/; the
 #: others are files a user brings (FE import, damping, calibration).
 CONFIG_FILES = {
     'machine.yaml': 'pentapod_sim.fe.machine_data:MachineParams',
@@ -93,6 +96,7 @@ CONFIG_FILES = {
     'reduction.yaml': 'pentapod_sim.plant.config:ReductionConfig',
     'machining.yaml': 'pentapod_sim.machining.materials:MachiningTable',
     'study.yaml': 'pentapod_damper.study.config:StudyFile',
+    'judge.yaml': 'pentapod_damper.judge.config:JudgeConfig',
     'FE model description (modes --fe-model FILE.yaml)':
         'pentapod_sim.fe.imported.description:FEDescription',
     'damping file (damping.yaml, reduction.yaml damping_file)':

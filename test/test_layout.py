@@ -26,7 +26,7 @@ STAGES = [
     ('pentapod_damper.laws', 'pentapod_damper.node_parameters', 'pentapod_damper.scenario_laws',
      'pentapod_damper.__init__'),
     ('pentapod_damper.nodes', 'pentapod_damper.study', 'pentapod_damper.sweep',
-     'pentapod_damper.design'),
+     'pentapod_damper.design', 'pentapod_damper.judge'),
 ]
 #: Packages that need a ROS installation; only node modules may import them.
 ROS_MODULES = ('rclpy', 'rcl_interfaces', 'builtin_interfaces', 'sensor_msgs', 'geometry_msgs',
@@ -35,6 +35,7 @@ MAX_LINES = 400
 #: The force-source node modules; started by the dozen in a scenario, they must not load the FE
 #: model code or the eigen solver (seconds of imports and memory per process for nothing).
 SOURCE_NODES = ('pentapod_sim.nodes.exciter_node', 'pentapod_sim.nodes.cutting_node',
+                'pentapod_sim.nodes.disturbance_node',
                 'pentapod_damper.nodes.damper_node',
                 'pentapod_damper.nodes.pma_node', 'pentapod_damper.nodes.example_controller')
 FE_PACKAGES = ('pentapod_sim.fe', 'pentapod_sim.modes')

@@ -93,6 +93,7 @@ def test_status_values_carry_every_key_and_the_recorder_parses_them():
     assert values['last_stamp_ns'] == str(2_000_000)          # t_2 = 2 ms
     assert float(values['step_rate']) == 1234.5
     assert (values['deadline_misses'], values['rejected_messages']) == ('2', '7')
+    assert values['rejected_by_reason'] == ''
     status = RunStatus.from_values(values)
     assert (status.state, status.steps, status.dt, status.ended) == ('running', 3, 1e-3, False)
     assert status_values('finished', 0, 1e-3, [], 0.0, 0, 0)['last_stamp_ns'] == '-1'

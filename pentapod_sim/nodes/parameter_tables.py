@@ -238,6 +238,25 @@ class CuttingParams(Sampled, SourceParams):
 
 
 @dataclass(frozen=True)
+class DisturbanceParams(Sampled, SourceParams):
+    """
+    Seeded white noise on chosen input ports, answering every /clock tick.
+
+    Independent on each port: the excitation that identifies a controller in the loop (judge).
+    """
+
+    ports: tuple[str, ...] = param((), 'plant input ports, each driven by its own noise '
+                                   '(e.g. the ports a controller answers)')
+    amplitude: float = param(10.0, 'RMS of the noise on each port', 'N or N m',
+                             bounds=(0.0, 1e9))
+    seed: int = param(0, 'random seed', bounds=(0, 2 ** 31))
+
+    def loop_laws(self, dt: float | None = None) -> list:
+        """No law: the noise reads no plant output, it closes no loop."""
+        return []
+
+
+@dataclass(frozen=True)
 class RecorderParams(NodeParams):
     """Writes chosen topics to a rosbag2-compatible MCAP bag."""
 

@@ -133,7 +133,9 @@ class PlantNode(TestbedNode):
             self.refresh()
         self.status.publish(state, self.core.k,
                             self.outputs.active_topics() + self.inputs.topics(),
-                            self.timing.deadline_misses(), sum(self.mixer.rejected.values()))
+                            self.timing.deadline_misses(), sum(self.mixer.rejected.values()),
+                            ','.join(f'{source}/{reason}={count}' for (source, reason), count
+                                     in sorted(self.mixer.rejected.items())))
 
     def wait_for_acks(self) -> None:
         """Wait until every subscriber acknowledged every output and status (``ack_timeout``)."""

@@ -22,12 +22,14 @@ from pentapod_sim.nodes.common import qos
 
 
 def status_values(state: str, steps: int, dt: float, step_topics: list[str],
-                  step_rate: float, deadline_misses: int, rejected: int) -> dict[str, str]:
+                  step_rate: float, deadline_misses: int, rejected: int,
+                  by_reason: str = '') -> dict[str, str]:
     """Key/value pairs of one run-status message (units: dt [s], step_rate [steps/s])."""
     values = {'state': state, 'steps': steps, 'dt': repr(dt),
               'last_stamp_ns': stamp_ns(steps - 1, dt) if steps else -1,
               'step_topics': ','.join(step_topics), 'step_rate': f'{step_rate:.6g}',
-              'deadline_misses': deadline_misses, 'rejected_messages': rejected}
+              'deadline_misses': deadline_misses, 'rejected_messages': rejected,
+              'rejected_by_reason': by_reason}
     return {k: str(v) for k, v in values.items()}
 
 
@@ -70,14 +72,14 @@ class RunStatusPublisher:
         return [self.pub]
 
     def publish(self, state: str, steps: int, step_topics: list[str], deadline_misses: int,
-                rejected: int) -> None:
+                rejected: int, by_reason: str = '') -> None:
         """Publish one status message: ``state`` after ``steps`` steps (docs/recording.md)."""
         now = time.monotonic()
         last_time, last_steps = self.last
         rate = (steps - last_steps) / (now - last_time) if now > last_time else 0.0
         self.last = (now, steps)
         values = status_values(state, steps, self.dt, step_topics, rate, deadline_misses,
-                               rejected)
+                               rejected, by_reason)
         level = DiagnosticStatus.WARN if state == interface.RUN_STOPPED else DiagnosticStatus.OK
         self.pub.publish(DiagnosticStatus(
             level=level, name=self.name, message=state,

@@ -128,6 +128,21 @@ def collocated_output(input_name: str, kind: str = 'velocity') -> str:
         raise PortError(f'input {input_name!r} has no collocated {kind!r} output') from None
 
 
+def collocated_input_of(output_name: str) -> str:
+    """
+    Return the input collocated with an output (displacement or velocity).
+
+    Raises
+    ------
+    PortError
+        If the output is unknown or no input acts where it measures.
+    """
+    check_names([output_name], 'output')
+    for (inp, _), out in _COLLOCATED.items():
+        if out == output_name:
+            return inp
+    raise PortError(f'output {output_name!r} has no collocated input')
+
 def _point_rows(points: Mapping[str, Any], name: str) -> npt.NDArray[np.float64]:
     """Dense (6, n) observation matrix of a point; PortError names missing points."""
     try:

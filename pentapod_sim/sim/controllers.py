@@ -95,6 +95,25 @@ class DiscreteController:
             raise ConfigError(f'not a controller description: {err}') from None
 
 
+def with_delay(ctrl: DiscreteController, steps: int = 1) -> DiscreteController:
+    """
+    ``ctrl`` answering ``steps`` samples late: ``u_k = K(y_{k - steps})``.
+
+    The delay line holds the last ``steps`` sensor vectors as extra states (oldest last).
+    """
+    if steps < 0:
+        raise ConfigError(f'a delay of {steps} samples is negative')
+    out = ctrl
+    n_s = len(ctrl.sensor_ports)
+    for _ in range(steps):
+        n = out.n_states
+        a = np.block([[out.a, out.b], [np.zeros((n_s, n + n_s))]])
+        b = np.vstack([np.zeros((n, n_s)), np.eye(n_s)])
+        c = np.hstack([out.c, out.d])
+        out = DiscreteController(ctrl.sensor_ports, ctrl.actuator_ports, a, b, c,
+                                 np.zeros_like(ctrl.d))
+    return out
+
 class PortedLaw(Protocol):
     """What :func:`controller_of` needs of a law besides ``discrete_model``/``linear_gain``."""
 
