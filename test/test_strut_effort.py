@@ -89,8 +89,10 @@ def _independent_outputs(model: PlantModel, u: np.ndarray, dt: float) -> np.ndar
 
 @pytest.mark.ros
 @pytest.mark.slow
+@pytest.mark.parametrize('executor', ['events', 'single'])
 def test_iff_struts_through_the_nodes_equals_the_offline_loop_and_publishes_the_forces(
-        tmp_path):
+        tmp_path, executor):
+    """Composed run: the in-process hand-off (``events``) or every message on DDS (``single``)."""
     shipped = read_scenario(SCENARIO).sections
     rate = float(shipped['plant']['sample_rate'])      # the shared sample rate (/**)
     steps = 2000
@@ -111,8 +113,8 @@ def test_iff_struts_through_the_nodes_equals_the_offline_loop_and_publishes_the_
     path = tmp_path / 'scenario.yaml'
     path.write_text(dump_params(doc))
     proc = subprocess.run([sys.executable, '-m', 'pentapod_sim.nodes.composed', str(path)],
-                          env=dict(os.environ), capture_output=True, text=True, timeout=300,
-                          cwd=ROOT)
+                          env=dict(os.environ, PENTAPOD_EXECUTOR=executor),
+                          capture_output=True, text=True, timeout=300, cwd=ROOT)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     run = dict(np.load(tmp_path / 'trace.npz'))
 
