@@ -9,8 +9,11 @@ messages (docs/architecture.md, docs/nodes.md):
 * ``/pentapod/tcp_state``: joints ``tcp_{x,y,z}``, position = ``tcp_displacement_*`` [m],
   velocity = ``tcp_velocity_*`` [m/s];
 * ``/pentapod/strut_states``: ``strut{i}_bending_{2,3}`` (position [rad] = bending, velocity
-  [rad/s] = bending rate), ``strut{i}_axial`` (position [m], velocity [m/s]) and
-  ``strut{i}_chord_{2,3}`` (position [m] = chord displacement, velocity [m/s]);
+  [rad/s] = bending rate), ``strut{i}_axial`` (BP cardan joint: position [m], velocity [m/s]),
+  ``strut{i}_chord_{2,3}`` (position [m] = chord displacement, velocity [m/s]) and
+  ``strut{i}_drive`` (feed-drive link, strut against gimbal: position [m] =
+  ``strut{i}_drive_displacement``, velocity [m/s], effort [N] = ``strut{i}_force``, the load
+  cell between nut and gimbal); effort NaN for every other joint of the topic;
 * ``/pentapod/pma_mount_state``: ``pma_mount_{x,y,z}``, velocity = ``pma_mount_velocity_*``
   [m/s] (position NaN: the plant has no displacement output there);
 * ``/pentapod/tcp_state_fullrate`` (multi-rate plant, N = ``substeps`` > 1, published only while
@@ -29,11 +32,12 @@ messages (docs/architecture.md, docs/nodes.md):
   between the entry and exit angles of :data:`CUTTING_SPEC` and h_j > 0. The force on the TCP
   is the node's answer on its force topic.
 
-A quantity the model lacks is published as NaN.
+A quantity the model lacks is published as NaN; a topic on which no joint has an effort
+publishes an empty effort array.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 import math
 from typing import Sequence
 
@@ -42,6 +46,7 @@ import numpy.typing as npt
 
 from pentapod_sim.errors import PortError
 from pentapod_sim.plant.ports import AXES, N_STRUTS
+from pentapod_sim.topic_layout import batch_layout, TopicLayout
 
 #: Namespace of every testbed topic except /clock.
 NAMESPACE = '/pentapod/'
@@ -272,7 +277,7 @@ def is_latched(topic: str) -> bool:
 
 
 def _table() -> dict[str, tuple[str, str, str]]:
-    """Map output port -> (topic, joint name, 'position' | 'velocity')."""
+    """Map output port -> (topic, joint name, 'position' | 'velocity' | 'effort')."""
     table = {}
     for a in AXES:
         table[f'tcp_displacement_{a}'] = (TCP_STATE, f'tcp_{a}', 'position')
@@ -285,6 +290,12 @@ def _table() -> dict[str, tuple[str, str, str]]:
                                                    'velocity')
         table[f'strut{i}_axial_displacement'] = (STRUT_STATES, f'strut{i}_axial', 'position')
         table[f'strut{i}_axial_velocity'] = (STRUT_STATES, f'strut{i}_axial', 'velocity')
+        # the feed-drive line of the strut (strut against its gimbal, across the drive link);
+        # its load cell sits in series with it, so it reads the force through this joint
+        # (the axial joint is the BP cardan ring, another joint of the strut)
+        table[f'strut{i}_drive_displacement'] = (STRUT_STATES, f'strut{i}_drive', 'position')
+        table[f'strut{i}_drive_velocity'] = (STRUT_STATES, f'strut{i}_drive', 'velocity')
+        table[f'strut{i}_force'] = (STRUT_STATES, f'strut{i}_drive', 'effort')
         for k in (2, 3):
             table[f'strut{i}_chord_{k}'] = (STRUT_STATES, f'strut{i}_chord_{k}', 'position')
             table[f'strut{i}_chord_velocity_{k}'] = (STRUT_STATES, f'strut{i}_chord_{k}',
@@ -303,37 +314,6 @@ def port_location(port: str) -> tuple[str, str, str]:
         raise PortError(f'output port {port!r} is not published in any state topic') from None
 
 
-@dataclass
-class TopicLayout:
-    """
-    How to fill one state message from the output vector y.
-
-    Attributes
-    ----------
-    topic : str
-        Topic name.
-    joints : list of str
-        JointState names.
-    position_index, velocity_index : (n_joints,) ndarray of int
-        Index into y, -1 where the model lacks the quantity (published as NaN).
-    """
-
-    topic: str
-    joints: list[str]
-    position_index: npt.NDArray[np.intp]
-    velocity_index: npt.NDArray[np.intp]
-    _ext: npt.NDArray[np.float64] = field(default_factory=lambda: np.full(1, np.nan),
-                                          repr=False, compare=False)
-
-    def values(self, y: npt.NDArray[np.float64]
-               ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
-        """Positions and velocities of the joints from y (NaN where missing)."""
-        if self._ext.size != y.size + 1:        # y and a NaN, which index -1 picks
-            self._ext = np.full(y.size + 1, np.nan)
-        self._ext[:-1] = y     # once per step: reused (np.append cost 6 % of a composed step)
-        return self._ext[self.position_index], self._ext[self.velocity_index]
-
-
 def state_layouts(output_names: Sequence[str]) -> list[TopicLayout]:
     """Layouts of the state topics that carry at least one of the model's outputs."""
     index = {n: i for i, n in enumerate(output_names)}
@@ -341,40 +321,13 @@ def state_layouts(output_names: Sequence[str]) -> list[TopicLayout]:
     for port in output_names:
         if port not in PORT_LOCATION:
             continue
-        topic, joint, field = PORT_LOCATION[port]
-        joints[topic].setdefault(joint, {})[field] = index[port]
-    layouts = []
-    for topic, table in joints.items():
-        if not table:
-            continue
-        names = list(table)
-        pos = np.array([table[j].get('position', -1) for j in names], dtype=np.intp)
-        vel = np.array([table[j].get('velocity', -1) for j in names], dtype=np.intp)
-        layouts.append(TopicLayout(topic, names, pos, vel))
-    return layouts
-
-
-def batch_layout(layout: TopicLayout, row_length: int, rows: int, topic: str) -> TopicLayout:
-    """
-    Layout of ``rows`` samples of ``layout`` in one message, on the flattened (rows, n) array.
-
-    Sample j (row j of an array whose rows have ``row_length`` values) becomes the joints
-    ``<joint>@<j>``, in the order of ``layout``'s joints, sample after sample.
-    """
-    offsets = np.arange(rows)[:, None] * row_length
-
-    def flat(index: npt.NDArray[np.intp]) -> npt.NDArray[np.intp]:
-        return np.where(index < 0, -1, offsets + index).reshape(-1)
-    return TopicLayout(topic, [f'{j}@{s}' for s in range(rows) for j in layout.joints],
-                       flat(layout.position_index), flat(layout.velocity_index))
-
-
-def split_batch_name(name: str) -> tuple[str, int]:
-    """``('tcp_x', 3)`` for the batched joint name ``'tcp_x@3'`` (ValueError if not one)."""
-    joint, at, sample = name.rpartition('@')
-    if not at or not joint or not sample.isdigit():
-        raise ValueError(f'{name!r} is no batched joint name <joint>@<sample>')
-    return joint, int(sample)
+        topic, joint, kind = PORT_LOCATION[port]
+        joints[topic].setdefault(joint, {})[kind] = index[port]
+    def column(table: dict[str, dict[str, int]], kind: str) -> npt.NDArray[np.intp]:
+        return np.array([fields.get(kind, -1) for fields in table.values()], dtype=np.intp)
+    return [TopicLayout(topic, list(table), column(table, 'position'),
+                        column(table, 'velocity'), column(table, 'effort'))
+            for topic, table in joints.items() if table]
 
 
 def fullrate_layout(output_names: Sequence[str], substeps: int) -> TopicLayout | None:

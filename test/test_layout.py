@@ -18,7 +18,7 @@ STAGES = [
     ('pentapod_sim.fe',),
     ('pentapod_sim.modes',),
     ('pentapod_sim.plant',),
-    ('pentapod_sim.sim', 'pentapod_sim.interface'),
+    ('pentapod_sim.sim', 'pentapod_sim.topic_layout', 'pentapod_sim.interface'),
     ('pentapod_sim.machining',),
     ('pentapod_sim.recording', 'pentapod_sim.analysis', 'pentapod_sim.scenario',
      'pentapod_sim.live'),

@@ -26,13 +26,14 @@ import time
 import numpy as np
 import pytest
 
-from fixtures.demo_model import demo_model
+from fixtures.demo_model import demo_model, load_cell_model
 from fixtures.foxglove_client import decoder, FoxgloveClient
 from pentapod_sim import interface
 from pentapod_sim.interface import stamp_ns, state_layouts
 from pentapod_sim.live.streams import BatchStream
 from pentapod_sim.sim.multirate import MultiRatePlant
 from pentapod_sim.sim.stepping import ForceMixer, ForceSource
+from pentapod_sim.topic_layout import split_batch_name
 
 
 class KeptPublisher:
@@ -63,7 +64,7 @@ def joint_values(msg) -> dict:
     out = {}
     fields = [list(getattr(msg, f)) for f in ('position', 'velocity', 'effort')]
     for i, name in enumerate(msg.name):
-        joint, sample = interface.split_batch_name(name)
+        joint, sample = split_batch_name(name)
         out[(joint, sample)] = tuple(f[i] if f else None for f in fields)
     return out
 
@@ -74,7 +75,7 @@ def test_batches_carry_every_step_bit_for_bit():
 
     from pentapod_sim.nodes.display_batch import DisplayBatches
     rate, steps = 3000.0, 50
-    core = MultiRatePlant.from_model(demo_model(4, seed=3), rate)
+    core = MultiRatePlant.from_model(load_cell_model(4, seed=3), rate)     # strut efforts too
     mixer = ForceMixer(core.input_names, [ForceSource('a'), ForceSource('b')])
     node = FakeNode()
     batches = DisplayBatches(node, core, mixer, period=0.004)        # 12 steps per batch
@@ -85,9 +86,10 @@ def test_batches_carry_every_step_bit_for_bit():
     for k in range(steps):
         y = core.outputs()
         for lay in state_layouts(core.output_names):
-            pos, vel = lay.values(y)
-            states.setdefault(lay.topic, {})[stamp_ns(k, core.dt)] = (lay.joints, pos, vel)
-        ports_b = ['tcp_force_z', 'tcp_force_x'] if k < 30 else ['tcp_force_x']  # changes
+            states.setdefault(lay.topic, {})[stamp_ns(k, core.dt)] = (lay.joints,
+                                                                     *lay.values(y))
+        # the mixer takes only the source's ports (in any order): the order changes
+        ports_b = ['tcp_force_z', 'tcp_force_x'] if k < 30 else ['tcp_force_x', 'tcp_force_z']
         for source, ports in (('a', ['tcp_force_y', 'tcp_force_x']), ('b', ports_b)):
             efforts = array.array('d', rng.normal(size=len(ports)) * 10.0 ** rng.integers(-9, 3))
             assert mixer.submit(source, list(ports), efforts, k, k) is None
@@ -103,15 +105,20 @@ def test_batches_carry_every_step_bit_for_bit():
         seen = {}
         for data in sent:
             msg = deserialize_message(data, JointState)
-            assert msg.header.frame_id == repr(core.dt) and not msg.effort
+            assert msg.header.frame_id == repr(core.dt)
+            assert bool(msg.effort) == (topic == interface.STRUT_STATES)
             first = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
             k0 = interface.step_of(first, core.dt)
-            for (joint, j), (pos, vel, _) in joint_values(msg).items():
-                seen.setdefault(stamp_ns(k0 + j, core.dt), {})[joint] = (pos, vel)
+            for (joint, j), values in joint_values(msg).items():
+                seen.setdefault(stamp_ns(k0 + j, core.dt), {})[joint] = values
         assert sorted(seen) == sorted(per_step)
-        for stamp, (joints, pos, vel) in per_step.items():
-            got = np.array([seen[stamp][j] for j in joints])
-            assert np.array_equal(got, np.stack([pos, vel], axis=1), equal_nan=True)
+        for stamp, (joints, *fields) in per_step.items():
+            for f, values in enumerate(fields):       # position, velocity, effort
+                got = [seen[stamp][j][f] for j in joints]
+                if values.size:
+                    assert np.array_equal(np.array(got), values, equal_nan=True), (topic, f)
+                else:
+                    assert got == [None] * len(joints), (topic, f)
         # the live view's decoder gives the same stamps and rows
         stream = BatchStream(topic, interface.JOINT_STATE, 10**7, 100)
         stamps, rows = stream.decode(sent)
@@ -127,18 +134,18 @@ def test_batches_carry_every_step_bit_for_bit():
             assert not msg.position and not msg.velocity
             k0 = interface.step_of(msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec,
                                    core.dt)
-            ports = list(dict.fromkeys(interface.split_batch_name(n)[0] for n in msg.name))
+            ports = list(dict.fromkeys(split_batch_name(n)[0] for n in msg.name))
             for (joint, j), (_, _, effort) in joint_values(msg).items():
                 step = seen.setdefault(stamp_ns(k0 + j, core.dt), ([], []))
                 step[0].append(joint)
                 step[1].append(effort)
             assert ports in (['tcp_force_y', 'tcp_force_x'], ['tcp_force_z', 'tcp_force_x'],
-                             ['tcp_force_x'])
+                             ['tcp_force_x', 'tcp_force_z'])
         assert seen == {t: (list(p), e) for t, (p, e) in per_step.items()}
-    # b's ports changed at step 30: the batch of steps 24-35 was cut at 30, for every topic
+    # b's port order changed at step 30: the batch of steps 24-35 was cut at 30, for every topic
     b_sent = node.pubs[interface.display_batch_topic(interface.force_topic('b'))].sent
     sizes = [len(deserialize_message(d, JointState).name) for d in b_sent]
-    assert sizes == [12 * 2, 12 * 2, 6 * 2, 12 * 1, 8 * 1]
+    assert sizes == [12 * 2, 12 * 2, 6 * 2, 12 * 2, 8 * 2]
 
 
 def test_batch_stream_counts_the_steps_of_lost_batches():
@@ -279,7 +286,7 @@ def test_batches_of_the_run_are_the_trace_bit_for_bit(viewed_run):
                 seen.setdefault(stamp_ns(k0 + j, dt), {})[joint] = (pos, vel)
         assert sorted(seen) == stamps, lay.topic
         for k, stamp in enumerate(stamps):
-            pos, vel = lay.values(y[k])
+            pos, vel, _ = lay.values(y[k])
             got = np.array([seen[stamp][j] for j in lay.joints])
             assert np.array_equal(got, np.stack([pos, vel], axis=1), equal_nan=True), (lay, k)
     names = list(trace['input_names'])

@@ -154,7 +154,8 @@ def test_fullrate_layout_picks_the_tcp_columns_of_every_substep():
     assert layout.topic == TCP_STATE_FULLRATE
     assert layout.joints[:4] == ['tcp_x@0', 'tcp_y@0', 'tcp_z@0', 'tcp_x@1']
     rows = np.arange(4 * len(names), dtype=float).reshape(4, len(names))
-    pos, vel = layout.values(rows.reshape(-1))
+    pos, vel, eff = layout.values(rows.reshape(-1))
+    assert eff.size == 0                # the TCP joints have no effort
     for i, joint in enumerate(layout.joints):
         axis, j = joint[4], int(joint.split('@')[1])
         assert pos[i] == rows[j, names.index(f'tcp_displacement_{axis}')]

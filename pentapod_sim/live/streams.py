@@ -33,8 +33,9 @@ from pentapod_sim.analysis.bag.cdr_arrays import (
     wrench_arrays,
 )
 from pentapod_sim.errors import BagError
-from pentapod_sim.interface import split_batch_name, step_of
+from pentapod_sim.interface import step_of
 from pentapod_sim.live.envelope import EnvelopeDownsampler, Sample
+from pentapod_sim.topic_layout import split_batch_name
 
 #: Message types the live view downsamples.
 SUPPORTED_TYPES = (interface.JOINT_STATE, interface.WRENCH_STAMPED)

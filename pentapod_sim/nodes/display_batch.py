@@ -12,9 +12,9 @@ someone subscribes, publishes every M steps one sensor_msgs/JointState per state
 force source on :func:`pentapod_sim.interface.display_batch_topic` (``/pentapod/live/batch/...``):
 
 * joints ``<joint>@j`` (j = 0..M-1, step k0 + j of the batch; the layout of the full-rate
-  topic, :func:`pentapod_sim.interface.batch_layout`), the per-step topic's fields: position
-  and velocity of the state topics, effort of a source's force (its ports in the order of its
-  messages);
+  topic, :func:`pentapod_sim.topic_layout.batch_layout`), the per-step topic's fields: position
+  and velocity of the state topics (and effort where the topic has one), effort of a source's
+  force (its ports in the order of its messages);
 * header.stamp t_k0; header.frame_id the step dt [s] as ``repr(dt)``, so a reader gets the
   stamp of sample j exactly, ``stamp_ns(k0 + j, dt)`` with ``k0 = step_of(stamp, dt)``.
 
@@ -35,15 +35,14 @@ import numpy as np
 from sensor_msgs.msg import JointState
 
 from pentapod_sim.interface import (
-    batch_layout,
     display_batch_topic,
     force_topic,
     stamp_ns,
     state_layouts,
-    TopicLayout,
 )
 from pentapod_sim.nodes.common import qos, stamp_msg
 from pentapod_sim.nodes.wire_cdr import JointStateCdr
+from pentapod_sim.topic_layout import batch_layout, TopicLayout
 
 
 class DisplayBatches:
@@ -132,7 +131,6 @@ class DisplayBatches:
             return
         msg = self._msg
         msg.header.stamp = stamp_msg(stamp_ns(self.k0, self.dt))
-        msg.effort = array.array('d')
         for pub, lay in self.states:
             if pub not in self.active:
                 continue
@@ -140,10 +138,11 @@ class DisplayBatches:
             if batch is None:
                 batch = self._layouts[(lay.topic, count)] = batch_layout(
                     lay, self.y.shape[1], count, pub.topic_name)
-            pos, vel = batch.values(self.y[:count].reshape(-1))
+            pos, vel, eff = batch.values(self.y[:count].reshape(-1))
             msg.name = batch.joints
             msg.position = array.array('d', pos.tobytes())
             msg.velocity = array.array('d', vel.tobytes())
+            msg.effort = array.array('d', eff.tobytes())
             self._publish(pub, msg)
         msg.position, msg.velocity = array.array('d'), array.array('d')
         for source, pub in self.forces.items():
@@ -154,13 +153,14 @@ class DisplayBatches:
                 got = self._layouts[key] = self._force_layout(self.ports[source], count)
             msg.name = got.joints
             msg.effort = array.array(
-                'd', self.u[source][:count].reshape(-1)[got.position_index].tobytes())
+                'd', self.u[source][:count].reshape(-1)[got.index('effort')].tobytes())
             self._publish(pub, msg)
 
     def _force_layout(self, ports: tuple[str, ...], count: int) -> TopicLayout:
-        """Joints ``<port>@j``; position indices into the flattened (count, n_in) forces."""
+        """Joints ``<port>@j``; effort indices into the flattened (count, n_in) forces."""
         columns = np.array([self.mixer.input_names.index(p) for p in ports], dtype=np.intp)
-        one = TopicLayout('', list(ports), columns, np.full(columns.size, -1, dtype=np.intp))
+        none = np.full(columns.size, -1, dtype=np.intp)
+        one = TopicLayout('', list(ports), none, none, columns)
         return batch_layout(one, len(self.mixer.input_names), count, '')
 
     def _publish(self, pub, msg: JointState) -> None:

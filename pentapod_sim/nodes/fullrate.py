@@ -100,9 +100,10 @@ class FullRateOutputs:
         rows = kept if kept is not None else self._rows
         self.core.fine_outputs(u, y, rows)
         if self.active:
-            pos, vel = self.layout.values(rows.reshape(-1))
+            pos, vel, eff = self.layout.values(rows.reshape(-1))
             msg = self.msg
             msg.position = array.array('d', pos.tobytes())
             msg.velocity = array.array('d', vel.tobytes())
+            msg.effort = array.array('d', eff.tobytes())
             msg.header.stamp = stamp_msg(stamp_ns(k, self.core.dt))
             self.pub.publish(msg)

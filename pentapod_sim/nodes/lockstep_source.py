@@ -322,7 +322,8 @@ class LockstepSource(TestbedNode):
             known = (names, [(slot, index[j], field) for slot, j, field in self.needs[topic]])
             self._picks[topic] = known
         for slot, i, field in known[1]:
-            values = msg.velocity if field == 'velocity' else msg.position
+            values = (msg.velocity if field == 'velocity'
+                      else msg.effort if field == 'effort' else msg.position)
             if i >= len(values):
                 self._reject(f'length: {topic} has {len(values)} {field} values for '
                              f'{len(names)} names')

@@ -19,10 +19,11 @@ from sensor_msgs.msg import JointState
 
 from pentapod_sim import shutdown
 from pentapod_sim.errors import RunError
-from pentapod_sim.interface import CLOCK, stamp_ns, state_layouts, TopicLayout
+from pentapod_sim.interface import CLOCK, stamp_ns, state_layouts
 from pentapod_sim.nodes.common import set_stamp, spin_until, STATE_QOS, subscribers_of
 from pentapod_sim.nodes.fullrate import FullRateOutputs
 from pentapod_sim.nodes.local_bus import LocalBus, Outlet
+from pentapod_sim.topic_layout import TopicLayout
 
 #: Wall time [s] between two looks at the output topics' subscribers during a run.
 REFRESH_PERIOD = 0.25
@@ -102,10 +103,11 @@ class PlantOutputs:
             set_stamp(self.clock_msg.clock, ns)
             self.clock.publish(self.clock_msg)
         for out, lay in self.active:
-            pos, vel = lay.values(y)
+            pos, vel, eff = lay.values(y)
             msg = self.state_msgs[lay.topic]
             msg.position = array.array('d', pos.tobytes())
             msg.velocity = array.array('d', vel.tobytes())
+            msg.effort = array.array('d', eff.tobytes())
             set_stamp(msg.header.stamp, ns)
             out.publish(msg)
 
