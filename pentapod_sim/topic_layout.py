@@ -42,7 +42,7 @@ class TopicLayout:
     _ext: npt.NDArray[np.float64] = field(default_factory=lambda: np.full(1, np.nan),
                                           repr=False, compare=False)
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         if self.effort_index is None:
             self.effort_index = np.full(len(self.joints), -1, dtype=np.intp)
 

@@ -31,6 +31,7 @@ IMPORT_KEYS = {
     'mcap_ros2': 'mcap-ros2-support',
     'numpy': 'python3-numpy',
     'pyarrow': 'python3-pyarrow-pip',
+    'pypardiso': 'python3-pypardiso-pip',
     'pyuff': 'python3-pyuff-pip',
     'rcl_interfaces': 'rcl_interfaces',
     'rclpy': 'rclpy',

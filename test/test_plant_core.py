@@ -80,24 +80,26 @@ class TestForceMixer:
     def test_sum_and_missing(self):
         mixer = self.make()
         assert mixer.missing(0) == ['exciter', 'damper']
-        assert mixer.submit('exciter', ['tcp_force_x'], [2.0], 0, 0) is None
+        assert mixer.submit('exciter', TCP, [2.0, 0.0, 0.0], 0, 0) is None
         assert mixer.missing(0) == ['damper']
         assert mixer.submit('damper', ['tcp_force_x', 'pma_force_x'], [1.0, -4.0], 0, 0) is None
         assert_allclose(mixer.total(), [3.0, 0.0, 0.0, -4.0])
 
     @pytest.mark.parametrize(('source', 'names', 'efforts', 'step', 'kind'), [
-        ('exciter', ['tcp_force_x'], [np.nan], 0, 'nonfinite'),
-        ('exciter', ['tcp_force_x'], [np.inf], 0, 'nonfinite'),
-        ('exciter', ['tcp_force_x', 'tcp_force_y'], [1.0], 0, 'length'),
+        ('exciter', TCP, [np.nan, 0.0, 0.0], 0, 'nonfinite'),
+        ('exciter', TCP, [0.0, np.inf, 0.0], 0, 'nonfinite'),
+        ('exciter', TCP, [1.0], 0, 'length'),
         ('exciter', ['tcp_force_q'], [1.0], 0, 'unknown_port'),
         ('exciter', ['pma_force_x'], [1.0], 0, 'forbidden_port'),
-        ('nobody', ['tcp_force_x'], [1.0], 0, 'unknown_source'),
-        ('exciter', ['tcp_force_x'], [1.0], 1, 'future'),
+        ('nobody', TCP, [1.0, 0.0, 0.0], 0, 'unknown_source'),
+        ('exciter', TCP, [1.0, 0.0, 0.0], 1, 'future'),
         ('exciter', ['tcp_force_x', 'tcp_force_x'], [1.0, 1.0], 0, 'duplicate_port'),
+        ('exciter', ['tcp_force_x'], [1.0], 0, 'ports'),       # a source answers all its ports
+        ('exciter', [], [], 0, 'ports'),
     ])
     def test_rejects_and_counts(self, source, names, efforts, step, kind):
         mixer = self.make()
-        assert mixer.submit('exciter', ['tcp_force_y'], [5.0], 0, 0) is None
+        assert mixer.submit('exciter', TCP, [0.0, 5.0, 0.0], 0, 0) is None
         mixer.latest_step['exciter'] = -1   # allow a second message for the same step
         reason = mixer.submit(source, names, efforts, step, 0)
         assert reason is not None and reason.startswith(kind)
