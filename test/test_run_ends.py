@@ -11,7 +11,8 @@ import time
 
 import numpy as np
 import pytest
-from test_stopping import Runner, scenario
+import test_stopping
+from test_stopping import scenario
 import yaml
 
 from pentapod_sim import exits
@@ -19,19 +20,10 @@ from pentapod_sim.scenario.files import dump_params
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
+#: the runner fixture of test_stopping (a run per call, every process killed after the test)
+runner_of = test_stopping.runner_of
+
 STALL = 2.0            # plant_stall_timeout of the sources [s]
-
-
-@pytest.fixture
-def runner_of(tmp_path):
-    made = []
-
-    def start(path, *args):
-        made.append(Runner(path, tmp_path, *args))
-        return made[-1]
-    yield start
-    for r in made:
-        r.kill_all()
 
 
 def child(run, needle: str) -> int:

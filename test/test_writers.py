@@ -12,13 +12,16 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from test_stopping import RATE, Runner, scenario
+import test_stopping
+from test_stopping import RATE, scenario
 
 from pentapod_sim.errors import RunError
 from pentapod_sim.nodes import writers
 from pentapod_sim.nodes.writers import WriterCheck
 
 TOPIC = '/pentapod/tcp_state'
+#: the runner fixture of test_stopping (a run per call, every process killed after the test)
+runner_of = test_stopping.runner_of
 
 
 def gid(host: int, pid: int, entity: int = 3) -> bytes:
@@ -98,17 +101,6 @@ def test_messages_are_refused_while_dds_matched_a_second_writer(monkeypatch):
 
 
 # ---- real participants on the session's domain ---------------------------------------------
-
-@pytest.fixture
-def runner_of(tmp_path):
-    made = []
-
-    def start(path, *args):
-        made.append(Runner(path, tmp_path, *args))
-        return made[-1]
-    yield start
-    for r in made:
-        r.kill_all()
 
 
 SPOOFER = Path(__file__).parent / 'fixtures' / 'spoofer.py'

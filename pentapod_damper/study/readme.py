@@ -20,6 +20,7 @@ import textwrap
 from pentapod_damper.study.config import load_study_config, StudyConfig
 from pentapod_damper.study.measured_damping import SETTLE_MODES
 from pentapod_damper.study.report import read_csv
+from pentapod_sim.reference import replace_section
 
 #: section of docs/results.md with the tables, section of the README with the sentences
 SECTION, SUMMARY = 'study-tables', 'study-summary'
@@ -71,21 +72,6 @@ COLUMNS: dict[str, Columns] = {
                 ('peak_analytic_um_per_N', 'peak, analytic [um/N]', '.3g'),
                 ('peak_error_db', 'peak, identified - analytic [dB]', '+.2f')),
 }
-
-
-def replace_section(text: str, name: str, body: str) -> str:
-    """
-    Replace what stands between ``<!-- name:begin -->`` and ``<!-- name:end -->`` by ``body``.
-
-    Raises ValueError naming the marker if either is missing or appears more than once.
-    """
-    begin, end = f'<!-- {name}:begin -->', f'<!-- {name}:end -->'
-    for marker in (begin, end):
-        if text.count(marker) != 1:
-            raise ValueError(f'{marker} must appear exactly once (found {text.count(marker)})')
-    head, rest = text.split(begin)
-    _, tail = rest.split(end)
-    return f'{head}{begin}\n{body.strip()}\n{end}{tail}'
 
 
 def _cell(text: str | None, kind: str) -> str:
