@@ -39,6 +39,7 @@ from pentapod_sim.cli import (
     run_command,
 )
 from pentapod_sim.cli.statespace_lobes import add_lobes_parser
+from pentapod_sim.cli.statespace_options import add_config_and_out, POSITIONS_HELP
 from pentapod_sim.cli.statespace_tune import add_tune_parser
 from pentapod_sim.errors import ConfigError
 from pentapod_sim.fe.model import FEModel
@@ -60,7 +61,6 @@ if TYPE_CHECKING:       # imported by the commands that use them
     from pentapod_sim.sim.stability import LoopCheck
 
 LOGGER = logging.getLogger('statespace')
-DEFAULT_OUT = Path('out') / 'statespace'
 #: Dampers of the default closed-loop case: bending of every strut, b = 20 kN s/m applied
 #: as a moment pair per rad/s (see docs/statespace.md for the unit).
 DEFAULT_DAMPERS = [f'strut{i}_bending_moment_{k}=2e4' for i in range(1, 6) for k in (2, 3)]
@@ -348,10 +348,8 @@ def _parser() -> argparse.ArgumentParser:
         add_model_arguments(p, position='')
         for action in p._actions:     # the shared option takes one name; here a list
             if action.dest == 'position':
-                action.help = 'comma-separated positions (default: positions in the config)'
-        p.add_argument('--config', default=None, help='reduction config (default: '
-                       'config/reduction.yaml)')
-        p.add_argument('--out', type=Path, default=DEFAULT_OUT, help='output directory')
+                action.help = POSITIONS_HELP
+        add_config_and_out(p)
         p.add_argument('--pair', default=None, metavar='OUTPUT/INPUT',
                        help='port pair to report and plot (default: report_pair of the config)')
         p.add_argument('--limit', type=float, default=None,

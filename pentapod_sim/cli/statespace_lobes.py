@@ -31,6 +31,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from pentapod_sim.cli.statespace_options import add_config_and_out, POSITIONS_HELP
 from pentapod_sim.errors import ConfigError
 from pentapod_sim.machining.lobe_plot import lobe_diagram
 from pentapod_sim.machining.loop_lobes import check_runs, loop_lobes, LoopLobes
@@ -56,12 +57,8 @@ def add_lobes_parser(sub: Any) -> None:
     p = sub.add_parser('lobes', help='stability lobes of the machine with the laws of '
                        'scenarios (sampled closed loop), minimum stable depths')
     p.set_defaults(func=cmd_lobes)
-    p.add_argument('--config', default=None, help='reduction config (default: '
-                   'config/reduction.yaml)')
-    p.add_argument('--out', type=Path, default=Path('out') / 'statespace',
-                   help='output directory')
-    p.add_argument('--position', default=None,
-                   help='comma-separated positions (default: positions in the config)')
+    add_config_and_out(p)
+    p.add_argument('--position', default=None, help=POSITIONS_HELP)
     p.add_argument('--scenario', default=DEFAULT_SCENARIOS,
                    help='comma-separated scenarios (names of config/scenarios or files; '
                         f'"all": every shipped one; default {DEFAULT_SCENARIOS}); the first '

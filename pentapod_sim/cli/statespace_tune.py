@@ -24,6 +24,7 @@ from typing import Any, TYPE_CHECKING
 
 import numpy as np
 
+from pentapod_sim.cli.statespace_options import add_config_and_out, POSITIONS_HELP
 from pentapod_sim.errors import ConfigError
 
 if TYPE_CHECKING:       # the numerical modules load with the command that needs them
@@ -39,12 +40,8 @@ def add_tune_parser(sub: Any) -> None:
     p = sub.add_parser('tune', help="gains of a strut damping law under the machine's "
                        'constraints, and the trade-off against static compliance')
     p.set_defaults(func=cmd_tune)
-    p.add_argument('--config', default=None, help='reduction config (default: '
-                   'config/reduction.yaml)')
-    p.add_argument('--out', type=Path, default=Path('out') / 'statespace',
-                   help='output directory')
-    p.add_argument('--position', default=None,
-                   help='comma-separated positions (default: positions in the config)')
+    add_config_and_out(p)
+    p.add_argument('--position', default=None, help=POSITIONS_HELP)
     p.add_argument('--family', default=','.join(FAMILIES),
                    help=f'comma-separated law families ({", ".join(FAMILIES)})')
     p.add_argument('--sample-rate', type=float, default=5000.0, metavar='HZ',
