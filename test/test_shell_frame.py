@@ -247,11 +247,12 @@ def test_walls_are_a_group_and_plate_modes_are_local(coarse_shells):
     walls = table.energy_shares[:, table.group_names.index('frame_walls')]
     # wall plate modes exist, are local (the struts and platform hardly move) ...
     assert np.count_nonzero(local & (walls > 0.5)) >= 3
-    # ... and the first mode (the frame on its feet, x) is not
-    assert not local[0]
-    # ... and hardly add to the TCP compliance (dc gain |phi_tcp|^2 / omega^2)
+    # ... and hardly add to the TCP compliance (dc gain |phi_tcp|^2 / omega^2) ...
     gain = (modes.shapes_at(model.point('tcp'))[:3] ** 2).sum(axis=0) / modes.omega ** 2
     assert gain[local].max() < 1e-2 * gain.max()           # measured: 0.22 %
+    # ... while the mode with the most TCP compliance (the frame on its feet, x) is not local
+    # (the lowest mode may be: the door lintel's plate mode, its lower edge free)
+    assert not local[int(np.argmax(gain))]
 
 
 def _walls(machine):
