@@ -19,6 +19,7 @@ import csv
 import dataclasses
 import os
 from pathlib import Path
+import signal
 import subprocess
 import sys
 
@@ -409,3 +410,36 @@ def test_mode_labels_give_the_fe_number_its_cause_and_the_tcp_direction():
     assert (third.plant_mode, third.fe_mode, third.cause, third.tcp_direction) == (
         3, 4, 'bp_joints', 'y')
     assert third.text() == 'FE 4 (plant 3), bp_joints, y'
+
+
+def test_a_node_that_already_runs_is_judged_with_node(lab):
+    """``--node``: a controller started by the user as its own process answers the judge's runs."""
+    tmp, env, models = lab
+    log = open(tmp / 'node.log', 'w')
+    node = subprocess.Popen(
+        [sys.executable, '-m', 'pentapod_sim.nodes.component', 'my_lab.plain:PlainDamper',
+         '--ros-args', '-p', f'gain:={TCP_GAIN}', '-p', 'source_name:=lab'],
+        env=env, stdout=log, stderr=subprocess.STDOUT, cwd=tmp)
+    try:
+        proc = subprocess.run(
+            [sys.executable, '-m', 'pentapod_damper.judge', '--node', 'plain_damper',
+             '--source', 'lab', '--config', str(tmp / 'judge.yaml'), '--sections',
+             'damping,robustness', '--ports', 'tcp_force_x', '--model-file',
+             str(tmp / 'demo.npz'),
+             '--out', str(tmp / 'node')],
+            env=env, capture_output=True, text=True, timeout=600, cwd=tmp)
+        assert node.poll() is None, (tmp / 'node.log').read_text()  # it outlives the runs
+    finally:
+        node.send_signal(signal.SIGINT)
+        node.wait(timeout=20)
+        log.close()
+    assert proc.returncode == 0, proc.stdout + proc.stderr + (tmp / 'node.log').read_text()
+    with open(tmp / 'node' / 'plain_damper' / 'numbers.csv', newline='') as f:
+        numbers = list(csv.DictReader(f))
+    plant = models['demo']
+    a, b, c, _ = plant.discrete_matrices(DT)
+    i, j = plant.input_names.index('tcp_force_x'), plant.output_names.index('tcp_velocity_x')
+    margin = control.stability_margins(control.ss(a, b[:, [i]], c[[j]], [[0.0]], DT)
+                                       * TCP_GAIN)[2]
+    row = _summary(numbers, 'return-difference margin')
+    assert float(row['plain_damper'].split()[0]) == pytest.approx(margin, rel=0.02)
