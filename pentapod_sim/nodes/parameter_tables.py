@@ -270,7 +270,7 @@ class RecorderParams(NodeParams):
     fresh_topics: tuple[str, ...] = param((), 'topics recorded only from what their writers '
                                           'publish after the recorder matched them, none of '
                                           'their history (the answers of a source that outlives '
-                                          'runs hold its earlier runs\' steps)')
+                                          "runs hold its earlier runs' steps)")
     queue_depth: int = param(100000, 'subscription depth (messages held while the writer catches '
                              'up)', bounds=(1, 2 ** 31 - 1))
     discovery_period: float = param(0.2, 'wall time between looks for new topics', 's',
