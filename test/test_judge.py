@@ -29,8 +29,10 @@ import pytest
 from statespace_fixtures import small_model
 
 from fixtures.demo_model import demo_model
+from pentapod_damper.study.analytic import SampledPairFrf
 from pentapod_sim.plant.build import load_reduction_config, plant_from_fe
 from pentapod_sim.plant.check_model import check_model_from_fe
+from pentapod_sim.plant.frf_peaks import maximise_near_poles
 from pentapod_sim.sim.controllers import DiscreteController
 from pentapod_sim.sim.stability import check_loop, STABLE, TRUNCATION
 
@@ -315,7 +317,7 @@ def test_a_built_in_law_gets_the_black_box_and_the_exact_check_and_they_agree(la
     proc = subprocess.run(
         [sys.executable, '-m', 'pentapod_damper.judge', 'damper', '--params',
          str(tmp / 'damper.yaml'), '--config', str(tmp / 'judge_1k.yaml'), '--sections',
-         'robustness', '--model-file', str(tmp / 'struts.npz'), '--check-model',
+         'robustness,buildable', '--model-file', str(tmp / 'struts.npz'), '--check-model',
          str(tmp / 'struts_check.npz'), '--out', str(tmp / 'damper')],
         env=env, capture_output=True, text=True, timeout=600, cwd=tmp)
     assert (tmp / 'damper' / 'damper' / 'numbers.csv').exists(), proc.stdout + proc.stderr
@@ -332,6 +334,17 @@ def test_a_built_in_law_gets_the_black_box_and_the_exact_check_and_they_agree(la
                  f'damper, check ({models["struts_check"].n_modes} modes)'):
         assert float(loops[(name, 'margin')]) == pytest.approx(
             float(loops[(name, 'model margin')]), rel=0.05, abs=0.01), name
+    # its row of the buildable-damper table: the check margin is 1 - the exact check's
+    # spectral radius, the peak reduction that of the exact peaks of the sampled loop
+    built = {r['column']: float(r['value']) for r in numbers
+             if r['table'].endswith('as a buildable damper') and r['value']}
+    assert built['check margin'] == pytest.approx(1.0 - exact.check_radius, abs=1e-9)
+    peaks = []
+    for laws in ([], [strut_bending_damper([1], gain)]):
+        frf = SampledPairFrf(models['struts'], laws, 1e-3, 'tcp_displacement_x', 'tcp_force_x')
+        peaks.append(maximise_near_poles(lambda f, h=frf: np.abs(h(f)), frf.poles,
+                                         10.0, 400.0).value)
+    assert built['peak reduction'] == pytest.approx(peaks[0] / peaks[1], rel=1e-6)
 
 
 def test_compare_judges_two_controllers_side_by_side(lab):
