@@ -33,6 +33,7 @@ from pentapod_sim.analysis.bag.reader import Bag
 from pentapod_sim.interface import force_topic, port_location
 from pentapod_sim.registry import executables
 
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
 ROOT = Path(__file__).resolve().parents[1]
 RATE = 2000.0
 

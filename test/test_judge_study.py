@@ -32,6 +32,7 @@ from pentapod_sim.plant.build import load_or_build_model
 from pentapod_sim.plant.frf_peaks import maximise_near_poles
 from pentapod_sim.scenario.files import read_scenario
 
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
 ROOT = Path(__file__).resolve().parents[1]
 BAND = (2.0, 200.0)
 #: The study's tolerances (test/test_study_run.py).
