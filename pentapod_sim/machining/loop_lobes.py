@@ -44,6 +44,9 @@ DEFAULT_BAND = (1.0, 1000.0)
 #: e-foldings of the predicted growth (or decay) a check run lasts after its settling part
 #: (the verdict needs a twofold growth or decay, 0.69 e-foldings).
 RUN_E_FOLDINGS = 2.0
+#: Fewest tooth periods a check run spans after its settling part (the verdict's growth fit
+#: needs 17; a fast rate on a small model would otherwise give too few).
+RUN_MIN_TOOTH_PERIODS = 40
 #: Speeds of the envelope the check speed is chosen from.
 CHECK_SPEEDS = 2000
 #: Share of a check run left out as the entry transient (the verdict's default).
@@ -224,25 +227,26 @@ def _averaged_rate(plant: PlantModel, controllers: list[DiscreteController], dt:
     return math.log(radius) / dt
 
 
-def _duration(rate: float, durations: tuple[float, float]) -> float:
-    active = RUN_E_FOLDINGS / max(abs(rate), 1e-9)
+def _duration(rate: float, durations: tuple[float, float], tooth_period: float) -> float:
+    active = max(RUN_E_FOLDINGS / max(abs(rate), 1e-9), RUN_MIN_TOOTH_PERIODS * tooth_period)
     return min(max(active / (1.0 - RUN_SETTLE_SHARE), durations[0]), durations[1])
 
 
 def _point(plant: PlantModel, controllers: list[DiscreteController], dt: float,
            table: MachiningTable, operation: str, speed: float, depth: float, freq: float,
-           factors: Sequence[float], durations: tuple[float, float]) -> CheckPoint:
+           factors: Sequence[float], averaged: Sequence[float],
+           durations: tuple[float, float]) -> CheckPoint:
     """The runs at ``factors`` of ``depth``, each as long as its Floquet rate asks."""
     runs = []
-    for factor in factors:
+    for factor, averaged_rate in zip(factors, averaged):
         cond = table.conditions(operation, speed, factor * depth)
         floquet = sampled_floquet(plant, controllers, cond, dt)
-        duration = _duration(floquet.growth_rate, durations)
+        duration = _duration(floquet.growth_rate, durations, cond.tooth_period)
         runs.append(CuttingRun(
             factor, 'stable' if factor < 1.0 else 'chatter',
             {'operation': operation, 'spindle_speed': speed, 'axial_depth': factor * depth},
-            duration, RUN_SETTLE_SHARE * duration, floquet.growth_rate,
-            _averaged_rate(plant, controllers, dt, cond), floquet.multiplier, floquet.kind))
+            duration, RUN_SETTLE_SHARE * duration, floquet.growth_rate, averaged_rate,
+            floquet.multiplier, floquet.kind))
     return CheckPoint(operation, speed, depth, freq, tuple(runs))
 
 
@@ -260,9 +264,10 @@ def check_runs(plant: PlantModel, laws: Sequence[Any], dt: float, table: Machini
     ``RUN_E_FOLDINGS`` e-foldings of it after the settling share, within ``durations`` (min,
     max) [s]. The speed is chosen among the ``candidates`` lowest lobe bottoms
     (:func:`lobe_bottoms`): the ``floquet_candidates`` whose runs the averaged loop predicts
-    shortest get their Floquet rates (a few seconds each on the machine's loop), and of those
+    shortest get their Floquet rates (about a second each on the machine's loop), and of those
     whose rates have the sign the zero-order limit predicts (decay below, growth above) the
-    one with the shortest runs is taken. ``speed`` [rpm] fixes the speed instead.
+    one with the shortest runs is taken; if none has, the next candidates are tried until one
+    has. ``speed`` [rpm] fixes the speed instead.
 
     Raises
     ------
@@ -281,11 +286,15 @@ def check_runs(plant: PlantModel, laws: Sequence[Any], dt: float, table: Machini
         rates = [_averaged_rate(plant, controllers, dt,
                                 table.conditions(lobes.operation, at, f * depth))
                  for f in factors]
-        points.append((max(_duration(r, durations) for r in rates), at, depth, freq))
+        period = 60.0 / (teeth * at)
+        points.append((max(_duration(r, durations, period) for r in rates), at, depth, freq,
+                       rates))
     best: CheckPoint | None = None
-    for _, at, depth, freq in sorted(points)[:floquet_candidates]:
+    for tried, (_, at, depth, freq, rates) in enumerate(sorted(points, key=lambda p: p[:2])):
+        if tried >= floquet_candidates and best is not None:
+            break
         point = _point(plant, controllers, dt, table, lobes.operation, at, depth, freq,
-                       factors, durations)
+                       factors, rates, durations)
         agrees = all((run.growth_rate > 0) == (run.expected == 'chatter') for run in point.runs)
         if agrees and (best is None or point.duration < best.duration):
             best = point

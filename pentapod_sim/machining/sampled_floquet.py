@@ -118,15 +118,57 @@ def sampled_floquet(plant: PlantModel, controllers: Sequence[DiscreteController]
         raise ConfigError(f'the tooth period spans {delay:.6f} steps of {dt:g} s; the Floquet '
                           f'multipliers need a whole number (spindle speed {nearest:.6g} rpm)')
     a, b, c, d = plant.discrete_matrices(dt)
-    loops = list(controllers)
-    period = None
-    for stiffness in step_stiffness(conditions, dt, steps):
-        step = loop_matrix(a, b, c, d, plant.input_names, plant.output_names,
-                           [*loops, delay_controller(stiffness, steps)])
-        period = step if period is None else step @ period
-    assert period is not None
+
+    def loop(stiffness: np.ndarray) -> np.ndarray:
+        return loop_matrix(a, b, c, d, plant.input_names, plant.output_names,
+                           [*controllers, delay_controller(stiffness, steps)])
+
+    period = _monodromy(loop(np.zeros((2, 2))),
+                        [[loop(np.outer(np.eye(2)[i], np.eye(2)[j])) for j in range(2)]
+                         for i in range(2)], step_stiffness(conditions, dt, steps))
     mu = np.linalg.eigvals(period)
     top = complex(mu[np.argmax(np.abs(mu))])
     time = steps * dt
     return SampledFloquet(top, math.log(abs(top)) / time, multiplier_kind(top),
                           abs(math.atan2(top.imag, top.real)) / (2.0 * math.pi * time))
+
+
+def _monodromy(free: np.ndarray, unit: list[list[np.ndarray]],
+               stiffness: np.ndarray) -> np.ndarray:
+    """
+    Product of the step matrices ``A_k = A_0 + U K_k V`` over one period.
+
+    The loop matrix is affine in the cut's stiffness: ``free`` is ``A_0`` (K = 0) and
+    ``unit[i][j]`` the loop with ``K = e_i e_j^T``, so ``unit[i][j] - A_0 = U[:, i] V[j]``
+    (the force's input columns times the regenerative chip's read-out). The product is taken
+    row block by row block: rows of ``A_0`` that copy one state (the delay line's shift) are
+    copies, the others a product over the columns they read, which is several times cheaper
+    than the dense product of every step.
+    """
+    if any(m.shape != free.shape for row in unit for m in row):
+        raise ConfigError('the loop with the cut changes its state with the stiffness')
+    delta = [[unit[i][j] - free for j in range(2)] for i in range(2)]
+    top = np.unravel_index(np.argmax(np.abs(delta[0][0])), free.shape)
+    u0 = delta[0][0][:, top[1]]                      # a column of the rank-one term
+    v0 = delta[0][0][top[0]] / u0[top[0]]
+    u = np.column_stack([u0, delta[1][0] @ v0 / (v0 @ v0)])
+    v = np.vstack([v0, u0 @ delta[0][1] / (u0 @ u0)])
+    if not all(np.allclose(u[:, i, None] * v[j], delta[i][j], rtol=0,
+                           atol=1e-9 * max(np.abs(delta[i][j]).max(), 1e-300))
+               for i in range(2) for j in range(2)):
+        raise ConfigError('the loop is not affine in the cutting stiffness (rank-one terms)')
+    nonzero = free != 0
+    copy = (nonzero.sum(axis=1) == 1) & np.isclose(free.max(axis=1), 1.0, rtol=0, atol=0)
+    copy_from = np.argmax(nonzero, axis=1)[copy]
+    rows = np.flatnonzero(~copy)
+    cols = np.flatnonzero(nonzero[rows].any(axis=0))
+    block = free[np.ix_(rows, cols)]
+    n = free.shape[0]
+    phi = np.eye(n)
+    for k in stiffness:
+        new = np.empty_like(phi)
+        new[copy] = phi[copy_from]
+        new[rows] = block @ phi[cols]
+        new += u @ (k @ (v @ phi))
+        phi = new
+    return phi
