@@ -27,6 +27,7 @@ from pentapod_sim.machining.loop_lobes import (
 )
 from pentapod_sim.machining.materials import load_machining
 from pentapod_sim.machining.sampled_floquet import (
+    check_speed,
     sampled_floquet,
     step_stiffness,
     whole_step_speed,
@@ -69,7 +70,7 @@ def point():
 def test_the_runs_last_two_e_foldings_of_the_floquet_rate(point):
     """At least 40 tooth periods after the settling quarter (the fit of the verdict)."""
     below, above = point.runs
-    assert point.speed == pytest.approx(whole_step_speed(1829.0, 4, DT))
+    assert point.speed == check_speed(1829.0, 4, DT)
     assert below.growth_rate < 0 < above.growth_rate
     for run in point.runs:
         cond = run.conditions(load_machining())
@@ -98,3 +99,21 @@ def test_a_simulated_cut_grows_at_the_floquet_rate_not_the_averaged_one(point):
         assert abs(measured - run.growth_rate) < 0.5 * abs(measured - run.averaged_rate), (
             run.factor, measured, run.growth_rate, run.averaged_rate)
         assert measured == pytest.approx(run.growth_rate, rel=0.15)
+
+
+@pytest.mark.parametrize('off_grid', [False, True])
+def test_a_check_speed_keeps_the_engagement_periodic(off_grid):
+    """
+    At a whole number of steps per tooth period the entry angle falls on samples.
+
+    On the grid, the rounding of the tooth angle decides irregularly whether a tooth cuts
+    there; at :func:`check_speed` every revolution after the first (whose step 0 has the teeth
+    exactly at their pitch angles) engages the teeth at the same samples.
+    """
+    table = load_machining()
+    speed = (check_speed if off_grid else whole_step_speed)(1829.0, 4, DT)
+    revolution = 4 * round(60.0 / (4 * speed * DT))
+    cut = simulate_cut(PLANT, table.conditions(OPERATION, speed, 1e-3), DT, 1000 * revolution * DT)
+    patterns = {cut.engaged[i:i + revolution].tobytes()
+                for i in range(revolution, cut.engaged.shape[0] - revolution + 1, revolution)}
+    assert (len(patterns) == 1) == off_grid, len(patterns)

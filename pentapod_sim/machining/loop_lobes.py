@@ -33,7 +33,7 @@ from pentapod_sim.machining.cutting_process import CuttingConditions, MIN_STEPS_
 from pentapod_sim.machining.lobe_plot import LobeSummary, summarise
 from pentapod_sim.machining.lobes import LobeEnvelope, milling_limit, StabilityLimit
 from pentapod_sim.machining.materials import MachiningTable
-from pentapod_sim.machining.sampled_floquet import sampled_floquet, whole_step_speed
+from pentapod_sim.machining.sampled_floquet import check_speed, sampled_floquet
 from pentapod_sim.machining.sampled_tcp import sampled_tcp_frf, SampledTcpFrf
 from pentapod_sim.plant.model import PlantModel
 from pentapod_sim.sim.controllers import controller_of, DiscreteController
@@ -257,8 +257,9 @@ def check_runs(plant: PlantModel, laws: Sequence[Any], dt: float, table: Machini
     """
     Cutting runs below and above the predicted limit at one speed (module docstring).
 
-    Every speed is moved to the nearest whole number of steps per tooth period (the depth is
-    the limit's envelope there), so that the loop with the cut is periodic and its Floquet
+    Every speed is moved to the nearest whole number of steps per tooth period, less 1e-9
+    (:func:`pentapod_sim.machining.sampled_floquet.check_speed`; the depth is the limit's
+    envelope there), so that the loop with the cut is periodic and its Floquet
     multipliers (:func:`pentapod_sim.machining.sampled_floquet.sampled_floquet`) give each
     run's growth or decay rate with the time-varying directional matrix; a run lasts
     ``RUN_E_FOLDINGS`` e-foldings of it after the settling share, within ``durations`` (min,
@@ -280,7 +281,7 @@ def check_runs(plant: PlantModel, laws: Sequence[Any], dt: float, table: Machini
     wanted = [float(speed)] if speed is not None else [
         at for at, _, _ in lobe_bottoms(lobes, teeth, dt)[:candidates]]
     points = []
-    for at in dict.fromkeys(whole_step_speed(s, teeth, dt) for s in wanted):
+    for at in dict.fromkeys(check_speed(s, teeth, dt) for s in wanted):
         env = lobes.limit.envelope([at])
         depth, freq = float(env.depth[0]), float(env.chatter_freq[0])
         rates = [_averaged_rate(plant, controllers, dt,
