@@ -63,7 +63,7 @@ def test_a_failed_recorder_fails_the_run_naming_it(tmp_path, runner_of, sig):
     assert int(trace['steps_run']) > 0 and str(trace['end']).startswith('stopped'), out
 
 
-@pytest.mark.parametrize('timing', ['lockstep'])
+@pytest.mark.parametrize('timing', ['lockstep', 'realtime'])
 def test_a_stopped_plant_is_named_within_the_stall_timeout(tmp_path, runner_of, timing):
     """SIGSTOP of the plant: a source stops the run with exit code 4; the runner names it."""
     run = runner_of(with_stall_timeout(scenario(tmp_path, record=False, timing=timing)))
