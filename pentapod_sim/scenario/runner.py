@@ -276,9 +276,11 @@ def _end_code(scenario: Scenario, code: int | None, failed: dict[str, int | None
            and rc not in (0, None, exits.of_signal(signal.SIGINT))}
     if bad and (code == 0 or cause == 'recording'):
         for name, rc in sorted(bad.items()):
-            LOG.error('recording failed: recorder %s %s; its bag is incomplete%s', name,
-                      describe_exit(rc), ' (no footer: `analyze recover`)'
-                      if rc is not None and rc < 0 else '')
+            LOG.error('recording failed: recorder %s %s; %s', name, describe_exit(rc),
+                      'its bag is closed, its report (above) says why it cannot be trusted'
+                      if rc == exits.RECORDING_FAILED else 'its bag is incomplete'
+                      + (' (no footer: `analyze recover`)' if rc is not None and rc < 0
+                         else ''))
         return exits.RECORDING_FAILED
     if code is None:
         return exits.TIMEOUT
