@@ -165,7 +165,13 @@ def gain_mid_run(p: Probe) -> int | None:
     run.wait_for('lockstep run of')
     time.sleep(1.0)
     p.notes.append('set accepted' if set_gain('damper', 1.0e9) else 'set refused')
-    return p.wait()
+    code = p.wait()
+    text = p.run.text()
+    for needle in (r'parameter tcp_gain changed during the run: [^,]*, acting from step \d+',
+                   r'truncation check \(loop_check = \w+\) of the new model of damper'):
+        found = re.search(needle, text)
+        p.notes.append(found.group(0) if found else f'no line {needle!r}')
+    return code
 
 
 def huge_sample_rate(p: Probe) -> int | None:

@@ -227,7 +227,11 @@ def _run_nodes(scenario: Scenario, timeout: float, env: dict, log_dir: Path | No
                     procs[name].wait()
             dead = {n for n, p in procs.items() if p.poll() not in (None, 0)} - reported
             for name in sorted(dead):
-                LOG.error('node %s %s', name, describe_exit(procs[name].poll()))
+                if forwarded and procs[name].poll() == shutdown.exit_code():
+                    LOG.info('node %s stopped on the forwarded %s', name,
+                             shutdown.signal_name())       # its clean stop, not an error
+                    continue
+                _log_end(name, procs[name].poll())
                 if procs[name].poll() == exits.PLANT_STALLED:
                     cause = cause or 'stalled'      # the plant is stuck: no grace helps it
                 elif name in recorders and procs[name].poll() != exits.RECORDING_FAILED:
@@ -267,8 +271,17 @@ def _run_nodes(scenario: Scenario, timeout: float, env: dict, log_dir: Path | No
             f'{name} ({describe_exit(rc)})' for name, rc in stopped.items()))
     for name, rc in failed.items():
         if name not in reported:
-            LOG.error('node %s %s', name, describe_exit(rc))
+            _log_end(name, rc)
     return _end_code(scenario, code, failed, {**stopped, **failed}, cause)
+
+
+def _log_end(name: str, rc: int | None) -> None:
+    """Log how a node ended: a clean stop on a signal (128 + N) as a warning, else an error."""
+    if rc is not None and rc in {exits.of_signal(s) for s in shutdown.STOP_SIGNALS}:
+        LOG.warning('node %s stopped by %s (exit code %d)', name,
+                    signal.Signals(rc - exits.SIGNAL_BASE).name, rc)
+    else:
+        LOG.error('node %s %s', name, describe_exit(rc))
 
 
 def _end_code(scenario: Scenario, code: int | None, failed: dict[str, int | None],
