@@ -54,6 +54,7 @@ class Probe:
         self.run = None
         self.fake: subprocess.Popen | None = None
         self.notes: list[str] = []
+        self.message: str | None = None     # what names the end, if not a line of the log
 
     def start(self, path: Path, *args: str):
         from test_stopping import Runner
@@ -195,8 +196,9 @@ def sockets(p: Probe) -> int | None:
     pids = [run.proc.pid, *descendants(run.proc.pid)]
     found = [s for pid in pids for s in process_sockets(pid)]
     outside = [str(s) for s in found if not s.loopback]
-    p.notes.append(f'{len(found)} sockets of {len(pids)} processes, '
-                   f'{len(outside)} outside 127.0.0.0/8' + (f': {outside}' if outside else ''))
+    p.message = (f'{len(found)} sockets of {len(pids)} processes mid-run, {len(outside)} '
+                 'outside 127.0.0.0/8' + (f': {outside}' if outside else '') +
+                 '; then SIGINT to the runner')
     run.proc.send_signal(signal.SIGINT)
     return p.wait(120.0)
 
@@ -242,7 +244,12 @@ NAMING = (r'^error: .*', r'^ERROR recording failed.*', r'^ERROR the plant .* sta
           r'\[plant\]: (finished|stopped by|error).*', r'\[(damper|plant)\]: parameter .*')
 
 
-def naming_line(text: str) -> str:
+def naming_line(text: str, trace: Path) -> str:
+    """The plant's own end if it was an error (its trace says), else the first line naming it."""
+    if trace.exists():
+        end = str(np.load(trace)['end'])
+        if end.startswith('error: '):
+            return 'plant: ' + (end if len(end) <= 220 else end[:217] + '...')
     lines = text.splitlines()
     for pattern in NAMING:
         found = [x for x in lines if re.search(pattern, x)]
@@ -330,7 +337,7 @@ def probe_all(args) -> int:
             p = Probe(Path(tmp))
             code = probe(p)
             text = p.run.text() if p.run else ''
-            message = naming_line(text)
+            message = p.message or naming_line(text, Path(tmp) / 'trace.npz')
             if p.notes:
                 message += ' (' + '; '.join(p.notes) + ')'
             row = (name, before, 'none' if code is None else str(code), message,

@@ -10,6 +10,7 @@ import sys
 import time
 from types import SimpleNamespace
 
+from mcap.reader import make_reader
 import numpy as np
 import pytest
 import test_stopping
@@ -18,7 +19,9 @@ from test_stopping import RATE, scenario
 from pentapod_sim import exits
 from pentapod_sim.errors import RunError
 from pentapod_sim.nodes import writers
+from pentapod_sim.nodes.recorder_node import RECORDING_RECORD
 from pentapod_sim.nodes.writers import WriterCheck
+from pentapod_sim.recording.run_end import NO_END
 
 TOPIC = '/pentapod/tcp_state'
 #: the runner fixture of test_stopping (a run per call, every process killed after the test)
@@ -191,6 +194,13 @@ def test_a_forged_plant_state_stops_the_run_and_no_forged_force_is_applied(
     if trace.exists():
         assert forged_steps(trace) == 0
         assert str(np.load(trace)['end']).startswith('error: ')
+    # the bag, whatever it holds of the forgery, says so (even if the plant never ran)
+    with open(next((tmp_path / 'bags' / 'run').glob('*.mcap')), 'rb') as stream:
+        record = {m.name: dict(m.metadata) for m in make_reader(stream).iter_metadata()}[
+            RECORDING_RECORD]
+    assert TOPIC in record['foreign'] and str(fake.pid & 0xffff) in record['foreign'], record
+    if not trace.exists():
+        assert record['run_state'] == NO_END, record
 
 
 @pytest.mark.ros

@@ -260,9 +260,11 @@ def _run_nodes(scenario: Scenario, timeout: float, env: dict, log_dir: Path | No
         failed = {n: p.poll() for n, p in procs.items() if p.poll() not in (0, None)
                   and not (forwarded and p.poll() == shutdown.exit_code())}
     finally:
-        # a recorder after SIGINT waits for the plant's end announcement, then drains
-        stopped = stop(procs, graces={n.name: n.params.drain_timeout + 5.0
-                                      for n in scenario.of_role(RECORDER)})
+        # a recorder after SIGINT waits for the plant's end announcement, then drains; the
+        # plant waits up to ack_timeout for its subscribers' acknowledgements
+        graces = {n.name: n.params.drain_timeout + 5.0 for n in scenario.of_role(RECORDER)}
+        graces[scenario.plant.name] = scenario.plant.params.ack_timeout + 5.0
+        stopped = stop(procs, graces=graces)
         tmp.cleanup()
         for stream in logs:
             stream.close()
