@@ -9,7 +9,9 @@ from __future__ import annotations
 
 import math
 import time
-from typing import Any, Callable, Protocol
+from typing import Any, Callable, Protocol, Sequence
+
+import numpy.typing as npt
 
 from pentapod_sim import shutdown
 from pentapod_sim.sim.lateness import fault_in, LatenessStats
@@ -96,7 +98,7 @@ class RealTime:
         self._next_check = self._next_report = math.inf
         self._prepared = False
 
-    def prepare(self, buffers) -> None:
+    def prepare(self, buffers: Sequence[npt.NDArray[Any] | None]) -> None:
         """
         Write every page of ``buffers`` and of the lateness record (:func:`fault_in`), once.
 
