@@ -296,7 +296,8 @@ def read_bag(bag: Path) -> str:
         record = meta.get('pentapod_recording')
         if record:
             bad = [k for k in ('missing', 'conflicting', 'foreign') if record.get(k, '{}') != '{}']
-            parts.append('recorder report: ' + (', '.join(bad) if bad else 'complete, clean'))
+            parts.append(f'recorder report ({record.get("run_state")}): '
+                         + (', '.join(bad) if bad else 'nothing missing, conflicting or foreign'))
     except Exception as err:
         parts.append(f'mcap refuses ({str(err).splitlines()[0][:80]})')
     return '; '.join(parts)
@@ -337,7 +338,8 @@ def probe_all(args) -> int:
             p = Probe(Path(tmp))
             code = probe(p)
             text = p.run.text() if p.run else ''
-            message = p.message or naming_line(text, Path(tmp) / 'trace.npz')
+            message = (p.message or naming_line(text, Path(tmp) / 'trace.npz')).replace(
+                f'{tmp}/', '')                  # no machine paths in the table
             if p.notes:
                 message += ' (' + '; '.join(p.notes) + ')'
             row = (name, before, 'none' if code is None else str(code), message,
