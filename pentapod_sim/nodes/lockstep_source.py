@@ -317,10 +317,11 @@ class LockstepSource(TestbedNode):
         """Fill this topic's sensor slots; reject the step if a joint or value is bad."""
         # per step the names are only compared with the last message's (a list comparison:
         # a few us less than hashing them, every step, for a per-step path that runs
-        # cache-cold; docs/nodes.md "Where a lockstep step's time goes")
+        # cache-cold; docs/nodes.md "Where a lockstep step's time goes"); the plant's
+        # in-process messages keep their name list, which the identity test passes at once
         names = msg.name
         known = self._picks.get(topic)
-        if known is None or known[0] != names:
+        if known is None or (known[0] is not names and known[0] != names):
             index = {n: i for i, n in enumerate(names)}
             missing = [j for _, j, _ in self.needs[topic] if j not in index]
             if missing:
