@@ -194,7 +194,7 @@ def _print_rows(rows: list[tables.SummaryRow]) -> None:
     for r in rows:
         dev = r.deviation_db if r.deviation_db is not None else float('nan')
         print(f'{r.position:4} {r.scenario:18} {r.peak_um_per_N:10.4f} {r.peak_reduction:9.2f} '
-              f'{r.rms_reduction:8.2f} {r.stable_depth_gain:10.2f} {dev:12.2f} '
+              f'{r.rms_reduction:8.2f} {r.stable_depth_gain:10.2f} {dev:12.2g} '
               f'{r.steps_per_s or 0:8.0f}')
 
 

@@ -112,7 +112,7 @@ def save_initial_state(path: str | Path, state: PeriodicState) -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     with open(path, 'wb') as f:
-        np.savez(f, **{STATE_KEY: state.plant_state, INPUT_KEY: state.u_previous})
+        np.savez(f, x=state.plant_state, u_previous=state.u_previous)   # the keys above
     return path
 
 
