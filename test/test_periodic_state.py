@@ -6,11 +6,12 @@ import numpy as np
 import pytest
 
 from pentapod_sim.errors import ConfigError
-from pentapod_sim.sim.controllers import DiscreteController
+from pentapod_sim.sim.controllers import DiscreteController, loop_system
 from pentapod_sim.sim.periodic_state import (
     load_initial_state,
     plant_periodic_state,
     save_initial_state,
+    start_with_laws_at_rest,
 )
 from pentapod_sim.sim.stepping import DiscretePlant
 
@@ -122,3 +123,48 @@ def test_initial_state_files_round_trip_and_wrong_ones_are_named(tmp_path):
     np.savez(other, y=np.zeros(2))
     with pytest.raises(ConfigError, match="no array 'x'"):
         load_initial_state(other, 2, 1)
+
+
+def _run_from(plant, ctrl, u, x0, u_prev, periods):
+    """Plant from (x0, u_prev), the law from rest; the TCP displacement of every step."""
+    plant.reset(x0, u_prev)
+    xc = np.zeros(ctrl.n_states)
+    out = []
+    for k in range(periods * len(u)):
+        y = plant.outputs()
+        out.append(y[0])
+        y = y[[1, 0]]                         # the law's sensors: vel, disp
+        effort = ctrl.c @ xc + ctrl.d @ y
+        xc = ctrl.a @ xc + ctrl.b @ y
+        plant.advance(u[k % len(u)] + effort)
+    return np.array(out)
+
+
+def test_a_plant_start_for_laws_at_rest_leaves_only_the_laws_fast_transient():
+    """
+    Lightly damped modes, a slow-ish law filter: the shifted plant start is periodic at once.
+
+    The plain periodic plant state with the law at rest leaves a transient that rings in the
+    0.1 %-damped modes; the shifted start leaves only the law's own (fast) decay.
+    """
+    plant = _modes([12.0, 31.0, 47.0], [0.001, 0.001, 0.001], feedthrough=1e-4)
+    pole = math.exp(-2 * math.pi * 100.0 * DT)        # 100 Hz low-pass: 1.6 ms
+    ctrl = DiscreteController(['vel', 'disp'], ['f'], [[pole]], [[1 - pole, 0.0]],
+                              [[-0.5]], [[0.0, 0.0]])
+    n = 250
+    k = np.arange(1, 30)
+    u = np.sum(np.cos(2 * np.pi * np.outer(np.arange(n), k) / n
+                      - np.pi * k * (k - 1) / k.size), axis=1)[:, None]
+    state = plant_periodic_state(plant, [ctrl], u)
+    loop = loop_system(plant.a, plant.b, plant.c, plant.d, plant.input_names,
+                       plant.output_names, [ctrl])
+    shifted = start_with_laws_at_rest(loop, plant.n_states, state)
+    plain = _run_from(plant, ctrl, u, state.plant_state, state.u_previous, 3)
+    better = _run_from(plant, ctrl, u, shifted.plant_state, shifted.u_previous, 3)
+    peak = np.abs(plain).max()
+    # after the law's own transient (its first period): periods 2 and 3
+    plain_diff = np.abs(plain[2 * n:] - plain[n:2 * n]).max() / peak
+    better_diff = np.abs(better[2 * n:] - better[n:2 * n]).max() / peak
+    assert plain_diff > 1e-4                  # the law's zero start rings in the modes
+    assert better_diff < 1e-3 * plain_diff, (plain_diff, better_diff)
+    assert not np.array_equal(shifted.plant_state, state.plant_state)

@@ -25,6 +25,7 @@ from pentapod_sim.schema import (
     build,
     check_choice,
     closest,
+    NON_NEGATIVE,
     POSITIVE,
     read_mapping,
     spec,
@@ -61,7 +62,9 @@ class StudyConfig:
     period : float
         Its period [s] (line spacing 1 / period).
     periods : int
-        Periods run and averaged per FRF run (from the periodic steady state).
+        Periods averaged per FRF run.
+    settle_periods : int
+        Periods run before them and discarded (the laws' own start transient).
     f_max : float
         Upper frequency of plots and tables [Hz].
     freq_grid : tuple
@@ -113,6 +116,7 @@ class StudyConfig:
     band: tuple[float, ...]
     period: float
     periods: int
+    settle_periods: int
     f_max: float
     freq_grid: tuple[float, float, int]
     pma_force_amplitude: float
@@ -140,8 +144,8 @@ class StudyConfig:
 
     @property
     def duration(self) -> float:
-        """Simulated time of an FRF run [s]: ``periods`` periods of the multisine."""
-        return self.periods * self.period
+        """Simulated time of an FRF run [s]: its settling and averaged periods."""
+        return (self.settle_periods + self.periods) * self.period
 
 
 @dataclass(frozen=True)
@@ -179,7 +183,9 @@ class Excitation:
     band: tuple[float, ...] = spec('Hz', POSITIVE, length=2, description='band of the lines')
     period: float = spec('s', POSITIVE, description='multisine period (line spacing 1 / '
                          'period)')
-    periods: int = spec('-', POSITIVE, description='periods run and averaged')
+    periods: int = spec('-', POSITIVE, description='periods averaged')
+    settle_periods: int = spec('-', NON_NEGATIVE, description='periods run before them and '
+                               'discarded')
 
 
 @dataclass(frozen=True)
@@ -264,7 +270,8 @@ class StudyFile:
 FILE_KEYS = {'positions': 'positions', 'scenarios': 'scenarios', 'sample_rate': 'sample_rate',
              'direction': 'excitation.direction', 'amplitude': 'excitation.amplitude',
              'band': 'excitation.band', 'period': 'excitation.period',
-             'periods': 'excitation.periods', 'f_max': 'analysis.f_max',
+             'periods': 'excitation.periods',
+             'settle_periods': 'excitation.settle_periods', 'f_max': 'analysis.f_max',
              'freq_grid': 'frequency', 'pma_force_amplitude': 'pma_force_amplitude',
              'step_position': 'step_response.position',
              'step_amplitude': 'step_response.amplitude',

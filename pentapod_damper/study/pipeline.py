@@ -52,7 +52,11 @@ from pentapod_sim.plant.frf_peaks import exact_peak, plant_pair_frf
 from pentapod_sim.scenario.files import read_scenario
 from pentapod_sim.sim.controllers import controller_of, LoopSystem
 from pentapod_sim.sim.excitation import Excitation, ExcitationSpec
-from pentapod_sim.sim.periodic_state import periodic_state, PeriodicState
+from pentapod_sim.sim.periodic_state import (
+    periodic_state,
+    PeriodicState,
+    start_with_laws_at_rest,
+)
 from pentapod_sim.sim.stability import apply_policy, check_loop, LoopCheck
 
 LOG = logging.getLogger(__name__)
@@ -110,8 +114,10 @@ def steady_start(cfg: StudyConfig, ana: ScenarioAnalytic) -> PeriodicState:
     """
     The periodic steady state of the scenario's sampled loop under the FRF runs' multisine.
 
-    From the linear models of plant and laws (:attr:`ScenarioAnalytic.sampled`); the run
-    starts the plant there and the laws' own states at zero (their nodes start at rest).
+    From the linear models of plant and laws (:attr:`ScenarioAnalytic.sampled`). The laws'
+    nodes start at rest, so the plant starts shifted from its periodic state such that the
+    laws' zero start excites only the loop's fastest modes (their filters'), not the lightly
+    damped ones (:func:`pentapod_sim.sim.periodic_state.start_with_laws_at_rest`).
     """
     exc, loop = frf_excitation(cfg), ana.sampled
     assert exc.period_steps is not None and loop is not None
@@ -121,7 +127,8 @@ def steady_start(cfg: StudyConfig, ana: ScenarioAnalytic) -> PeriodicState:
     for i, axis in enumerate('xyz'):
         e[:, ports.index(f'tcp_force_{axis}')] = forces[:, i]
     system = LoopSystem(loop.a, loop.b, loop.c_y, loop.c_u, loop.augmented)
-    return periodic_state(system, loop.core.n_states, e)
+    return start_with_laws_at_rest(system, loop.core.n_states,
+                                   periodic_state(system, loop.core.n_states, e))
 
 
 def scenario_pma(scenario: str) -> PmaSpec | None:
@@ -224,9 +231,9 @@ def measure(run: RunResult, cfg: StudyConfig) -> Measured:
     """
     The TCP FRF (and PMA stroke and force FRFs) at the lines of a multisine run's bag.
 
-    Synchronous averaging over every recorded period
+    Synchronous averaging over the periods after the settling ones
     (:func:`pentapod_sim.analysis.frf.from_run.frfs_from_bag`), and the periodicity check:
-    the largest difference between the first and the last recorded period of the TCP
+    the largest difference between the first and the last of those periods of the TCP
     displacement, relative to its largest value (rounding for a run that started at the
     periodic steady state of a loop the testbed follows exactly; a transient shows there).
     """
@@ -239,8 +246,9 @@ def measure(run: RunResult, cfg: StudyConfig) -> Measured:
     bag = open_bag(run.bag)
     y = bag.series(outputs[0]).values
     n = int(round(cfg.period / cfg.dt))
-    first, last = y[:n], y[(cfg.periods - 1) * n:cfg.periods * n]
-    periodicity = float(np.abs(last - first).max() / np.abs(y).max())
+    s, e = cfg.settle_periods * n, (cfg.settle_periods + cfg.periods) * n
+    first, last = y[s:s + n], y[e - n:e]
+    periodicity = float(np.abs(last - first).max() / np.abs(y[s:e]).max())
     counts = {t: bag.topic(t).count for t in (TCP_STATE, EXCITATION)}
     result = Measured(run, frfs.freq, frfs.H[0, 0], periodicity, n_messages=counts)
     if pma:

@@ -59,9 +59,10 @@ def excitation_params(cfg: StudyConfig, kind: str = 'frf') -> dict[str, Any]:
     """
     Exciter parameters of a study run (FRF run or PMA step run).
 
-    An FRF run's multisine has no settling period: the run starts at the loop's periodic
-    steady state (:func:`pentapod_sim.sim.periodic_state.periodic_state`), so every one of its
-    ``cfg.periods`` periods is analysed.
+    An FRF run starts near the loop's periodic steady state
+    (:func:`pentapod_damper.study.pipeline.steady_start`): ``cfg.settle_periods`` periods
+    (the laws' own fast start transient) are discarded, the ``cfg.periods`` after them
+    averaged.
     """
     if kind == 'step':
         return {'kind': 'step', 'amplitude': cfg.step_amplitude,
@@ -69,7 +70,7 @@ def excitation_params(cfg: StudyConfig, kind: str = 'frf') -> dict[str, Any]:
     return {'kind': 'multisine', 'amplitude': cfg.amplitude,
             'direction': DIRECTIONS[cfg.direction], 'f_start': float(cfg.band[0]),
             'f_end': float(cfg.band[1]), 'period': cfg.period, 'phases': 'schroeder',
-            'settle_periods': 0, 'duration': cfg.duration}
+            'settle_periods': cfg.settle_periods, 'duration': cfg.duration}
 
 
 def damping_excitation(cfg: StudyConfig, settle: float) -> dict[str, Any]:

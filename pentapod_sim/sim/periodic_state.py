@@ -94,6 +94,35 @@ def periodic_state(loop: LoopSystem, n_plant: int,
                          float(np.linalg.norm(z_end - z0)) / scale)
 
 
+def start_with_laws_at_rest(loop: LoopSystem, n_plant: int,
+                            state: PeriodicState) -> PeriodicState:
+    """
+    A plant start for laws whose nodes start at rest, from the loop's periodic ``state``.
+
+    The laws' states start at zero, not at their periodic values: the difference is a
+    transient, and through the plant it rings in every lightly damped mode for as long as
+    those modes ring (0.1 % damping: seconds). The plant's state is shifted by ``delta`` so
+    that the whole start error ``[delta; -xc; 0]`` has no component along the ``n_plant``
+    slowest eigenvectors of the loop: what is left decays at the rates of the fastest modes
+    (the laws' own filters), and the run is periodic after a few of their time constants.
+    ``u_previous`` stays the periodic one (the plant sets it). The returned ``plant_state`` is
+    ``x + delta``; ``loop_state`` is the loop's periodic state as given.
+    """
+    n_laws = loop.a.shape[0] - n_plant - (loop.b.shape[1] if loop.augmented else 0)
+    if n_laws == 0:
+        return state
+    lam, vec = np.linalg.eig(loop.a)
+    slow = np.argsort(-np.abs(lam), kind='stable')[:n_plant]
+    rows = np.linalg.solve(vec, np.eye(vec.shape[0]))[slow]          # left eigenvectors
+    coupling = rows[:, :n_plant]
+    wanted = rows[:, n_plant:n_plant + n_laws] @ state.loop_state[n_plant:n_plant + n_laws]
+    # real delta with coupling delta = wanted (conjugate pairs: the real and imaginary parts)
+    delta = np.linalg.lstsq(np.vstack([coupling.real, coupling.imag]),
+                            np.r_[wanted.real, wanted.imag], rcond=None)[0]
+    return PeriodicState(state.loop_state, state.plant_state + delta, state.u_previous,
+                         state.closure)
+
+
 def plant_periodic_state(plant: DiscretePlant, controllers: Sequence[DiscreteController],
                          excitation: npt.ArrayLike) -> PeriodicState:
     """
