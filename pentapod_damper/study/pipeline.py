@@ -29,6 +29,7 @@ from pentapod_damper.study.analytic import (
 from pentapod_damper.study.config import StudyConfig
 from pentapod_damper.study.pma import pma_design, PmaDesign
 from pentapod_damper.study.records import (
+    ComplexArray,
     FloatArray,
     Measured,
     PmaSpec,
@@ -38,6 +39,7 @@ from pentapod_damper.study.records import (
 from pentapod_damper.study.runs import excitation_params, RunResult
 from pentapod_sim.analysis.bag.reader import open_bag
 from pentapod_sim.analysis.frf.from_run import frfs_from_bag
+from pentapod_sim.analysis.frf.periodic import synchronous_frf
 from pentapod_sim.errors import ConfigError
 from pentapod_sim.fe.imported.build import load_fe_model
 from pentapod_sim.interface import EXCITATION, PMA_STATE, TCP_STATE
@@ -241,7 +243,7 @@ def measure(run: RunResult, cfg: StudyConfig) -> Measured:
     outputs = [f'{TCP_STATE}.position.tcp_{d}']
     pma = run.scenario.startswith('pma')
     if pma:
-        outputs += [f'{PMA_STATE}.position.pma_{d}', f'{PMA_STATE}.effort.pma_{d}']
+        outputs.append(f'{PMA_STATE}.effort.pma_{d}')
     frfs = frfs_from_bag(run.bag, outputs)
     bag = open_bag(run.bag)
     y = bag.series(outputs[0]).values
@@ -252,8 +254,32 @@ def measure(run: RunResult, cfg: StudyConfig) -> Measured:
     counts = {t: bag.topic(t).count for t in (TCP_STATE, EXCITATION)}
     result = Measured(run, frfs.freq, frfs.H[0, 0], periodicity, n_messages=counts)
     if pma:
-        result.pma_stroke, result.pma_force = frfs.H[1, 0], frfs.H[2, 0]
+        result.pma_force = frfs.H[1, 0]
+        stroke = bag.series(f'{PMA_STATE}.position.pma_{d}').values[:e]
+        result.pma_stroke = _stroke_frf(bag.series(f'{EXCITATION}.force.{d}').values[:e],
+                                        stroke, cfg, frfs.freq)
     return result
+
+
+def _stroke_frf(force: FloatArray, stroke: FloatArray, cfg: StudyConfig,
+                lines: FloatArray) -> ComplexArray:
+    """
+    Stroke / force at the lines, the proof mass's drift removed.
+
+    An ideal PMA has no spring: any constant proof-mass velocity is a solution, and its node
+    starts the mass at rest, not at the periodic solution's mean velocity. The stroke is then
+    periodic plus a ramp; the ramp's slope is the change of the period mean from the first
+    analysed period to the last, and is removed before the synchronous average.
+    """
+    n = int(round(cfg.period / cfg.dt))
+    s, e = cfg.settle_periods * n, (cfg.settle_periods + cfg.periods) * n
+    slope = 0.0
+    if cfg.periods > 1:
+        slope = ((stroke[e - n:e].mean() - stroke[s:s + n].mean())
+                 / ((cfg.periods - 1) * n))
+    flat = stroke - slope * np.arange(stroke.size)
+    frf = synchronous_frf(force, flat, cfg.dt, n, cfg.settle_periods, lines)
+    return np.asarray(frf.H, dtype=np.complex128)
 
 
 def deviation_db(measured: Measured, disc: DiscreteFrf, output: str) -> tuple[float, float]:

@@ -122,12 +122,15 @@ def study_section(results: Path, cfg: StudyConfig) -> str:
                'analytic FRF of the sampled loop, over every line of the multisine '
                f'({cfg.amplitude:g} N peak, lines every {1 / cfg.period:g} Hz from '
                f'{cfg.band[0]:g} to {cfg.band[1]:g} Hz, {cfg.periods} periods of '
-               f'{cfg.period:g} s averaged, {cfg.duration * cfg.sample_rate:.0f} steps per run '
-               f'at {cfg.sample_rate:g} Hz). What it rests on: each run starts at the periodic '
-               'steady state computed from the linear model of the loop (the plant there, the '
-               "laws' own states at zero, as their nodes start), so it needs no settling and "
-               'resolves the lines of the 0.1 %-damped modes; the deviation then measures how '
-               'far the testbed departs from that model over the periods run. *periods differ* '
+               f'{cfg.period:g} s averaged after {cfg.settle_periods} discarded, '
+               f'{cfg.duration * cfg.sample_rate:.0f} steps per run at {cfg.sample_rate:g} Hz). '
+               'What it rests on: each run starts at the periodic steady state computed from '
+               'the linear model of the loop (plant and laws), so the 0.1 %-damped modes need '
+               "no settling and every line is resolved. The laws' nodes start at rest, so the "
+               'plant starts shifted from that state such that the difference excites only the '
+               "loop's fastest modes (the laws' filters, gone within milliseconds), and the "
+               'discarded period holds that. The deviation then measures how far the testbed '
+               'departs from the linear model over the periods averaged. *periods differ* '
                'is the periodicity check: the largest difference between the first and the last '
                'recorded period of the TCP displacement, relative to its peak; a transient (a '
                "start that is not the testbed's steady state) would show there. Lines are "
