@@ -65,3 +65,17 @@ def continuous_dampers(laws) -> dict[str, float]:
         for i, port in enumerate(law.actuator_ports):
             gains[port] = gains.get(port, 0.0) - float(k[i, i])
     return gains
+
+
+def viscous_equivalent(laws) -> dict[str, float] | None:
+    """
+    :func:`continuous_dampers` of the laws, or None if one of them has dynamics of its own.
+
+    A law with a continuous model of its own (IFF, lag displacement, PPF, band-pass velocity)
+    is not a viscous damper: its continuous reference is its own continuous loop
+    (:func:`pentapod_damper.study.damping.continuous_loop_frf`).
+    """
+    if any(getattr(law, 'viscous_gains', None) is None and law.linear_gain() is None
+           for law in laws):
+        return None
+    return continuous_dampers(laws)

@@ -32,8 +32,8 @@ TABLE = (
     (PLANT_STALLED, 'the plant stalled: no message from it for plant_stall_timeout s of wall '
                     'time during its run (a source or recorder noticed; the runner stops the '
                     'plant and names it)'),
-    (TIMEOUT, 'runner: the plant did not end within --timeout, or within the grace after '
-              'another node failed'),
+    (TIMEOUT, 'runner: the plant did not end within --timeout (a node that failed first '
+              'gives 1, named, even if the plant then had to be stopped)'),
     (SIGNAL_BASE, '128 + N: stopped by signal N (130 SIGINT, 143 SIGTERM, 129 SIGHUP) after a '
                   'clean stop; runner: also its plant killed by signal N (137 SIGKILL, '
                   '139 SIGSEGV)'),

@@ -42,6 +42,19 @@ def install() -> None:
         signal.signal(sig, _handler)
 
 
+def ignore_from_now() -> None:
+    """
+    Ignore stop signals from now on: for a process whose stop is complete, about to exit.
+
+    Python's finalisation puts the default action back for every signal with a Python handler,
+    so a second signal in the last milliseconds (the runner forwarding the Ctrl-C its process
+    group already got) killed a node that had stopped cleanly: "killed by SIGINT". Ignored
+    signals stay ignored through finalisation.
+    """
+    for sig in STOP_SIGNALS:
+        signal.signal(sig, signal.SIG_IGN)
+
+
 def requested() -> bool:
     """True once a stop signal arrived."""
     return bool(_received)

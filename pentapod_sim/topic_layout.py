@@ -41,16 +41,18 @@ class TopicLayout:
     effort_index: npt.NDArray[np.intp] | None = None
     _ext: npt.NDArray[np.float64] = field(default_factory=lambda: np.full(1, np.nan),
                                           repr=False, compare=False)
+    _has_effort: bool = field(default=False, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         if self.effort_index is None:
             self.effort_index = np.full(len(self.joints), -1, dtype=np.intp)
+        # fixed with the layout, and values() asks every step
+        self._has_effort = bool((self.effort_index >= 0).any())
 
     @property
     def has_effort(self) -> bool:
         """True if at least one joint takes an effort from y."""
-        assert self.effort_index is not None
-        return bool((self.effort_index >= 0).any())
+        return self._has_effort
 
     def index(self, name: str) -> npt.NDArray[np.intp]:
         """The index array of a field (``'position'``, ``'velocity'`` or ``'effort'``)."""
@@ -70,7 +72,7 @@ class TopicLayout:
         if self._ext.size != y.size + 1:        # y and a NaN, which index -1 picks
             self._ext = np.full(y.size + 1, np.nan)
         self._ext[:-1] = y     # once per step: reused (np.append cost 6 % of a composed step)
-        effort = (self._ext[self.effort_index] if self.has_effort else self._ext[:0])
+        effort = (self._ext[self.effort_index] if self._has_effort else self._ext[:0])
         return self._ext[self.position_index], self._ext[self.velocity_index], effort
 
 

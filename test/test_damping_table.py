@@ -5,9 +5,11 @@ import control
 import numpy as np
 import pytest
 
-from pentapod_damper.laws import Dynamics, tcp_damper
+from fixtures.demo_model import demo_model
+from pentapod_damper.laws import Dynamics, lag_displacement_feedback, tcp_damper
+from pentapod_damper.scenario_laws import viscous_equivalent
 from pentapod_damper.study.__main__ import main
-from pentapod_damper.study.damping import damping_rows, settling_time
+from pentapod_damper.study.damping import continuous_loop_frf, damping_rows, settling_time
 from pentapod_sim.errors import ConfigError
 from pentapod_sim.plant.build import modal_damping
 from pentapod_sim.plant.config import default_path, load_reduction_config
@@ -159,3 +161,32 @@ def test_rows_name_each_mode_by_its_fe_number_and_cause():
     assert rows and all((r.fe_mode, r.cause) == named[r.mode - 1] for r in rows)
     # a plant made from modal data has no FE model behind it: its own numbers, no cause
     assert tcp_plant(0.001).fe_mode(3) == (3, '')
+
+
+def test_continuous_reference_of_a_law_with_its_own_dynamics():
+    """
+    Lag displacement feedback (no viscous equivalent): its continuous loop FRF as python-control's.
+
+    The study's continuous reference of such a law is the loop of its own continuous model;
+    with a feed-through in the plant (the static correction) the direct term counts too.
+    """
+    plant = demo_model(n_modes=5, f_min=25.0, f_max=180.0, zeta=0.002, input_scale=0.01,
+                       seed=3, feedthrough=2e-9)
+    law = lag_displacement_feedback('bending', [1, 2], 2e7, 60.0, 1 / 2000)
+    assert viscous_equivalent([law]) is None
+    frf = continuous_loop_frf(plant, [law], 'tcp_displacement_x', 'tcp_force_x')
+    sys_p = plant.to_statespace()
+    k = law.continuous_model()
+    outs, ins = list(plant.output_names), list(plant.input_names)
+    pick = np.zeros((len(k.sensor_ports), len(outs)))
+    pick[np.arange(len(k.sensor_ports)), [outs.index(p) for p in k.sensor_ports]] = 1
+    put = np.zeros((len(ins), len(k.actuator_ports)))
+    put[[ins.index(p) for p in k.actuator_ports], np.arange(len(k.actuator_ports))] = 1
+    loop = control.feedback(sys_p, control.ss(k.a, k.b @ pick, put @ k.c, put @ k.d @ pick),
+                            sign=1)
+    o, j = outs.index('tcp_displacement_x'), ins.index('tcp_force_x')
+    freq = np.array([5.0, 22.0, 40.0, 66.0, 150.0, 400.0])
+    expected = np.array([loop(2j * np.pi * f)[o, j] for f in freq])
+    np.testing.assert_allclose(frf(freq), expected, rtol=1e-8)
+    open_loop = np.array([sys_p(2j * np.pi * f)[o, j] for f in freq])
+    assert np.max(np.abs(frf(freq) / open_loop - 1)) > 0.05        # the law acts

@@ -19,6 +19,7 @@ import csv
 import dataclasses
 import os
 from pathlib import Path
+import signal
 import subprocess
 import sys
 
@@ -28,8 +29,10 @@ import pytest
 from statespace_fixtures import small_model
 
 from fixtures.demo_model import demo_model
+from pentapod_damper.study.analytic import SampledPairFrf
 from pentapod_sim.plant.build import load_reduction_config, plant_from_fe
 from pentapod_sim.plant.check_model import check_model_from_fe
+from pentapod_sim.plant.frf_peaks import maximise_near_poles
 from pentapod_sim.sim.controllers import DiscreteController
 from pentapod_sim.sim.stability import check_loop, STABLE, TRUNCATION
 
@@ -314,7 +317,7 @@ def test_a_built_in_law_gets_the_black_box_and_the_exact_check_and_they_agree(la
     proc = subprocess.run(
         [sys.executable, '-m', 'pentapod_damper.judge', 'damper', '--params',
          str(tmp / 'damper.yaml'), '--config', str(tmp / 'judge_1k.yaml'), '--sections',
-         'robustness', '--model-file', str(tmp / 'struts.npz'), '--check-model',
+         'robustness,buildable', '--model-file', str(tmp / 'struts.npz'), '--check-model',
          str(tmp / 'struts_check.npz'), '--out', str(tmp / 'damper')],
         env=env, capture_output=True, text=True, timeout=600, cwd=tmp)
     assert (tmp / 'damper' / 'damper' / 'numbers.csv').exists(), proc.stdout + proc.stderr
@@ -331,6 +334,19 @@ def test_a_built_in_law_gets_the_black_box_and_the_exact_check_and_they_agree(la
                  f'damper, check ({models["struts_check"].n_modes} modes)'):
         assert float(loops[(name, 'margin')]) == pytest.approx(
             float(loops[(name, 'model margin')]), rel=0.05, abs=0.01), name
+    # its row of the buildable-damper table: the check margin is 1 - the exact check's
+    # spectral radius, the peak reduction that of the exact peaks of the sampled loop
+    built = {r['column']: r['value'] for r in numbers
+             if r['table'].endswith('as a buildable damper')}
+    assert built.pop('stroke unit') == 'rad/N'          # a bending moment pair's rotation
+    built = {k: float(v) for k, v in built.items() if v}
+    assert built['check margin'] == pytest.approx(1.0 - exact.check_radius, abs=1e-9)
+    peaks = []
+    for laws in ([], [strut_bending_damper([1], gain)]):
+        frf = SampledPairFrf(models['struts'], laws, 1e-3, 'tcp_displacement_x', 'tcp_force_x')
+        peaks.append(maximise_near_poles(lambda f, h=frf: np.abs(h(f)), frf.poles,
+                                         10.0, 400.0).value)
+    assert built['peak reduction'] == pytest.approx(peaks[0] / peaks[1], rel=1e-6)
 
 
 def test_compare_judges_two_controllers_side_by_side(lab):
@@ -409,3 +425,36 @@ def test_mode_labels_give_the_fe_number_its_cause_and_the_tcp_direction():
     assert (third.plant_mode, third.fe_mode, third.cause, third.tcp_direction) == (
         3, 4, 'bp_joints', 'y')
     assert third.text() == 'FE 4 (plant 3), bp_joints, y'
+
+
+def test_a_node_that_already_runs_is_judged_with_node(lab):
+    """``--node``: a controller started by the user as its own process answers the judge's runs."""
+    tmp, env, models = lab
+    log = open(tmp / 'node.log', 'w')
+    node = subprocess.Popen(
+        [sys.executable, '-m', 'pentapod_sim.nodes.component', 'my_lab.plain:PlainDamper',
+         '--ros-args', '-p', f'gain:={TCP_GAIN}', '-p', 'source_name:=lab'],
+        env=env, stdout=log, stderr=subprocess.STDOUT, cwd=tmp)
+    try:
+        proc = subprocess.run(
+            [sys.executable, '-m', 'pentapod_damper.judge', '--node', 'plain_damper',
+             '--source', 'lab', '--config', str(tmp / 'judge.yaml'), '--sections',
+             'damping,robustness', '--ports', 'tcp_force_x', '--model-file',
+             str(tmp / 'demo.npz'),
+             '--out', str(tmp / 'node')],
+            env=env, capture_output=True, text=True, timeout=600, cwd=tmp)
+        assert node.poll() is None, (tmp / 'node.log').read_text()  # it outlives the runs
+    finally:
+        node.send_signal(signal.SIGINT)
+        node.wait(timeout=20)
+        log.close()
+    assert proc.returncode == 0, proc.stdout + proc.stderr + (tmp / 'node.log').read_text()
+    with open(tmp / 'node' / 'plain_damper' / 'numbers.csv', newline='') as f:
+        numbers = list(csv.DictReader(f))
+    plant = models['demo']
+    a, b, c, _ = plant.discrete_matrices(DT)
+    i, j = plant.input_names.index('tcp_force_x'), plant.output_names.index('tcp_velocity_x')
+    margin = control.stability_margins(control.ss(a, b[:, [i]], c[[j]], [[0.0]], DT)
+                                       * TCP_GAIN)[2]
+    row = _summary(numbers, 'return-difference margin')
+    assert float(row['plain_damper'].split()[0]) == pytest.approx(margin, rel=0.02)

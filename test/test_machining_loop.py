@@ -25,6 +25,7 @@ from pentapod_sim.machining.cutting_spec import parse_spec_message, spec_message
 from pentapod_sim.machining.loop_lobes import check_runs, lobe_bottoms, loop_lobes
 from pentapod_sim.machining.materials import load_machining
 from pentapod_sim.machining.milling_cut import directional_factors
+from pentapod_sim.machining.sampled_floquet import check_speed
 from pentapod_sim.machining.sampled_tcp import sampled_tcp_frf
 from pentapod_sim.machining.tcp_frf import tcp_plant, TcpMode
 from pentapod_sim.nodes.parameter_tables import CuttingParams
@@ -114,8 +115,11 @@ def test_check_runs_pick_a_lobe_bottom_and_size_the_runs():
     point = check_runs(PLANT, [], DT, table, lobes)
     bottoms = lobe_bottoms(lobes, 4, DT)
     assert [b[1] for b in bottoms] == sorted(b[1] for b in bottoms)
-    assert (point.speed, point.depth) in [(b[0], b[1]) for b in bottoms[:8]]
-    assert point.speed <= 60.0 / (4 * 50 * DT)                 # >= 50 steps per tooth
+    # a bottom moved to a whole number of steps per tooth period (>= 50), the limit there
+    assert point.speed in [check_speed(b[0], 4, DT) for b in bottoms[:8]]
+    assert point.depth == pytest.approx(float(lobes.limit.envelope([point.speed]).depth[0]))
+    steps = 60.0 / (4 * point.speed * DT)
+    assert steps == pytest.approx(round(steps), abs=1e-6) and round(steps) >= 50
     below, above = point.runs
     assert (below.expected, above.expected) == ('stable', 'chatter')
     assert below.growth_rate < 0 < above.growth_rate

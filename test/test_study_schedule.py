@@ -248,3 +248,24 @@ def test_truncation_check_is_kept_per_loop_and_read_back_exactly(tmp_path, monke
     assert again == dataclasses.replace(direct, label='again')     # every digit kept
     with pytest.raises(AssertionError, match='solved again'):       # another loop: solved
         pipeline.checked_loop(model, controllers, dt / 2, 'warn', 'faster')
+
+
+def test_the_ready_stage_with_the_longest_chain_starts_first():
+    """
+    Critical-path order: after a model, its damping run (22 s) before four lobes (0.5 s each).
+
+    dask's own order (depth first) would run the lobes and their table first, leaving the
+    long run to the end.
+    """
+    order = []
+    g = Graph()
+
+    def stage(name, *_):
+        order.append(name)
+        return Done(name)
+    model = g.add('models', 'm', stage, 'm')
+    lobes = [g.add('stability lobes', f's{i}', stage, f's{i}', model) for i in range(4)]
+    run = g.add('damping runs', 'd', stage, 'd', model)
+    table = g.add('stability lobes', 'table', stage, 'table', *lobes)
+    compute([table, run], g.stage_of, 1, lambda line: None)
+    assert order[:2] == ['m', 'd'] and order[-1] == 'table'

@@ -16,43 +16,14 @@ import sys
 import numpy as np
 import pytest
 
+from fixtures import user_docs
 from fixtures.demo_model import demo_model
 
 RATE = 5000.0
 GAIN = 300.0
 
-CONTROLLER = '''
-"""A lab's own TCP damper in x (not part of the testbed package)."""
-from dataclasses import dataclass
-
-from pentapod_sim.nodes.lockstep_source import LockstepSource
-from pentapod_sim.parameters import param, Sampled, SourceParams
-from pentapod_sim.sim.controllers import DiscreteController
-
-
-@dataclass(frozen=True)
-class LabDamperParams(Sampled, SourceParams):
-    """The lab's TCP damper in x: u = -gain * v_x."""
-
-    gain: float = param(100.0, 'damping of the TCP in x', 'N s/m', bounds=(0.0, 1.0e6))
-
-
-class LabDamper(LockstepSource):
-    """Velocity feedback on the TCP x direction, with the parameters above."""
-
-    Params = LabDamperParams
-
-    def __init__(self, **kwargs):
-        super().__init__('lab_damper', **kwargs)
-        self.setup(['tcp_velocity_x'], ['tcp_force_x'])
-
-    def compute(self, ns, sensors):
-        return -self.params.gain * sensors
-
-    def linear_model(self):
-        return DiscreteController.static(['tcp_velocity_x'], ['tcp_force_x'],
-                                         [[-self.params.gain]])
-'''
+#: The controller module of docs/nodes.md, "Writing your own controller", as the page shows it.
+CONTROLLER = user_docs.files()['my_lab/controllers.py']
 
 
 @pytest.fixture

@@ -10,14 +10,18 @@ import sys
 import time
 from types import SimpleNamespace
 
+from mcap.reader import make_reader
 import numpy as np
 import pytest
 import test_stopping
 from test_stopping import RATE, scenario
 
+from pentapod_sim import exits
 from pentapod_sim.errors import RunError
 from pentapod_sim.nodes import writers
+from pentapod_sim.nodes.recorder_node import RECORDING_RECORD
 from pentapod_sim.nodes.writers import WriterCheck
+from pentapod_sim.recording.run_end import NO_END
 
 TOPIC = '/pentapod/tcp_state'
 #: the runner fixture of test_stopping (a run per call, every process killed after the test)
@@ -177,7 +181,9 @@ def test_a_forged_plant_state_stops_the_run_and_no_forged_force_is_applied(
             fake.kill()
             forged = fake.communicate()[0]
     out = run.text()
-    assert code not in (0, None), out
+    # 1, the damper's error: before the run the plant, still waiting for its sources, had to
+    # be stopped, which the runner once reported as its own timeout (5)
+    assert code == exits.ERROR, out
     assert '/pentapod/tcp_state has 2 writers' in out, out
     assert 'Traceback' not in out, out
     # the attack did happen: the spoofer's participant (its process id) is the one named; it
@@ -188,3 +194,43 @@ def test_a_forged_plant_state_stops_the_run_and_no_forged_force_is_applied(
     if trace.exists():
         assert forged_steps(trace) == 0
         assert str(np.load(trace)['end']).startswith('error: ')
+    # the bag, whatever it holds of the forgery, says so (even if the plant never ran)
+    with open(next((tmp_path / 'bags' / 'run').glob('*.mcap')), 'rb') as stream:
+        record = {m.name: dict(m.metadata) for m in make_reader(stream).iter_metadata()}[
+            RECORDING_RECORD]
+    assert TOPIC in record['foreign'] and str(fake.pid & 0xffff) in record['foreign'], record
+    if not trace.exists():
+        assert record['run_state'] == NO_END, record
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+@pytest.mark.parametrize('mode', ['empty', 'partial', 'force'])
+def test_a_forged_force_answer_at_the_right_stamp_is_never_applied(tmp_path, runner_of, mode):
+    """
+    The issue's answers on /pentapod/forces/damper, stamped with each real step, mid-run.
+
+    ``empty`` (no port) and ``partial`` (tcp_force_x only, 100 kN) once displaced the real
+    answer; ``force`` (both ports, 100 kN) is the second force writer applied for 26-60 steps.
+    The plant refuses the writer (exit 1, naming the spoofer's participant), no step carries
+    its force, and the recorder's failed report (it saw the writer too) does not hide the
+    plant's error behind a recording failure (3).
+    """
+    run = runner_of(scenario(tmp_path))
+    run.wait_for('lockstep run of')
+    time.sleep(1.0)
+    fake = spoofer(RATE, mode)
+    try:
+        code = run.proc.wait(timeout=120)
+    finally:
+        fake.kill()
+        forged = fake.communicate()[0]
+    out = run.text()
+    assert code == exits.ERROR, out
+    line = next(x for x in out.splitlines()
+                if x.startswith('error: /pentapod/forces/damper has 2 writers'))
+    assert f'process id {fake.pid & 0xffff} ' in line, (line, forged)
+    trace = np.load(tmp_path / 'trace.npz')
+    assert str(trace['end']).startswith('error: /pentapod/forces/damper has 2 writers')
+    assert int(trace['steps_run']) > 0 and forged_steps(tmp_path / 'trace.npz') == 0
+    assert 'Traceback' not in out, out

@@ -10,7 +10,7 @@ redraw) to ``--out``::
     python -m pentapod_damper.design [--positions P1,P2] [--machine locked|drives|both]
                                      [--sample-rate 5000] [--delay 1] [--grid 3]
                                      [--gain-points 8] [--refine 25] [--check-below HZ]
-                                     [--quick]
+                                     [--quick] [--record FOLDER [--record-laws L1;L2]]
                                      [--out out/design]
 
 The full run tunes six families at two positions with the check model (about an hour on two
@@ -22,8 +22,10 @@ import argparse
 import logging
 from pathlib import Path
 import pickle
+import shutil
 import sys
 
+from pentapod_damper.design import recorded
 from pentapod_damper.design.report import (
     energy_lines,
     fill,
@@ -37,13 +39,15 @@ from pentapod_damper.design.report import (
 from pentapod_damper.design.report import records as table_records
 from pentapod_damper.design.scenarios import write_scenarios
 from pentapod_damper.design.table import add_strokes, damper_table, DamperTable, with_lowband
-from pentapod_damper.design.verify import verify_best
+from pentapod_damper.design.verify import remeasure, verify_best
 from pentapod_sim.cli import CommandParser, configure_logging, run_command
 from pentapod_sim.sim.design_models import load_design_model
 from pentapod_sim.sim.law_models import Dynamics
 from pentapod_sim.sim.tuning import TuneSettings
 
 LOG = logging.getLogger('design')
+#: The recorded runs' CSV beside the docs page (docs/results/), read by test_damper_docs.
+RECORDED_DOCS_CSV = Path('results') / 'dampers_recorded.csv'
 
 
 def _tables(args: argparse.Namespace) -> list[DamperTable]:
@@ -53,7 +57,13 @@ def _tables(args: argparse.Namespace) -> list[DamperTable]:
         for path in args.from_tables.split(','):
             with open(path, 'rb') as stream:
                 tables += list(pickle.load(stream))
-        return [_with_strokes(with_lowband(table)) for table in tables]
+        tables = [_with_strokes(with_lowband(table)) for table in tables]
+        names = [n.strip() for n in args.remeasure.split(';') if n.strip()]
+        if names:
+            tables = [remeasure(table, load_design_model(
+                table.position, table.settings.sample_rate, check=False, corners=False),
+                names, progress=lambda msg: LOG.info('%s', msg)) for table in tables]
+        return tables
     machines = ('locked', 'drives') if args.machine == 'both' else (args.machine,)
     tables = []
     for position in [p for p in args.positions.split(',') if p]:
@@ -106,20 +116,45 @@ def run(args: argparse.Namespace) -> int:
                                   corners=False)
         for path in write_scenarios(records, model.stiffness, position, args.scenarios):
             print(f'wrote {path}')
+    recorded_csv = _record(args, records)
     if args.docs:
         path = Path(args.docs)
-        doc = fill(path.read_text(), 'dampers-table', markdown_records(records))
+        kept = path.parent / RECORDED_DOCS_CSV
+        if recorded_csv is not None and recorded_csv.resolve() != kept.resolve():
+            shutil.copyfile(recorded_csv, kept)
+        runs = recorded.read_csv(kept) if kept.is_file() else []
+        doc = fill(path.read_text(), 'dampers-table', markdown_records(records, runs))
         doc = fill(doc, 'dampers-energy', energy_lines(energy))
+        doc = fill(doc, 'dampers-recorded', recorded.markdown(runs))
         path.write_text(fill(doc, 'dampers-verdict', verdict(records)))
         print(f'updated {path}')
     return 0
+
+
+def _record(args: argparse.Namespace, records: list[dict[str, str]]) -> Path | None:
+    """Record the laws' damping runs (``--record``) or name an earlier run's CSV."""
+    if args.recorded:
+        return recorded.merge_csv([Path(p) for p in args.recorded.split(',')],
+                                  args.out / 'recorded.csv')
+    if not args.record:
+        return None
+    names = [n.strip() for n in args.record_laws.split(';') if n.strip()]
+    rows = []
+    wanted = args.positions.split(',')
+    for position in dict.fromkeys(r['position'] for r in records if r['position'] in wanted):
+        rows += recorded.record_position(records, position, args.record, print, names,
+                                         args.record_period)
+    path = recorded.write_csv(rows, args.record / 'recorded.csv')
+    print(f'wrote {path}')
+    return path
 
 
 def main(argv: list[str] | None = None) -> int:
     """Command line of the damper table."""
     parser = CommandParser(prog='python -m pentapod_damper.design', description=__doc__,
                            formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument('--positions', default='P1,P2', help='comma-separated positions')
+    parser.add_argument('--positions', default='P1,P2',
+                        help='comma-separated positions (computed, or recorded with --record)')
     parser.add_argument('--machine', choices=('locked', 'drives', 'both'), default='locked',
                         help='locked: the FE model as the study (drives infinitely stiff); '
                              'drives: with the feed drives of config/drives.yaml; both')
@@ -142,12 +177,31 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--from-tables', default='', metavar='PKL[,PKL]',
                         help='draw and write the tables of earlier runs (their tables.pkl, '
                              'comma-separated) instead of computing them')
+    parser.add_argument('--remeasure', default='', metavar='LAW[;LAW]',
+                        help='with --from-tables: measure these rows again at their tuned gains '
+                             "(';'-separated table row names; check margins kept)")
     parser.add_argument('--scenarios', default='', metavar='FOLDER',
                         help='also write the scenario files of the tuned laws of the first '
                              'position (config/scenarios)')
     parser.add_argument('--docs', default='', metavar='FILE',
                         help='also rewrite the dampers-table and dampers-verdict blocks of FILE '
                              '(docs/dampers.md)')
+    parser.add_argument('--record', type=Path, default=None, metavar='FOLDER',
+                        help="record a multisine damping run of the table's strut laws at each "
+                             'position on the testbed (lockstep, the damper node) and compare '
+                             "the identified damping with the sampled loop's poles; writes "
+                             'FOLDER/recorded.csv (and, with --docs, the dampers-recorded '
+                             'block)')
+    parser.add_argument('--record-laws', default='; '.join(recorded.DEFAULT_LAWS),
+                        metavar='LAW[;LAW]',
+                        help='the laws recorded besides the law to build (table row names, '
+                             f"';'-separated; default {'; '.join(recorded.DEFAULT_LAWS)})")
+    parser.add_argument('--record-period', type=float, default=None, metavar='S',
+                        help="the recorded runs' multisine period [s] (default: the study's, "
+                             'config/study.yaml damping.period)')
+    parser.add_argument('--recorded', default='', metavar='CSV',
+                        help='the recorded.csv of earlier --record runs (comma-separated), '
+                             'for --docs')
     parser.add_argument('-v', '--verbose', action='store_true')
     args = parser.parse_args(argv)
     configure_logging(args.verbose)

@@ -94,8 +94,25 @@ def _blocks(rows: Sequence[Record]) -> dict[tuple[str, str, str], list[Record]]:
     return blocks
 
 
-def markdown_records(rows: Sequence[Record]) -> str:
-    """Markdown tables of records (one per position and machine), with what they rest on."""
+def _recorded(position: str, law: str, recorded: Sequence[Record]) -> str:
+    """The recorded runs' verdict of a row: modes within tolerance, largest ζ error."""
+    mine = [r for r in recorded if (r['position'], r['law']) == (position, law)]
+    if not mine:
+        return '-'
+    errors = [abs(float(r['zeta_error'])) for r in mine]
+    worst = max(errors) if all(math.isfinite(e) for e in errors) else math.nan
+    within = sum(r['within'] == 'True' for r in mine)
+    return (f'{within}/{len(mine)} modes within, ζ error ' +
+            (f'{worst:.1%}' if math.isfinite(worst) else 'unpaired'))
+
+
+def markdown_records(rows: Sequence[Record], recorded: Sequence[Record] = ()) -> str:
+    """
+    Markdown tables of records (one per position and machine), with what they rest on.
+
+    ``recorded``: the rows of the recorded runs' CSV
+    (:func:`pentapod_damper.design.recorded.write_csv`), summarised per law.
+    """
     text = []
     for (position, machine, delay), block in _blocks(rows).items():
         h = block[0]
@@ -107,23 +124,29 @@ def markdown_records(rows: Sequence[Record]) -> str:
                  f'{_num(h["sample_rate_hz"], "g")} Hz with {h["delay_steps"]} sample(s) of '
                  f'delay; check model: {h["check_modes"]} modes below '
                  f'{_num(h["check_f_max_hz"], "g")} Hz; tuning: '
-                 f'{h.get("tuning_grid") or "not recorded"})', '',
+                 f'{h.get("tuning_grid") or "not recorded"}). '
+                 "**The laws' own dynamics are in the numbers** of every row but the ideal "
+                 'one: their filters, the zero-order hold and the computational delay '
+                 f'({delay} sample(s)), and the margins also with one sample more.', '',
                  '| law | sensors / actuators | gains | own dynamics in the numbers | peak / '
-                 'RMS reduction | static (below f1/2) compliance | check margin (+1 sample) | '
-                 'force RMS [N/N] | stroke RMS per N | struts 1+2 share peak / RMS | '
-                 'meets limits |',
-                 '|---|---|---|---|---|---|---|---|---|---|---|']
+                 'RMS reduction | static (below f1/2) compliance | check margin, '
+                 f'{delay} sample(s) of delay | check margin, {int(delay) + 1} sample(s) '
+                 '(one extra) | force RMS [N/N] | stroke RMS per N | struts 1+2 share peak '
+                 '/ RMS | meets limits | recorded run: identified ζ against the sampled '
+                 'loop |',
+                 '|---|---|---|---|---|---|---|---|---|---|---|---|---|']
         for r in block:
             own = 'yes' if r['dynamics_included'] == 'True' else 'no (continuous, ideal)'
             text.append(
                 f'| {r["law"]} | {r["sensors"]} / {r["actuators"]} | {r["gains"]} | {own} | '
                 f'{_num(r["peak_reduction"])} / {_num(r["rms_reduction"])} | '
                 f'x{_num(r["static_ratio"], ".3f")} (x{_num(r["lowband_ratio"])}) | '
-                f'{_num(r["check_margin"], ".1e")} ({_num(r["check_margin_extra_delay"], ".1e")})'
+                f'{_num(r["check_margin"], ".1e")} | {_num(r["check_margin_extra_delay"], ".1e")}'
                 f' | {_num(r["effort_rms_n_per_n"], ".3g")} | {_stroke(r)} | '
                 f'{_num(r["struts12_share_peak"], ".0f", 100)} / '
                 f'{_num(r["struts12_share_rms"], ".0f", 100)} % | '
-                f'{"yes" if r["feasible"] == "True" else "no"} |')
+                f'{"yes" if r["feasible"] == "True" else "no"} | '
+                f'{_recorded(position, r["law"], recorded)} |')
         text.append('')
     return '\n'.join(text).rstrip() + '\n'
 

@@ -148,7 +148,7 @@ def frf_grid(settings: TuneSettings, points: int = 4000) -> np.ndarray:
     return np.geomspace(*settings.band, points)
 
 
-def _magnitude(judge: Judge, values: dict[str, float], ideal: bool) -> np.ndarray:
+def magnitude(judge: Judge, values: dict[str, float], ideal: bool) -> np.ndarray:
     """|TCP FRF| [m/N] of a row on :func:`frf_grid` (NaN for an unstable loop)."""
     freq = frf_grid(judge.settings)
     if ideal:
@@ -163,8 +163,9 @@ def _magnitude(judge: Judge, values: dict[str, float], ideal: bool) -> np.ndarra
     return np.abs(loop.output(out, inp)(freq))
 
 
-def _row(spec: RowSpec, judge: Judge, values: dict[str, float], best: Evaluation, base: Evaluation,
-         radii: tuple[float, float] | None, say: Callable[[str], None]) -> DamperRow:
+def measure_row(spec: RowSpec, judge: Judge, values: dict[str, float], best: Evaluation,
+                base: Evaluation, radii: tuple[float, float] | None,
+                say: Callable[[str], None]) -> DamperRow:
     """Measure one row (its check-model margins and the struts 1+2 share)."""
     ideal = spec.kind == 'ideal'
     table_peak, table_rms = base.peak, base.rms
@@ -215,7 +216,7 @@ def damper_table(model: DesignModel, settings: TuneSettings = TuneSettings(),
     rows = default_rows() if rows is None else rows
     reference = Judge(model, rows[0].family, replace(settings, refine_iterations=0))
     base = reference.baseline
-    out_rows, curves, magnitudes = [], {}, {'baseline': _magnitude(reference, {}, False)}
+    out_rows, curves, magnitudes = [], {}, {'baseline': magnitude(reference, {}, False)}
     radii = None
     for spec in rows:
         judge = Judge(model, spec.family, settings)
@@ -236,8 +237,8 @@ def damper_table(model: DesignModel, settings: TuneSettings = TuneSettings(),
             values = {}
             best = judge.evaluate(values)
         base_eval = Evaluation({}, peak=base.peak, rms=base.rms)
-        magnitudes[spec.name] = _magnitude(judge, values, spec.kind == 'ideal')
-        row = _row(spec, judge, values, best, base_eval, radii, say)
+        magnitudes[spec.name] = magnitude(judge, values, spec.kind == 'ideal')
+        row = measure_row(spec, judge, values, best, base_eval, radii, say)
         out_rows.append(replace(row, lowband_ratio=_lowband(magnitudes, spec.name,
                                                            base.peak_hz, settings),
                                 uses_drives=spec.family.machine == 'drives'))

@@ -12,15 +12,21 @@ from __future__ import annotations
 
 from dataclasses import replace
 import logging
-from typing import Callable
+from typing import Callable, Sequence
 
 import numpy as np
 
 from pentapod_damper.design.report import best_strut_law, records
 from pentapod_damper.design.rows import default_rows
-from pentapod_damper.design.table import DamperTable
+from pentapod_damper.design.table import (
+    DamperTable,
+    magnitude,
+    measure_row,
+    stroke,
+    with_lowband,
+)
 from pentapod_sim.sim.design_models import DesignModel
-from pentapod_sim.sim.tuning import Judge
+from pentapod_sim.sim.tuning import Evaluation, Judge
 
 LOG = logging.getLogger(__name__)
 
@@ -64,3 +70,37 @@ def verify_best(table: DamperTable, model: DesignModel, attempts: int = 3,
             if radii[0] < 1.0 and radii[1] < 1.0:
                 break
     return table
+
+
+def remeasure(table: DamperTable, model: DesignModel, laws: Sequence[str],
+              progress: Callable[[str], None] | None = None) -> DamperTable:
+    """
+    ``table`` with the rows of ``laws`` measured again at their tuned gains (no tuning).
+
+    Peak, RMS, statics, effort, struts 1+2 shares, stroke and the figure's FRF (so the
+    low-band ratio) come from the code as it is now, on ``model``'s design plant; the check
+    margins, full-check margins and the tuner's feasibility verdict are kept (they need the
+    check model and the corners). For rows measured with an earlier version of the loop FRF
+    (the drives' rows before ``loop_frf.modal_form`` balanced its matrix).
+    """
+    say = progress or (lambda msg: LOG.info('%s', msg))
+    specs = {spec.name: spec for spec in default_rows()}
+    settings = replace(table.settings, refine_iterations=0)
+    base = Evaluation({}, peak=table.baseline_peak, rms=table.baseline_rms)
+    rows, magnitudes = list(table.rows), dict(table.magnitudes)
+    for index, row in enumerate(rows):
+        if row.law not in laws:
+            continue
+        spec, values = specs[row.law], dict(row.gains)
+        judge = Judge(replace(model, check=None), spec.family, settings)
+        best = judge.evaluate(values, robust=False)
+        new = measure_row(spec, judge, values, best, base, None, say)
+        magnitudes[row.law] = magnitude(judge, values, spec.kind == 'ideal')
+        value, unit = stroke(judge, values)
+        rows[index] = replace(row, peak_reduction=new.peak_reduction,
+                              rms_reduction=new.rms_reduction, peak_hz=new.peak_hz,
+                              static_ratio=new.static_ratio,
+                              effort_rms_per_n=new.effort_rms_per_n,
+                              share12_peak=new.share12_peak, share12_rms=new.share12_rms,
+                              stroke_rms_per_n=value, stroke_unit=unit)
+    return with_lowband(replace(table, rows=tuple(rows), magnitudes=magnitudes))

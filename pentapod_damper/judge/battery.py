@@ -17,7 +17,9 @@ from pathlib import Path
 import time
 from typing import Callable, Sequence
 
+from pentapod_damper.design.table import DamperRow
 from pentapod_damper.judge import damping
+from pentapod_damper.judge.buildable import buildable_rows
 from pentapod_damper.judge.config import JudgeConfig
 from pentapod_damper.judge.controller import BASELINE, Controller, law_ports
 from pentapod_damper.judge.damping import DominantMode, Pole
@@ -57,7 +59,7 @@ from pentapod_sim.sim.controllers import DiscreteController
 LOG = logging.getLogger(__name__)
 #: Sections of the battery: those that need the multisine runs, and the loop check.
 MULTISINE_SECTIONS = ('damping', 'compliance', 'demand', 'machining', 'faults')
-SECTIONS = MULTISINE_SECTIONS + ('robustness',)
+SECTIONS = MULTISINE_SECTIONS + ('robustness', 'buildable')
 
 
 @dataclass
@@ -75,6 +77,7 @@ class Judged:
     faults: list[RunFaults] = field(default_factory=list)
     robustness: Robustness | None = None
     machining: StableDepth | None = None
+    buildable: dict[str, DamperRow] = field(default_factory=dict)   # per TCP direction
 
     @property
     def has_model(self) -> bool:
@@ -195,6 +198,9 @@ def analyse(cfg: JudgeConfig, pos: PositionModel, result: PositionResult, judged
     judged.faults = [dataclasses.replace(faults(r.bag, r.spec.name, r.spec.steps,
                                                 ctrl.sources, dt), error=r.failed)
                      for r in judged.records]
+    if 'buildable' in sections and ctrl is not BASELINE and judged.models:
+        judged.buildable = buildable_rows(pos, judged.models, cfg.sample_rate, cfg.directions,
+                                          band, ctrl.label)
     if (ROBUSTNESS, '') in by_kind:
         judged.robustness = assess(by_kind[(ROBUSTNESS, '')].bag, ctrl.sources, ctrl.sensors,
                                    pos.plant, pos.check, dt, cfg.robustness.nperseg,

@@ -33,6 +33,13 @@ from pentapod_sim.machining.lobe_plot import lobe_diagram
 from pentapod_sim.machining.materials import load_machining
 
 ASSUMED = ', assumed: the velocities collocated with its ports'
+BUILDABLE = ('The controller as published, measured as every law of the buildable-damper '
+             'table (docs/dampers.md, the same code): exact TCP peak and band-RMS reduction of '
+             'the sampled loop, static TCP compliance over the baseline, check-model margin '
+             '(1 - spectral radius) as published and with one more sample of delay, largest '
+             'actuator force and stroke RMS per newton of TCP force. Left out: the stiffness '
+             "corners and the feed drives' loops; a controller without a published model "
+             '(its FRF known on the bins only).')
 
 
 def _how(ctrl: Controller) -> str:
@@ -118,6 +125,9 @@ def position_blocks(res: PositionResult, labels: list[str], cfg: JudgeConfig,
             out += [Heading('Machining', 3), machining,
                     Figure(diagram.png, f'{name}: stability lobes from the identified FRFs')]
         out += [Heading('Actuator demand', 3), tables.demand_table(res, labels)]
+    buildable = tables.buildable_table(res, labels)
+    if buildable is not None:
+        out += [Heading('As a buildable damper', 3), Paragraph(BUILDABLE), buildable]
     if mine.robustness is not None:
         out += [Heading('Robustness of the loop', 3), tables.robustness_table(res, labels)]
         for label in labels[1:]:

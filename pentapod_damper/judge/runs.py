@@ -200,6 +200,9 @@ def run_document(spec: RunSpec, cfg: JudgeConfig, pos: PositionModel, settle: in
         'topics': recorded_topics(ctrl, spec.kind, ports, sensors),
         'output_dir': str(bag_dir.parent), 'bag_name': bag_dir.name,
         'run_info': yaml.safe_dump(run_info, sort_keys=False)}}
+    if ctrl.how == 'node':     # it outlives the runs: its writer holds the earlier runs' steps
+        doc['recorder']['ros__parameters']['fresh_topics'] = [force_topic(s)
+                                                              for s in ctrl.sources]
     return doc
 
 

@@ -107,6 +107,24 @@ def demand_table(res: PositionResult, labels: Sequence[str]) -> Table:
     return table
 
 
+def buildable_table(res: PositionResult, labels: Sequence[str]) -> Table | None:
+    """The buildable-damper table's row (docs/dampers.md) of each controller with a model."""
+    table = Table(f'{res.position.name} as a buildable damper', [
+        Column('controller, direction'), Column('peak reduction', '-', '.3g'),
+        Column('RMS reduction', '-', '.3g'), Column('static compliance ratio', '-', '.4g'),
+        Column('check margin', '-', '.3g'), Column('check margin, +1 sample', '-', '.3g'),
+        Column('force RMS per N', 'N/N', '.3g'), Column('stroke RMS per N', '-', '.3g'),
+        Column('stroke unit')])
+    for label in labels[1:]:
+        j = res.judged.get(label)
+        for d, row in (j.buildable.items() if j else ()):
+            table.add(f'{label}, {d}{d}', row.peak_reduction, row.rms_reduction,
+                      row.static_ratio, row.check_margin, row.check_margin_extra,
+                      row.effort_rms_per_n,
+                      row.stroke_rms_per_n if row.stroke_unit else None, row.stroke_unit or '-')
+    return table if table.rows else None
+
+
 def robustness_table(res: PositionResult, labels: Sequence[str]) -> Table:
     """Every loop check: identified FRF (Nyquist), model FRF (Nyquist), exact radius."""
     table = Table(f'{res.position.name} loop checks', [

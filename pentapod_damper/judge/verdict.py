@@ -252,7 +252,7 @@ class Summary:
                  f'>= {t.coherence_min:g}', judge(None if not math.isfinite(rob.coherence_min)
                                                   else rob.coherence_min >= t.coherence_min))
         if rob.exact:
-            agree = verdict(mine, 0, True).split(' (')[0] == state
+            agree = verdict(mine, 0, True).rsplit(' (radius ', 1)[0] == state
             self.add(res, 'exact check with the published model (spectral radius, plant / '
                      'check model)', '-', lambda j: verdict(j, 0, True), STABLE,
                      judge(verdict(mine, 0, True).startswith(STABLE + ' ')

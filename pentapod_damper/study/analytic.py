@@ -171,7 +171,8 @@ class SampledPairFrf:
         late = (not augmented) and core.has_feedthrough
         self.q = (core.d[o] @ c_u @ vec) * right if late else np.zeros_like(self.r)
         self.d_late = float(core.d[o, j]) if late else 0.0
-        self.poles = np.log(lam.astype(complex)) / dt
+        with np.errstate(divide='ignore', invalid='ignore'):   # a delay cell's pole z = 0
+            self.poles = np.log(lam.astype(complex)) / dt
         self.spectral_radius = float(np.abs(lam).max())
 
     def __call__(self, freq_hz: npt.ArrayLike) -> np.ndarray:

@@ -29,10 +29,16 @@ from pentapod_damper.scenario_laws import scenario_laws
 from pentapod_damper.study.config import load_study_config
 from pentapod_sim.errors import ConfigError
 from pentapod_sim.plant.build import load_or_build_model
+from pentapod_sim.plant.frf_peaks import PoleResidueFrf
 from pentapod_sim.plant.model import PlantModel
 from pentapod_sim.scenario.files import read_scenario
-from pentapod_sim.sim.controllers import controller_of, DiscreteController
-from pentapod_sim.sim.loop_poles import closed_loop_poles, continuous_loop_poles, LoopPoles
+from pentapod_sim.sim.controllers import controller_blocks, controller_of, DiscreteController
+from pentapod_sim.sim.loop_poles import (
+    closed_loop_poles,
+    continuous_loop_poles,
+    continuous_loop_system,
+    LoopPoles,
+)
 
 #: Band in which the dominant modes are sought [Hz] (issue 13: 2-200 Hz).
 BAND = (2.0, 200.0)
@@ -96,6 +102,25 @@ def continuous_controller(law: Any) -> DiscreteController:
         raise ConfigError(f'{type(law).__name__} on {law.actuator_ports} has no continuous '
                           'linear model')
     return DiscreteController.static(law.sensor_ports, law.actuator_ports, gain)
+
+
+def continuous_loop_frf(plant: PlantModel, laws: Sequence[Any], output: str,
+                        input_: str) -> PoleResidueFrf:
+    """
+    FRF ``output / input_`` of the continuous loop of the laws' own continuous models.
+
+    The continuous reference of laws with dynamics of their own (IFF, lag displacement, PPF,
+    band-pass, a filtered PMA: :func:`continuous_controller`), which have no viscous
+    equivalent: the loop with their filters, without sampling and delay.
+    """
+    controllers = [continuous_controller(law) for law in laws]
+    a, b, c_y = continuous_loop_system(plant, controllers)
+    i, o = plant.input_names.index(input_), plant.output_names.index(output)
+    # the direct term of the loop, y = c_y z + D (I - K D)^-1 e (K: the laws' static gains)
+    d = plant.state_matrices()[3]
+    gain = controller_blocks(controllers, plant.input_names, plant.output_names)[0]
+    direct = (d @ np.linalg.inv(np.eye(len(plant.input_names)) - gain @ d))[o, i]
+    return PoleResidueFrf.from_state_space(a, b[:, i], c_y[o], float(direct))
 
 
 def loop_poles(plant: PlantModel, laws: Sequence[Any],

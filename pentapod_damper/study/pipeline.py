@@ -18,7 +18,7 @@ from typing import Any, Callable
 import numpy as np
 
 from pentapod_damper.node_parameters import PmaParams
-from pentapod_damper.scenario_laws import continuous_dampers, scenario_laws
+from pentapod_damper.scenario_laws import scenario_laws, viscous_equivalent
 from pentapod_damper.study.analytic import (
     continuous_frf,
     discrete_frf,
@@ -27,6 +27,7 @@ from pentapod_damper.study.analytic import (
     sampled_loop,
 )
 from pentapod_damper.study.config import StudyConfig
+from pentapod_damper.study.damping import continuous_loop_frf
 from pentapod_damper.study.pma import pma_design, PmaDesign
 from pentapod_damper.study.records import (
     ComplexArray,
@@ -157,16 +158,20 @@ def scenario_analytic(model: PositionModel, scenario: str, cfg: StudyConfig,
     dt = cfg.dt
     sections = read_scenario(scenario).sections
     laws = scenario_laws(sections, dt)
-    dampers = continuous_dampers(laws)
+    dampers = viscous_equivalent(laws)
     loop = checked_loop(model, [controller_of(law) for law in laws], dt, cfg.check_policy,
                         f'scenario {scenario} at {model.position}')
     if loop.plant_radius >= 1.0:       # whatever the policy: the run itself would diverge
         raise ConfigError(f'{loop.summary()}; lower its gains or raise the sample rate')
     sampled = sampled_loop(model.plant, laws, dt)
     disc = discrete_frf(model.plant, laws, dt, line_freq(cfg), f'tcp_force_{d}', sampled)
-    cont = continuous_frf(model.plant, dampers, freq, f'tcp_displacement_{d}',
-                          f'tcp_force_{d}')
-    frf = plant_pair_frf(model.plant, f'tcp_displacement_{d}', f'tcp_force_{d}', dampers)
+    if dampers is None:         # laws with dynamics of their own: their continuous loop
+        frf = continuous_loop_frf(model.plant, laws, f'tcp_displacement_{d}', f'tcp_force_{d}')
+        cont, dampers = frf(freq), {}
+    else:
+        cont = continuous_frf(model.plant, dampers, freq, f'tcp_displacement_{d}',
+                              f'tcp_force_{d}')
+        frf = plant_pair_frf(model.plant, f'tcp_displacement_{d}', f'tcp_force_{d}', dampers)
     peak = exact_peak(frf, float(cfg.band[0]), float(cfg.f_max), freq)
     return ScenarioAnalytic(scenario, laws, dampers, cont, disc, scenario_pma(scenario), frf,
                             peak, loop, sampled, model.position)

@@ -161,7 +161,8 @@ def run_on_testbed(scenario: str, position: str, model_file: Path, model_hash: s
     RunError
         If a node fails or the bag is missing; the message names the run and its log folder.
     """
-    name = f'{position}_{scenario}' + ('' if kind == 'frf' else f'_{kind}')
+    # a shipped scenario's name, or a scenario file (named after its file)
+    name = f'{position}_{Path(scenario).stem}' + ('' if kind == 'frf' else f'_{kind}')
     run_dir = out_dir / 'runs' / name
     bag_dir = run_dir / 'bag'
     run_dir.mkdir(parents=True, exist_ok=True)

@@ -7,9 +7,10 @@ testbed run and, for the damping scenarios, a multisine damping run; the PMA ste
 requirements; per position the bending damper comparison; the figures. Each stage is a
 ``dask.delayed`` call of a function of :mod:`pentapod_damper.study.stages` on the records of
 the stages it needs. :func:`compute` runs the graph on ``jobs`` threads (dask's local
-scheduler; it orders the ready stages itself, by the shape of the graph) and prints one line
-per finished stage. Threads suffice on two cores: a testbed run is a child process (one
-core), and the analytic stages spend their time in LAPACK, which releases the GIL.
+scheduler), starting among the ready stages the one that leads to the longest chain of work
+(:func:`critical_path`), and prints one line per finished stage. Threads suffice on two
+cores: a testbed run is a child process (one core), and the analytic stages spend their time
+in LAPACK, which releases the GIL.
 
 Testbed runs each reserve a free ROS domain, so they run side by side. With ``ROS_DOMAIN_ID``
 set (the user's choice of one domain) they form one lane: each run waits for the one before
@@ -49,6 +50,12 @@ MODELS, ANALYTIC, BENDING, PMA = ('models', 'analytic FRFs, checks and poles',
                                   'bending dampers', 'PMA requirements')
 FRF_RUNS, DAMPING_RUNS, FIGURES = 'FRF and step runs', 'damping runs', 'figures'
 LOBES, CUTTING_RUNS = 'stability lobes', 'cutting runs'
+#: Rough time of one task of each stage [s] (the study's timeline.csv on an idle two-core
+#: machine). Only their proportions matter: they rank the ready stages by the longest
+#: chain of work each leads to (:class:`Progress`), so that the long damping runs and bending
+#: comparisons start early instead of leaving one thread alone at the end.
+STAGE_COST = {MODELS: 2.0, ANALYTIC: 3.0, BENDING: 21.0, PMA: 2.5, FRF_RUNS: 2.5,
+              DAMPING_RUNS: 22.0, FIGURES: 4.0, LOBES: 0.5, CUTTING_RUNS: 10.0}
 
 
 class Interrupted(Exception):
@@ -205,15 +212,30 @@ class Progress(Callback):
     started: dict[str, float] = field(default_factory=dict)
     finished: dict[str, float] = field(default_factory=dict)
     total: int = 0
+    rank: dict[Any, tuple[float, int]] = field(default_factory=dict)
 
     def _start_state(self, dsk: Mapping[str, Any], state: Any) -> None:
         self.total = sum(key in self.stage_of for key in dsk)
+        self.rank = critical_path(dsk, state['dependents'], self.stage_of)
+        self._reorder(state)
+
+    def _reorder(self, state: Any) -> None:
+        """
+        The ready stages by rank: dask's local scheduler starts the last of its ready list.
+
+        dask orders the ready tasks depth first, which suits memory, not two threads and
+        tasks from 0.3 to 30 s long. The rank is the longest chain of :data:`STAGE_COST`
+        from a task to the end of the study (critical-path list scheduling); ties keep
+        dask's order.
+        """
+        state['ready'].sort(key=lambda key: self.rank.get(key, (0.0, 0)))
 
     def _pretask(self, key: str, dsk: Any, state: Any) -> None:
         self.started[key] = time.perf_counter()
 
     def _posttask(self, key: str, result: Any, dsk: Any, state: Any, worker_id: Any) -> None:
         self.finished[key] = time.perf_counter()
+        self._reorder(state)
         if key in self.stage_of:
             done = sum(k in self.stage_of for k in self.finished)
             line = result.describe() if hasattr(result, 'describe') else key
@@ -248,6 +270,29 @@ class Progress(Callback):
             span[2] += end - start
             span[3] += 1
         return {k: (v[1] - v[0], v[2], int(v[3])) for k, v in spans.items()}
+
+
+def critical_path(dsk: Mapping[Any, Any], dependents: Mapping[Any, Any],
+                  stage_of: Mapping[str, str]) -> dict[Any, tuple[float, int]]:
+    """
+    Key -> (longest chain of stage costs from it to the end [s], -its place in dask's order).
+
+    A stage costs :data:`STAGE_COST` of its stage (1 s for one not listed); dask's own tasks
+    (collecting results) cost nothing.
+    """
+    from dask.order import order
+    place = order(dsk)
+    rank: dict[Any, float] = {}
+
+    def chain(key: Any) -> float:
+        if key not in rank:
+            stage = stage_of.get(key) if isinstance(key, str) else None
+            own = 0.0 if stage is None else STAGE_COST.get(stage, 1.0)
+            rank[key] = own + max((chain(d) for d in dependents.get(key, ())), default=0.0)
+        return rank[key]
+    for key in dsk:
+        chain(key)
+    return {key: (rank[key], -place[key]) for key in dsk}
 
 
 def compute(outputs: Any, stage_of: dict[str, str], jobs: int,

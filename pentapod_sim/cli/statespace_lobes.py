@@ -26,6 +26,7 @@ from __future__ import annotations
 import argparse
 import csv
 import logging
+import math
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -34,7 +35,7 @@ import numpy as np
 from pentapod_sim.cli.statespace_options import add_config_and_out, POSITIONS_HELP
 from pentapod_sim.errors import ConfigError
 from pentapod_sim.machining.lobe_plot import lobe_diagram
-from pentapod_sim.machining.loop_lobes import check_runs, loop_lobes, LoopLobes
+from pentapod_sim.machining.loop_lobes import check_runs, CuttingRun, loop_lobes, LoopLobes
 from pentapod_sim.machining.materials import load_machining, MachiningTable
 from pentapod_sim.parameters import sample_time
 from pentapod_sim.reference import replace_section
@@ -223,8 +224,9 @@ def runs_table(checks: Sequence[Sequence[Any]]) -> str:
     """Markdown of the recorded checks (rows of :data:`CHECK_COLUMNS`)."""
     lines = ['| position | scenario | operation | speed [rpm] | limit [mm] | predicted chatter '
              '[Hz] | run | depth [mm] | simulated [s] | expected | verdict of the recording | '
-             'chatter [Hz] | growth [1/s] | off harmonics | wall [s] |',
-             '|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|']
+             'chatter [Hz] | growth [1/s] | off harmonics | predicted growth [1/s] | averaged '
+             'loop [1/s] | critical multiplier | wall [s] |',
+             '|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|']
     for row in checks:
         r = dict(zip(CHECK_COLUMNS, row))
         lines.append(f"| {r['position']} | {r['scenario']} | {r['operation']} | "
@@ -232,7 +234,8 @@ def runs_table(checks: Sequence[Sequence[Any]]) -> str:
                      f"{r['factor']:g}x | {r['depth_m'] * 1e3:.4g} | {r['duration_s']:.3g} | "
                      f"{r['expected']} | {r['verdict']} | {r['measured_chatter_Hz']:.1f} | "
                      f"{r['growth_rate_per_s']:+.3g} | {r['off_harmonic_share']:.1%} | "
-                     f"{r['wall_time_s']:.0f} |")
+                     f"{r['predicted_rate_per_s']:+.3g} | {r['averaged_rate_per_s']:+.3g} | "
+                     f"{r['multiplier']} | {r['wall_time_s']:.0f} |")
     return '\n'.join(lines)
 
 
@@ -240,7 +243,7 @@ def runs_table(checks: Sequence[Sequence[Any]]) -> str:
 CHECK_COLUMNS = ('position', 'scenario', 'operation', 'speed_rpm', 'limit_m', 'chatter_Hz',
                  'factor', 'depth_m', 'duration_s', 'predicted_rate_per_s', 'expected',
                  'verdict', 'measured_chatter_Hz', 'growth_rate_per_s', 'off_harmonic_share',
-                 'left_cut_share', 'wall_time_s', 'bag')
+                 'left_cut_share', 'wall_time_s', 'bag', 'averaged_rate_per_s', 'multiplier')
 
 
 def _check(plant: Any, rec: LoopLobes, op: str, table: MachiningTable,
@@ -250,7 +253,8 @@ def _check(plant: Any, rec: LoopLobes, op: str, table: MachiningTable,
     laws = scenario_loop_laws(rec.label, rec.loop.dt)
     point = check_runs(plant, laws, rec.loop.dt, table, rec.operations[op])
     runs = '; '.join(f'{r.factor:g}x = {r.params["axial_depth"] * 1e3:.4g} mm for '
-                     f'{r.duration:.3g} s (rate {r.growth_rate:+.3g} 1/s, expect {r.expected})'
+                     f'{r.duration:.3g} s (rate {r.growth_rate:+.3g} 1/s, {_multiplier(r)}; '
+                     f'averaged loop {r.averaged_rate:+.3g} 1/s; expect {r.expected})'
                      for r in point.runs)
     print(f'  check {rec.position} {rec.label} {op}: at {point.speed:.1f} rpm the limit is '
           f'{point.depth * 1e3:.4g} mm (chatter {point.chatter_freq:.1f} Hz): {runs}')
@@ -274,5 +278,12 @@ def _check(plant: Any, rec: LoopLobes, op: str, table: MachiningTable,
         rows.append([rec.position, rec.label, op, point.speed, point.depth, point.chatter_freq,
                      run.factor, run.params['axial_depth'], run.duration, run.growth_rate,
                      run.expected, v.verdict, v.chatter_freq, v.growth_rate,
-                     v.off_harmonic_share, v.left_cut_share, done.wall_time, str(done.bag)])
+                     v.off_harmonic_share, v.left_cut_share, done.wall_time, str(done.bag),
+                     run.averaged_rate, _multiplier(run)])
     return rows
+
+
+def _multiplier(run: CuttingRun) -> str:
+    """The critical Floquet multiplier as modulus, angle [deg] and kind."""
+    mu = run.multiplier
+    return f'{abs(mu):.5f} at {math.degrees(math.atan2(mu.imag, mu.real)):+.1f} deg ({run.kind})'

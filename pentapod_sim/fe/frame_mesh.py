@@ -11,8 +11,9 @@ The frame is built from the mid-surfaces of welded steel plates with gmsh's Open
   of ``shell_frame.hub_width`` around the machine axis from the spokes' bottom to
   ``frame.bed_z``, with the spokes' wall;
 * walls (``shell_frame.wall_thickness``) in the chord planes between neighbouring columns,
-  from the base ring to the top ring, in the bays ``shell_frame.walls`` names (one bay is
-  left open: the door).
+  from the base ring to the top ring, in the bays ``shell_frame.walls`` names; a bay without
+  a wall is a door with a lintel (a wall ``shell_frame.door_lintel`` high under the top
+  ring; 0: open to the top ring).
 
 The plates are fragmented so that the mesh is conforming along every weld line; the pieces of
 a plate that lie inside another part's box (a ring's end inside a column) are removed, so
@@ -120,11 +121,16 @@ def frame_plates(machine: MachineParams) -> FramePlates:
         for z in z_ring:
             boxes.append(_box(foot[i] + z * z_axis, foot[j] + z * z_axis, z_axis, fr.ring,
                               'ring'))
-        if sh.walls[i]:
-            lo, hi = z_ring
+        lo, hi = z_ring
+        if not sh.walls[i]:         # the door: only its lintel, if any
+            lo = hi - sh.door_lintel
+        if hi - lo > _EPS:
             plates.append((np.array([foot[i] + lo * z_axis, foot[j] + lo * z_axis,
                                      foot[j] + hi * z_axis, foot[i] + hi * z_axis]),
                            sh.wall_thickness, 'wall'))
+    if not sh.door_lintel < z_ring[1] - z_ring[0]:
+        raise ConfigError(f'shell_frame.door_lintel {sh.door_lintel!r} m must be below the '
+                          f'{z_ring[1] - z_ring[0]:.3f} m between the rings')
     z_spoke = fr.base_ring_z
     hub_lo = z_spoke - (fr.spoke.height - fr.spoke.thickness) / 2
     if not hub_lo < fr.bed_z:

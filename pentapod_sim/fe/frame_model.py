@@ -188,9 +188,12 @@ class ReducedFrame:
 def frame_key(machine: MachineParams, element_size: float, f_cut: float) -> str:
     """SHA-256 (hex, 16 chars) of everything the reduced frame depends on."""
     assert machine.shell_frame is not None
-    data = {'format': FORMAT, 'frame': asdict(machine.frame),
+    # the bed's mass and inertia and the feet are added per pose (couple_frame), not reduced
+    frame = {k: v for k, v in asdict(machine.frame).items()
+             if k not in ('bed_mass', 'bed_inertia', 'model')}
+    data = {'format': FORMAT, 'frame': frame,
             'shell_frame': {k: v for k, v in asdict(machine.shell_frame).items()
-                            if k != 'foot_stiffness'},        # the feet are not in the frame
+                            if k != 'foot_stiffness'},
             'steel': asdict(machine.materials.steel),
             'bp_joints': [list(machine.bp_joints.angles), list(machine.bp_joints.z),
                           machine.bp_joints.radius],

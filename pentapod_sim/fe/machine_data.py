@@ -124,6 +124,10 @@ class ShellFrameParams:
     foot_stiffness: tuple[float, ...] | None = spec(
         'N/m', POSITIVE, length=3, default=None,
         description='x, y, z stiffness of each foot with this frame (default: installation)')
+    door_lintel: float = spec('m', NON_NEGATIVE, default=0.0,
+                              description='height of the wall above the door in each bay '
+                                          'without a wall, down from the top ring (0: open '
+                                          'bay)')
 
 
 @_schema

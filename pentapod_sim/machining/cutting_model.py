@@ -63,14 +63,24 @@ def regenerative_controller(conditions: CuttingConditions, dt: float) -> Discret
         If the tooth period spans more than :data:`MAX_MODEL_DELAY_STEPS` steps (the message
         would be too large; the reason becomes the source's ``no linear model`` text).
     """
-    delay = conditions.tooth_period / dt
+    return delay_controller(averaged_stiffness(conditions), conditions.tooth_period / dt)
+
+
+def delay_controller(stiffness: np.ndarray, delay: float) -> DiscreteController:
+    """
+    ``F_k = K (r_k - r(t_k - T))`` on the TCP ports, ``T = delay`` steps (any real >= 0).
+
+    ``K`` (2, 2) [N/m] in machine x-y; ``r(t_k - T)`` interpolated linearly between the two
+    steps around it, as the cutting process does. ConfigError beyond
+    :data:`MAX_MODEL_DELAY_STEPS` whole steps.
+    """
     whole = int(math.floor(delay))
     frac = delay - whole
     if whole > MAX_MODEL_DELAY_STEPS:
         raise ConfigError(f'the tooth period spans {whole} steps; the linear model of the '
                           f'regenerative delay is offered up to {MAX_MODEL_DELAY_STEPS} steps '
                           f'({2 * (MAX_MODEL_DELAY_STEPS + 1)} states)')
-    k = averaged_stiffness(conditions)
+    k = np.asarray(stiffness, dtype=float)
     n = 2 * (whole + 1)                 # state block i: r_{k-1-i}, i = 0..m
     a = np.zeros((n, n))
     a[2:, :-2] = np.eye(n - 2)          # shift by one step

@@ -8,10 +8,13 @@ a speed grid and its summary (minimum stable depth, best pocket): a :class:`Loop
 command ``statespace lobes`` and the study's machining section are made of these records.
 
 :func:`check_runs` picks the test of the issue's "done when": a spindle speed where a cutting
-node gets at least 50 steps per tooth period and the envelope is lowest, the predicted limiting
-depth there, and a run at each factor of it (0.8 and 1.2) whose length follows from the growth
-or decay rate of the averaged regenerative loop (:mod:`pentapod_sim.machining.cutting_model`)
-at that depth: :class:`CuttingRun` records with the cutting node's parameters.
+node gets a whole number (at least 50) of steps per tooth period and the envelope is lowest,
+the predicted limiting depth there, and a run at each factor of it (0.8 and 1.2) whose length
+follows from the growth or decay rate of the cut on the sampled loop at that depth, from its
+critical Floquet multiplier (:mod:`pentapod_sim.machining.sampled_floquet`; the averaged loop
+of :mod:`pentapod_sim.machining.cutting_model` overestimates it where the chatter lies near
+half the tooth-passing frequency): :class:`CuttingRun` records with the cutting node's
+parameters.
 
 Units: depths [m], speeds [rpm], frequencies [Hz], times [s].
 """
@@ -30,6 +33,7 @@ from pentapod_sim.machining.cutting_process import CuttingConditions, MIN_STEPS_
 from pentapod_sim.machining.lobe_plot import LobeSummary, summarise
 from pentapod_sim.machining.lobes import LobeEnvelope, milling_limit, StabilityLimit
 from pentapod_sim.machining.materials import MachiningTable
+from pentapod_sim.machining.sampled_floquet import check_speed, sampled_floquet
 from pentapod_sim.machining.sampled_tcp import sampled_tcp_frf, SampledTcpFrf
 from pentapod_sim.plant.model import PlantModel
 from pentapod_sim.sim.controllers import controller_of, DiscreteController
@@ -40,6 +44,9 @@ DEFAULT_BAND = (1.0, 1000.0)
 #: e-foldings of the predicted growth (or decay) a check run lasts after its settling part
 #: (the verdict needs a twofold growth or decay, 0.69 e-foldings).
 RUN_E_FOLDINGS = 2.0
+#: Fewest tooth periods a check run spans after its settling part (the verdict's growth fit
+#: needs 17; a fast rate on a small model would otherwise give too few).
+RUN_MIN_TOOTH_PERIODS = 40
 #: Speeds of the envelope the check speed is chosen from.
 CHECK_SPEEDS = 2000
 #: Share of a check run left out as the entry transient (the verdict's default).
@@ -149,7 +156,14 @@ class CuttingRun:
     settle : float
         Entry transient left out of the verdict [s].
     growth_rate : float
-        Growth rate [1/s] of the averaged regenerative loop at this depth (negative: decay).
+        Growth rate [1/s] of the cut on the sampled loop from its critical Floquet multiplier
+        (negative: decay); the run's length follows from it.
+    averaged_rate : float
+        Growth rate [1/s] of the averaged loop (the cutting node's linear model) at this depth.
+    multiplier : complex
+        The critical Floquet multiplier (per tooth period).
+    kind : str
+        'hopf', 'flip' or 'fold'.
     """
 
     factor: float
@@ -158,6 +172,9 @@ class CuttingRun:
     duration: float
     settle: float
     growth_rate: float
+    averaged_rate: float = math.nan
+    multiplier: complex = complex(math.nan)
+    kind: str = ''
 
     def conditions(self, table: MachiningTable) -> CuttingConditions:
         """The run's cutting conditions (what the cutting node makes of ``params``)."""
@@ -203,50 +220,86 @@ def lobe_bottoms(lobes: OperationLobes, teeth: int, dt: float
     return [(float(env.speed[i]), float(d[i]), float(env.chatter_freq[i])) for i in inner]
 
 
-def _runs(plant: PlantModel, controllers: list[DiscreteController], dt: float,
-          table: MachiningTable, operation: str, speed: float, depth: float,
-          factors: Sequence[float], durations: tuple[float, float]) -> tuple[CuttingRun, ...]:
-    """The runs at ``factors`` of ``depth``, each as long as its predicted rate asks."""
+def _averaged_rate(plant: PlantModel, controllers: list[DiscreteController], dt: float,
+                   cond: CuttingConditions) -> float:
+    """Growth rate [1/s] of the averaged loop (the cutting node's linear model)."""
+    radius, _ = plant_radius(plant, [*controllers, regenerative_controller(cond, dt)], dt)
+    return math.log(radius) / dt
+
+
+def _duration(rate: float, durations: tuple[float, float], tooth_period: float) -> float:
+    active = max(RUN_E_FOLDINGS / max(abs(rate), 1e-9), RUN_MIN_TOOTH_PERIODS * tooth_period)
+    return min(max(active / (1.0 - RUN_SETTLE_SHARE), durations[0]), durations[1])
+
+
+def _point(plant: PlantModel, controllers: list[DiscreteController], dt: float,
+           table: MachiningTable, operation: str, speed: float, depth: float, freq: float,
+           factors: Sequence[float], averaged: Sequence[float],
+           durations: tuple[float, float]) -> CheckPoint:
+    """The runs at ``factors`` of ``depth``, each as long as its Floquet rate asks."""
     runs = []
-    for factor in factors:
+    for factor, averaged_rate in zip(factors, averaged):
         cond = table.conditions(operation, speed, factor * depth)
-        radius, _ = plant_radius(plant, [*controllers, regenerative_controller(cond, dt)], dt)
-        rate = math.log(radius) / dt
-        active = RUN_E_FOLDINGS / max(abs(rate), 1e-9)
-        duration = min(max(active / (1.0 - RUN_SETTLE_SHARE), durations[0]), durations[1])
+        floquet = sampled_floquet(plant, controllers, cond, dt)
+        duration = _duration(floquet.growth_rate, durations, cond.tooth_period)
         runs.append(CuttingRun(
             factor, 'stable' if factor < 1.0 else 'chatter',
             {'operation': operation, 'spindle_speed': speed, 'axial_depth': factor * depth},
-            duration, RUN_SETTLE_SHARE * duration, rate))
-    return tuple(runs)
+            duration, RUN_SETTLE_SHARE * duration, floquet.growth_rate, averaged_rate,
+            floquet.multiplier, floquet.kind))
+    return CheckPoint(operation, speed, depth, freq, tuple(runs))
 
 
 def check_runs(plant: PlantModel, laws: Sequence[Any], dt: float, table: MachiningTable,
                lobes: OperationLobes, factors: Sequence[float] = (0.8, 1.2),
                speed: float | None = None, durations: tuple[float, float] = (0.5, 120.0),
-               candidates: int = 8) -> CheckPoint:
+               candidates: int = 8, floquet_candidates: int = 3) -> CheckPoint:
     """
     Cutting runs below and above the predicted limit at one speed (module docstring).
 
-    A run lasts ``RUN_E_FOLDINGS`` e-foldings of the averaged loop's growth or decay at its
-    depth after the settling share, within ``durations`` (min, max) [s]. The speed is the one
-    of the ``candidates`` lowest lobe bottoms (:func:`lobe_bottoms`) whose runs are shortest
-    (with 0.1 % modal damping a limit set by a low mode grows and decays slowly); ``speed``
-    [rpm] fixes it instead (the depth is then the limit's envelope there).
+    Every speed is moved to the nearest whole number of steps per tooth period, less 1e-9
+    (:func:`pentapod_sim.machining.sampled_floquet.check_speed`; the depth is the limit's
+    envelope there), so that the loop with the cut is periodic and its Floquet
+    multipliers (:func:`pentapod_sim.machining.sampled_floquet.sampled_floquet`) give each
+    run's growth or decay rate with the time-varying directional matrix; a run lasts
+    ``RUN_E_FOLDINGS`` e-foldings of it after the settling share, within ``durations`` (min,
+    max) [s]. The speed is chosen among the ``candidates`` lowest lobe bottoms
+    (:func:`lobe_bottoms`): the ``floquet_candidates`` whose runs the averaged loop predicts
+    shortest get their Floquet rates (about a second each on the machine's loop), and of those
+    whose rates have the sign the zero-order limit predicts (decay below, growth above) the
+    one with the shortest runs is taken; if none has, the next candidates are tried until one
+    has. ``speed`` [rpm] fixes the speed instead.
+
+    Raises
+    ------
+    ConfigError
+        If at no candidate speed the Floquet rates agree with the zero-order prediction (the
+        zero-order limit is off by more than the factors there).
     """
     teeth = table.tools[table.operation(lobes.operation).tool].teeth
     controllers = [controller_of(law) for law in laws]
-    if speed is not None:
-        env = lobes.limit.envelope([speed])
-        points = [(float(speed), float(env.depth[0]), float(env.chatter_freq[0]))]
-    else:
-        points = lobe_bottoms(lobes, teeth, dt)[:candidates]
+    wanted = [float(speed)] if speed is not None else [
+        at for at, _, _ in lobe_bottoms(lobes, teeth, dt)[:candidates]]
+    points = []
+    for at in dict.fromkeys(check_speed(s, teeth, dt) for s in wanted):
+        env = lobes.limit.envelope([at])
+        depth, freq = float(env.depth[0]), float(env.chatter_freq[0])
+        rates = [_averaged_rate(plant, controllers, dt,
+                                table.conditions(lobes.operation, at, f * depth))
+                 for f in factors]
+        period = 60.0 / (teeth * at)
+        points.append((max(_duration(r, durations, period) for r in rates), at, depth, freq,
+                       rates))
     best: CheckPoint | None = None
-    for at, depth, freq in points:
-        runs = _runs(plant, controllers, dt, table, lobes.operation, at, depth, factors,
-                     durations)
-        point = CheckPoint(lobes.operation, at, depth, freq, runs)
-        if best is None or point.duration < best.duration:
+    for tried, (_, at, depth, freq, rates) in enumerate(sorted(points, key=lambda p: p[:2])):
+        if tried >= floquet_candidates and best is not None:
+            break
+        point = _point(plant, controllers, dt, table, lobes.operation, at, depth, freq,
+                       factors, rates, durations)
+        agrees = all((run.growth_rate > 0) == (run.expected == 'chatter') for run in point.runs)
+        if agrees and (best is None or point.duration < best.duration):
             best = point
-    assert best is not None
+    if best is None:
+        raise ConfigError(f'{lobes.operation}: at none of the speeds tried do the Floquet '
+                          f'rates of the cut agree with the zero-order limit at {factors} of it')
     return best

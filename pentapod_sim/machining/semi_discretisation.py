@@ -140,7 +140,8 @@ def spectral_radius(plant: PlantModel, cut: MillingCut, speed_rpm: float, depth:
     return abs(_largest_multiplier(monodromy(plant, cut, speed_rpm, depth, intervals)))
 
 
-def _kind(mu: complex) -> str:
+def multiplier_kind(mu: complex) -> str:
+    """'fold' (+1), 'flip' (-1) or 'hopf' (complex) for a Floquet multiplier."""
     angle = abs(math.atan2(mu.imag, mu.real))
     if angle < REAL_ANGLE:
         return 'fold'
@@ -194,4 +195,4 @@ def critical_depth(plant: PlantModel, cut: MillingCut, speed_rpm: float, depth_m
             unstable, mu = middle, m
         else:
             stable = middle
-    return CriticalDepth(float(speed_rpm), 0.5 * (stable + unstable), mu, _kind(mu))
+    return CriticalDepth(float(speed_rpm), 0.5 * (stable + unstable), mu, multiplier_kind(mu))

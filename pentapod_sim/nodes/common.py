@@ -219,6 +219,7 @@ def run_node(factory: Callable[..., object], argv=None, run: Callable | None = N
             served = code == 0 and shutdown.requested() and callable(after_end) and after_end()
             node.destroy_node()
         rclpy.try_shutdown()
+        shutdown.ignore_from_now()      # stopped: a late second signal must not kill it
     if served:
         return 0
     if code == 0 and shutdown.requested():

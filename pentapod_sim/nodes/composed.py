@@ -97,7 +97,8 @@ def main(argv=None) -> int:
     line), 128 + signal number after a clean stop.
     """
     argv = list(sys.argv if argv is None else argv)
-    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0],
+                                     allow_abbrev=False)
     parser.add_argument('scenario', help='scenario name (config/scenarios) or YAML file')
     args = parser.parse_args(argv[1:])
     try:

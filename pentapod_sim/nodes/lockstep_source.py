@@ -16,8 +16,9 @@ The state topics it reads have one writer, the plant (:mod:`pentapod_sim.nodes.w
 message is taken only while its subscription has one matched publisher, and the graph's
 publishers are checked at the first message and every ``CHECK_PERIOD`` s; a second writer stops
 the source (exit code 1) naming both by DDS participant and host. No message from the plant for
-``plant_stall_timeout`` s of wall time during its run stops the source with exit code 4, naming
-the plant (:class:`pentapod_sim.errors.PlantStalledError`). A parameter set during the run is
+``plant_stall_timeout`` s of wall time during its run (counted from its run announcement once
+its writer is matched, if no step came yet) stops the source with exit code 4, naming the
+plant (:class:`pentapod_sim.errors.PlantStalledError`). A parameter set during the run is
 logged with old and new value and the step from which it acts, and published stamped with that
 step on /pentapod/parameter_changes/<source_name>
 (:data:`pentapod_sim.interface.PARAMETER_CHANGE_PREFIX`) for the recorder; a law publishes its
@@ -277,6 +278,11 @@ class LockstepSource(TestbedNode):
     def _check_stall(self) -> None:
         """PlantStalledError once the plant, during its run, was silent plant_stall_timeout s."""
         limit = self.params.plant_stall_timeout
+        if self.last_heard is None and self.plant_run.running and self.subs and all(
+                sub.get_publisher_count() for sub in self.subs):
+            # the plant announced its run and DDS matched its writer, yet no step came (a
+            # plant stopped right after its start): its silence counts from here
+            self.last_heard = time.monotonic()
         if (limit <= 0 or self.last_heard is None or self.plant_run.ended is not None
                 or self.failure is not None or time.monotonic() - self.last_heard <= limit):
             return
@@ -284,7 +290,8 @@ class LockstepSource(TestbedNode):
                              for w in map(Writer.of, self.get_publishers_info_by_topic(t)))
         self.fail(PlantStalledError(
             f'the plant stalled: no message from it for {limit:g} s of wall time during its run '
-            f'(plant_stall_timeout; last answered stamp {self._last[0]} ns); its writer: '
+            f'(plant_stall_timeout; last answered stamp {self._last[0]} ns, -1: none); its '
+            'writer: '
             f'{plant or "gone from the graph"}'))
 
     def on_params_changed(self, old, new, names: Sequence[str]) -> None:
@@ -310,10 +317,11 @@ class LockstepSource(TestbedNode):
         """Fill this topic's sensor slots; reject the step if a joint or value is bad."""
         # per step the names are only compared with the last message's (a list comparison:
         # a few us less than hashing them, every step, for a per-step path that runs
-        # cache-cold; docs/nodes.md "Where a lockstep step's time goes")
+        # cache-cold; docs/nodes.md "Where a lockstep step's time goes"); the plant's
+        # in-process messages keep their name list, which the identity test passes at once
         names = msg.name
         known = self._picks.get(topic)
-        if known is None or known[0] != names:
+        if known is None or (known[0] is not names and known[0] != names):
             index = {n: i for i, n in enumerate(names)}
             missing = [j for _, j, _ in self.needs[topic] if j not in index]
             if missing:

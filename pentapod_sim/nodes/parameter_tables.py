@@ -273,6 +273,10 @@ class RecorderParams(NodeParams):
                           '(20260101T120000Z); empty: run-{utc}')
     run_info: str = param('', "YAML mapping stored in the bag's custom_data (model hash, pose, "
                           'scenario)')
+    fresh_topics: tuple[str, ...] = param((), 'topics recorded only from what their writers '
+                                          'publish after the recorder matched them, none of '
+                                          'their history (the answers of a source that outlives '
+                                          "runs hold its earlier runs' steps)")
     queue_depth: int = param(100000, 'subscription depth (messages held while the writer catches '
                              'up)', bounds=(1, 2 ** 31 - 1))
     discovery_period: float = param(0.2, 'wall time between looks for new topics', 's',

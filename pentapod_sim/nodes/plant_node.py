@@ -171,6 +171,8 @@ class PlantNode(TestbedNode):
         p, log = self.params, self.get_logger()
         trace = Trace(self.n_steps, self.core, bool(p.output_file))
         self.start_up(executor)
+        if isinstance(self.timing, RealTime):     # pages written before the run is announced
+            self.timing.prepare(trace.buffers())
         polling = self.inputs.on_dds() and p.timing == 'lockstep'
         if not shutdown.requested():     # else stopped during start-up: no run to announce
             self.announce(interface.RUN_RUNNING)

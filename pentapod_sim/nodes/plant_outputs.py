@@ -107,7 +107,8 @@ class PlantOutputs:
             msg = self.state_msgs[lay.topic]
             msg.position = array.array('d', pos.tobytes())
             msg.velocity = array.array('d', vel.tobytes())
-            msg.effort = array.array('d', eff.tobytes())
+            if lay.has_effort:      # else the empty array the message was built with
+                msg.effort = array.array('d', eff.tobytes())
             set_stamp(msg.header.stamp, ns)
             out.publish(msg)
 

@@ -109,6 +109,7 @@ class RecorderNode(TestbedNode):
         if not isinstance(run_info, dict):
             raise ConfigError(f'parameter run_info must be a YAML mapping, got {run_info!r}')
         self.depth = params.queue_depth
+        self.fresh = set(params.fresh_topics)   # never transient local: no earlier run's history
         self.writer = BagWriter(Path(params.output_dir) / name, run_info=run_info,
                                 flush_period_s=0.0)
         self.subs = {}  # topic -> (subscription or None, msg_type, level: level_for)
@@ -150,7 +151,7 @@ class RecorderNode(TestbedNode):
             publishers = self.get_publishers_info_by_topic(topic)
             if not publishers:
                 continue
-            level = level_for(topic, publishers)
+            level = level_for(topic, publishers, topic in self.fresh)
             if known is not None and level >= known[2]:
                 continue
             if known is not None:  # the reader asks more than a publisher offers
@@ -166,7 +167,7 @@ class RecorderNode(TestbedNode):
     def _subscribe(self, topic: str, msg_type: str, level: int | None = None) -> None:
         """Subscribe at ``level`` (:func:`level_for`; None: the topic's own, no publisher)."""
         if level is None:
-            level = level_for(topic, [])
+            level = level_for(topic, [], topic in self.fresh)
         status = topic == interface.RUN_STATUS
         # transient local (per-step streams, run status, excitation spec): a recorder that
         # matched a writer late gets what the writer still holds
@@ -333,8 +334,9 @@ class RecorderNode(TestbedNode):
 
     def store_report(self) -> None:
         """Log unique vs expected steps per topic and why it failed; store them in the bag."""
-        if self.end is None:
+        if self.end is None:       # the bag still says what it holds is not the plant's
             self.failed = [f'{t}: {text}' for t, text in self.foreign.items()]
+            self.writer.add_record(RECORDING_RECORD, report_record(None, {}, self.foreign))
             return
         self.report = report = self.ledger.report(
             self.end, self.expected_topics(), self.writer.topic_counts())

@@ -20,16 +20,19 @@ BEST_EFFORT, RELIABLE, LATE_JOINER = 0, 1, 2
 LEVELS = {BEST_EFFORT: 'best effort', RELIABLE: 'volatile', LATE_JOINER: 'transient local'}
 
 
-def level_for(topic: str, publishers) -> int:
+def level_for(topic: str, publishers, fresh: bool = False) -> int:
     """
     The highest level that matches every one of ``publishers`` (no publisher: the topic's).
+
+    ``fresh``: volatile at most, none of the writers' history (a source that outlives runs,
+    such as a node the judge did not start, holds the answers of its earlier runs).
 
     Transient local only for topics whose testbed writers offer it
     (:func:`pentapod_sim.interface.is_latched`) and only while every publisher does.
     """
     if any(p.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT for p in publishers):
         return BEST_EFFORT
-    if interface.is_latched(topic) and all(
+    if not fresh and interface.is_latched(topic) and all(
             p.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL for p in publishers):
         return LATE_JOINER
     return RELIABLE

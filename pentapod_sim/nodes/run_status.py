@@ -111,6 +111,7 @@ class PlantRunWatch:
     def __init__(self, node):
         self.log = node.get_logger()
         self.ended: str | None = None       # the end state the plant announced
+        self.running = False                # the plant announced a run (and no end since)
         self.sub = node.create_subscription(DiagnosticStatus, interface.RUN_STATUS,
                                             self.on_status, qos('status'))
 
@@ -122,6 +123,7 @@ class PlantRunWatch:
             self.ended = msg.message
         elif msg.message == interface.RUN_RUNNING:
             self.ended = None
+        self.running = msg.message == interface.RUN_RUNNING
 
     def explains_stop(self) -> bool:
         """After a stop signal: True, and logged, if the plant's run had ended before it."""

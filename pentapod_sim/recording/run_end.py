@@ -175,14 +175,19 @@ def failures(report: Mapping[str, Mapping[str, int]],
     return out
 
 
-def report_record(end: RunStatus, report: Mapping[str, Mapping[str, int]],
+#: ``run_state`` of a report whose plant announced no end (killed, or never ran).
+NO_END = 'no end announced'
+
+
+def report_record(end: RunStatus | None, report: Mapping[str, Mapping[str, int]],
                   foreign: Mapping[str, str]) -> dict[str, object]:
     """
     The recorder's record of a run's end in its bag (MCAP metadata ``pentapod_recording``).
 
     ``run_state``, ``steps`` and per topic ``expected``, ``recorded`` (messages), ``unique``
     (steps), ``missing`` (steps), ``conflicting`` (copies), and ``foreign`` (topic -> the
-    second writers seen); docs/recording.md.
+    second writers seen); docs/recording.md. Without an end announcement (``end`` None):
+    ``run_state`` :data:`NO_END`, ``steps`` -1, no counts, the foreign writers seen.
     """
     def flow(mapping: Mapping[str, object]) -> str:
         return yaml.safe_dump(dict(mapping), default_flow_style=True, sort_keys=False,
@@ -190,7 +195,7 @@ def report_record(end: RunStatus, report: Mapping[str, Mapping[str, int]],
 
     def per_topic(key: str) -> str:
         return flow({t: c[key] for t, c in report.items()})
-    return {'run_state': end.state, 'steps': end.steps,
+    return {'run_state': end.state if end else NO_END, 'steps': end.steps if end else -1,
             'expected': per_topic('expected'), 'recorded': per_topic('recorded'),
             'unique': per_topic('unique'), 'missing': flow(shortfalls(report)),
             'conflicting': flow({t: c['conflicting'] for t, c in report.items()

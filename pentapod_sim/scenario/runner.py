@@ -13,8 +13,9 @@ end, stops the others with SIGINT (SIGKILL after a grace period; a source that s
 plant's run end says so and exits 0) and returns the plant's exit code, or the code of what
 else went wrong (:mod:`pentapod_sim.exits`, docs/interface.md "Stopping and exit codes"): 3 if
 a recorder did not close its bag complete (it failed, was killed, or stayed stopped), naming
-it; 4 if a source saw the plant stall (the plant is then stopped at once); 5 if the plant did
-not end in time; 1 if another node failed; 128 + N for a plant killed by signal N.
+it; 4 if a source saw the plant stall (the plant is then stopped at once); 1 if another node
+failed (also when the plant then had to be stopped); 5 if the plant did not end within
+``--timeout``; 128 + N for a plant killed by signal N.
 launch/testbed.launch.py uses the same parser.
 
 SIGINT, SIGTERM or SIGHUP to the runner is forwarded to every node; the nodes finish their
@@ -65,22 +66,25 @@ def composed_command(params_file: Path) -> list[str]:
     return [sys.executable, '-m', COMPOSED_MODULE, str(params_file)]
 
 
-def stop(procs: dict[str, Proc], grace: float = 5.0) -> dict[str, int | None]:
+def stop(procs: dict[str, Proc], grace: float = 5.0,
+         graces: dict[str, float] | None = None) -> dict[str, int | None]:
     """
     SIGINT every running process, SIGKILL (named) those still alive after ``grace`` s.
 
-    Returns the exit codes of the processes it stopped.
+    ``graces`` gives some processes longer (a recorder draining the last steps: a killed one
+    leaves a bag without footer). Returns the exit codes of the processes it stopped.
     """
     running = [name for name, proc in procs.items() if proc.poll() is None]
     for name in running:
         procs[name].send_signal(signal.SIGINT)
         procs[name].send_signal(signal.SIGCONT)   # a stopped process ends cleanly too
-    end = time.monotonic() + grace
+    start = time.monotonic()
     for name, proc in procs.items():
+        limit = (graces or {}).get(name, grace)
         try:
-            proc.wait(timeout=max(0.1, end - time.monotonic()))
+            proc.wait(timeout=max(0.1, start + limit - time.monotonic()))
         except subprocess.TimeoutExpired:
-            LOG.error('node %s did not stop within %.0f s of SIGINT; killing it', name, grace)
+            LOG.error('node %s did not stop within %.0f s of SIGINT; killing it', name, limit)
             proc.kill()
             proc.wait()
     return {name: procs[name].poll() for name in running}
@@ -223,18 +227,27 @@ def _run_nodes(scenario: Scenario, timeout: float, env: dict, log_dir: Path | No
                     procs[name].wait()
             dead = {n for n, p in procs.items() if p.poll() not in (None, 0)} - reported
             for name in sorted(dead):
-                LOG.error('node %s %s', name, describe_exit(procs[name].poll()))
+                if forwarded and procs[name].poll() == shutdown.exit_code():
+                    LOG.info('node %s stopped on the forwarded %s', name,
+                             shutdown.signal_name())       # its clean stop, not an error
+                    continue
+                _log_end(name, procs[name].poll())
                 if procs[name].poll() == exits.PLANT_STALLED:
                     cause = cause or 'stalled'      # the plant is stuck: no grace helps it
-                elif name in recorders:
+                elif name in recorders and procs[name].poll() != exits.RECORDING_FAILED:
                     cause = cause or 'recording'    # the run's record is lost from here on
+                # (a recorder's report failed (3) after the run ended: the plant's own end,
+                # an error that stopped its run, comes next and is the cause)
                 # a dead source stops a lockstep plant with a named error; give it the time
                 end = min(end, time.monotonic() + (0.0 if cause else _plant_grace(scenario)))
             reported |= dead
             if time.monotonic() > end:
-                if cause is None:
+                if cause is None and reported and not forwarded:
+                    LOG.error('stopping the plant: it did not end within %.0f s after %s '
+                              'failed', _plant_grace(scenario), ', '.join(sorted(reported)))
+                elif cause is None:
                     LOG.error('plant did not end in time (timeout %.0f s, or the grace after '
-                              'a node died or a stop signal); stopping it', timeout)
+                              'a stop signal); stopping it', timeout)
                 else:
                     LOG.error('stopping the plant: %s', 'it stalled' if cause == 'stalled'
                               else 'a recorder failed')
@@ -247,7 +260,11 @@ def _run_nodes(scenario: Scenario, timeout: float, env: dict, log_dir: Path | No
         failed = {n: p.poll() for n, p in procs.items() if p.poll() not in (0, None)
                   and not (forwarded and p.poll() == shutdown.exit_code())}
     finally:
-        stopped = stop(procs)
+        # a recorder after SIGINT waits for the plant's end announcement, then drains; the
+        # plant waits up to ack_timeout for its subscribers' acknowledgements
+        graces = {n.name: n.params.drain_timeout + 5.0 for n in scenario.of_role(RECORDER)}
+        graces[scenario.plant.name] = scenario.plant.params.ack_timeout + 5.0
+        stopped = stop(procs, graces=graces)
         tmp.cleanup()
         for stream in logs:
             stream.close()
@@ -256,8 +273,17 @@ def _run_nodes(scenario: Scenario, timeout: float, env: dict, log_dir: Path | No
             f'{name} ({describe_exit(rc)})' for name, rc in stopped.items()))
     for name, rc in failed.items():
         if name not in reported:
-            LOG.error('node %s %s', name, describe_exit(rc))
+            _log_end(name, rc)
     return _end_code(scenario, code, failed, {**stopped, **failed}, cause)
+
+
+def _log_end(name: str, rc: int | None) -> None:
+    """Log how a node ended: a clean stop on a signal (128 + N) as a warning, else an error."""
+    if rc is not None and rc in {exits.of_signal(s) for s in shutdown.STOP_SIGNALS}:
+        LOG.warning('node %s stopped by %s (exit code %d)', name,
+                    signal.Signals(rc - exits.SIGNAL_BASE).name, rc)
+    else:
+        LOG.error('node %s %s', name, describe_exit(rc))
 
 
 def _end_code(scenario: Scenario, code: int | None, failed: dict[str, int | None],
@@ -276,12 +302,14 @@ def _end_code(scenario: Scenario, code: int | None, failed: dict[str, int | None
            and rc not in (0, None, exits.of_signal(signal.SIGINT))}
     if bad and (code == 0 or cause == 'recording'):
         for name, rc in sorted(bad.items()):
-            LOG.error('recording failed: recorder %s %s; its bag is incomplete%s', name,
-                      describe_exit(rc), ' (no footer: `analyze recover`)'
-                      if rc is not None and rc < 0 else '')
+            LOG.error('recording failed: recorder %s %s; %s', name, describe_exit(rc),
+                      'its bag is closed, its report (above) says why it cannot be trusted'
+                      if rc == exits.RECORDING_FAILED else 'its bag is incomplete'
+                      + (' (no footer: `analyze recover`)' if rc is not None and rc < 0
+                         else ''))
         return exits.RECORDING_FAILED
-    if code is None:
-        return exits.TIMEOUT
+    if code is None:        # a node that failed first is the cause (named above)
+        return exits.ERROR if failed else exits.TIMEOUT
     if code == 0 and failed:
         return exits.ERROR
     return exits.of_returncode(code)
@@ -297,7 +325,8 @@ def _forward(procs: dict[str, Proc], name: str) -> None:
 
 def main(argv=None) -> int:
     """Entry point of ``ros2 run pentapod_testbed scenario <name or file>``."""
-    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0],
+                                     allow_abbrev=False)
     parser.add_argument('scenario', help='scenario name (config/scenarios) or YAML file')
     parser.add_argument('--steps', type=int, help='override plant steps')
     parser.add_argument('--duration', type=float, help='override plant duration [s]')

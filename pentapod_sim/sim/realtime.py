@@ -9,7 +9,9 @@ from __future__ import annotations
 
 import math
 import time
-from typing import Any, Callable, Protocol
+from typing import Any, Callable, Protocol, Sequence
+
+import numpy.typing as npt
 
 from pentapod_sim import shutdown
 from pentapod_sim.sim.lateness import fault_in, LatenessStats
@@ -94,10 +96,22 @@ class RealTime:
         self._first = Lockstep(core, mixer, 1, waits, clock, stopped)
         self._t0 = 0.0
         self._next_check = self._next_report = math.inf
+        self._prepared = False
+
+    def prepare(self, buffers: Sequence[npt.NDArray[Any] | None]) -> None:
+        """
+        Write every page of ``buffers`` and of the lateness record (:func:`fault_in`), once.
+
+        Seconds for a long run: the plant does it before it announces its run, so that its
+        sources do not take that time for a stalled plant (``plant_stall_timeout``).
+        """
+        if not self._prepared:
+            fault_in(*buffers, self.stats.lateness, self.stats.misses)
+            self._prepared = True
 
     def run(self, exchange: Exchange) -> None:
         """Step 0 in lockstep, then the paced steps until ``n_steps`` or a stop request."""
-        fault_in(*exchange.buffers(), self.stats.lateness, self.stats.misses)  # before step 0
+        self.prepare(exchange.buffers())          # before step 0
         self._first.run(exchange)
         self._t0 = t0 = self.clock() - self.core.dt
         self._next_report = t0 + self.report_period
