@@ -92,7 +92,6 @@ class RecorderNode(TestbedNode):
         utc = datetime.datetime.now(datetime.timezone.utc).strftime('%Y%m%dT%H%M%SZ')
         name = (params.bag_name or 'run-{utc}').replace('{utc}', utc)
         self.ledger = StepLedger(self._selected)
-        self.initial_state: str | None = None     # as the plant's run status says
         self.end = None           # RunStatus once the plant announced the end of the run
         self.end_seen = None      # monotonic time of that announcement
         self.report = None        # expected vs unique counts, set by close()
@@ -241,9 +240,7 @@ class RecorderNode(TestbedNode):
             except BagError as err:
                 self.get_logger().error(f'{interface.RUN_STATUS}: {err}')
                 return
-            if status.initial_state != self.initial_state:   # a start not at rest is noted
-                self.initial_state = status.initial_state
-                self.writer.add_record(run_end.START_RECORD, {'initial_state': self.initial_state})
+            run_end.note_start(self.writer, status)       # a start not at rest is noted
             if status.ended:
                 self.end, self.end_seen = status, time.monotonic()
                 self.get_logger().info(f'run {status.state} after {status.steps} steps; '

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 import time
-from typing import Callable, Iterable, Mapping
+from typing import Any, Callable, Iterable, Mapping
 
 import yaml
 
@@ -80,6 +80,12 @@ class RunStatus:
             raise BagError(f'run status has steps = {steps} < 0')
         topics = tuple(t for t in values['step_topics'].split(',') if t)
         return cls(state, steps, dt, last, topics, values.get('initial_state', 'rest'))
+
+
+def note_start(writer: Any, status: RunStatus) -> None:
+    """Store where the plant started (:data:`START_RECORD`) in ``writer``'s bag, once."""
+    if writer.custom_data.get(f'{START_RECORD}.initial_state') != status.initial_state:
+        writer.add_record(START_RECORD, {'initial_state': status.initial_state})
 
 
 class StepLedger:
