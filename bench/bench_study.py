@@ -49,7 +49,7 @@ def _loop_steps_per_s(run_dir: Path) -> float:
 def run(quick: bool = False) -> list[dict]:
     """Study FRF runs against the offline loop of the same plant and laws."""
     rounds = 1 if quick else 3
-    cfg = load_study_config(positions=('P1',), duration=1.0 if quick else None)
+    cfg = load_study_config(positions=('P1',), period=0.25 if quick else None)
     rows = []
     load = os.getloadavg()[0]          # the ratio holds under load, the absolute figures not
     with tempfile.TemporaryDirectory() as tmp:

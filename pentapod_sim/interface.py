@@ -135,8 +135,11 @@ RUN_STATUS_KEYS = ('state', 'steps', 'dt', 'last_stamp_ns', 'step_topics')
 #: the first), ``deadline_misses`` (realtime: answers of a source that missed the end of their
 #: period so far, summed over the sources; 0 in lockstep) and ``rejected_messages`` (force
 #: messages the plant rejected so far) and ``rejected_by_reason`` (``source/reason=count``,
-#: comma-separated; ``stale`` and ``duplicate``: expected copies of re-published steps).
-RUN_PROGRESS_KEYS = ('step_rate', 'deadline_misses', 'rejected_messages', 'rejected_by_reason')
+#: comma-separated; ``stale`` and ``duplicate``: expected copies of re-published steps), and
+#: ``initial_state`` (``rest``, or ``file <path>``: the plant started from the state in that
+#: file, parameter ``initial_state_file``; the recorder stores it in the bag's metadata).
+RUN_PROGRESS_KEYS = ('step_rate', 'deadline_misses', 'rejected_messages', 'rejected_by_reason',
+                     'initial_state')
 
 
 def force_topic(source: str) -> str:

@@ -52,7 +52,7 @@ def _write(tmp_path: Path, name: str, doc) -> Path:
     ('positions.yaml', ['positions', 'P2', 'b_deg'], 'b_dg', 'b_deg'),
     ('reduction.yaml', ['static_correction'], 'static_corection', 'static_correction'),
     ('reduction.yaml', ['relevance', 1, 'rel_limit'], 'rel_limt', 'rel_limit'),
-    ('study.yaml', ['analysis', 'nperseg'], 'npersg', 'nperseg'),
+    ('study.yaml', ['excitation', 'settle_periods'], 'settle_period', 'settle_periods'),
     ('study.yaml', ['step_response'], 'step_respons', 'step_response'),
     ('machining.yaml', ['materials', 'steel', 'kienzle', 'exponent'], 'exponnt', 'exponent'),
     ('machining.yaml', ['operations', 'steel_half_down', 'milling'], 'miling', 'milling'),
@@ -101,8 +101,7 @@ def test_the_issues_example_relevance_measure(tmp_path):
      'frequency: f_min = 500.0 Hz must be < f_max = 400.0 Hz'),
     ('reduction.yaml', ['report_pair'], ['tcp_displacement_y'],
      "report_pair = ['tcp_displacement_y']: expected a list of 2 items"),
-    ('study.yaml', ['analysis', 'coherence_min'], 1.5,
-     'analysis.coherence_min = 1.5: must lie in (0, 1)'),
+    ('study.yaml', ['excitation', 'periods'], 0, 'excitation.periods = 0: must be > 0'),
     ('study.yaml', ['excitation', 'direction'], 'w',
      "excitation.direction = 'w': must be one of x, y, z"),
     ('study.yaml', ['positions'], ['P1', 'P22'],
@@ -229,25 +228,26 @@ def test_shipped_study_file_gives_the_raw_values():
     assert cfg.scenarios == tuple(raw['scenarios'])
     assert (cfg.sample_rate, cfg.pma_force_amplitude) == (raw['sample_rate'],
                                                           raw['pma_force_amplitude'])
-    assert (cfg.direction, cfg.amplitude, cfg.band, cfg.duration, cfg.seed) == (
-        exc['direction'], exc['amplitude'], tuple(exc['band']), exc['duration'], exc['seed'])
-    assert (cfg.nperseg, cfg.f_max, cfg.coherence_min) == (ana['nperseg'], ana['f_max'],
-                                                           ana['coherence_min'])
+    assert (cfg.direction, cfg.amplitude, cfg.band, cfg.period, cfg.periods,
+            cfg.settle_periods) == (exc['direction'], exc['amplitude'], tuple(exc['band']),
+                                    exc['period'], exc['periods'], exc['settle_periods'])
+    assert cfg.f_max == ana['f_max']
     assert cfg.freq_grid == (freq['f_min'], freq['f_max'], freq['n_points'])
     assert (cfg.step_position, cfg.step_amplitude, cfg.step_duration) == (
         step['position'], step['amplitude'], step['duration'])
-    assert isinstance(cfg.seed, int) and isinstance(cfg.freq_grid[2], int)
+    assert isinstance(cfg.periods, int) and isinstance(cfg.freq_grid[2], int)
 
 
 def test_study_overrides_are_checked_and_named():
-    cfg = load_study_config(duration=8.0, positions=('P2',))
-    assert cfg.duration == 8.0 and cfg.positions == ('P2',)
-    with pytest.raises(ConfigError, match=r'study\.yaml with duration=-1\.0: excitation\.'
-                                          r'duration = -1\.0 s: must be > 0$'):
-        load_study_config(duration=-1.0)
-    with pytest.raises(ConfigError, match="unknown study setting 'durtion'; did you mean "
-                                          "'duration'"):
-        load_study_config(durtion=2.0)
+    cfg = load_study_config(period=2.0, positions=('P2',))
+    assert cfg.period == 2.0 and cfg.positions == ('P2',)
+    assert cfg.duration == 2.0 * (cfg.settle_periods + cfg.periods)
+    with pytest.raises(ConfigError, match=r'study\.yaml with period=-1\.0: excitation\.'
+                                          r'period = -1\.0 s: must be > 0$'):
+        load_study_config(period=-1.0)
+    with pytest.raises(ConfigError, match="unknown study setting 'perod'; did you mean "
+                                          "'period'"):
+        load_study_config(perod=2.0)
 
 
 # ------------------------------------------------------------------------ the schema itself

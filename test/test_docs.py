@@ -198,8 +198,11 @@ def test_readme_result_sentences_are_made_from_the_committed_csv():
     assert (f'All {stable} sampled loops' if stable == len(summary)
             else f'{stable} of the {len(summary)} sampled loops') in text
     worst = max(float(r['deviation_db']) for r in summary.values())
-    assert float(re.search(r'by at most ([\d.]+) dB', text).group(1)) == pytest.approx(
+    assert float(re.search(r'by at most ([\d.e+-]+) dB', text).group(1)) == pytest.approx(
         worst, rel=0.05)
+    # the study's FRF runs: every line of every scenario at every position within 1 dB of the
+    # sampled loop (issue: measured peaks as the analytic ones)
+    assert worst < 1.0, worst
 
 
 def _analytic_results(out_dir: Path) -> StudyResults:

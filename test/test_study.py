@@ -99,13 +99,16 @@ def test_filtered_pma_has_no_viscous_equivalent():
 
 def test_a_run_applies_study_settings_and_adds_a_recorder(tmp_path):
     """The study's typed settings reach every node's typed parameters, and its file."""
-    cfg = load_study_config(duration=4.0, sample_rate=2500.0)
+    cfg = load_study_config(period=1.5, sample_rate=2500.0)
     run = study_scenario('pma_5kg', 'P1', tmp_path / 'm.npz', cfg, tmp_path / 'bag',
-                         {'model_hash': 'abc'})
+                         {'model_hash': 'abc'}, initial_state=tmp_path / 'x0.npz')
     plant = run.plant.params
-    assert (plant.position, plant.duration, plant.model_file) == ('P1', 4.0,
-                                                                   str(tmp_path / 'm.npz'))
-    assert run.node('exciter').params.amplitude == cfg.amplitude
+    assert (plant.position, plant.duration, plant.model_file) == (
+        'P1', 1.5 * (cfg.settle_periods + cfg.periods), str(tmp_path / 'm.npz'))
+    assert plant.initial_state_file == str(tmp_path / 'x0.npz')
+    exciter = run.node('exciter').params
+    assert (exciter.kind, exciter.amplitude, exciter.period) == ('multisine', cfg.amplitude, 1.5)
+    assert exciter.settle_periods == cfg.settle_periods
     for name in ('plant', 'exciter', 'pma'):
         assert run.node(name).params.dt == cfg.dt == 1 / 2500.0, name
         assert run.node(name).params.wait_for_subscribers == ('recorder',), name
@@ -120,7 +123,7 @@ def test_a_run_applies_study_settings_and_adds_a_recorder(tmp_path):
 @pytest.mark.parametrize('override, message', [
     ({'direction': 'w'}, "excitation.direction = 'w'"),
     ({'band': (0.0, 5000.0)}, 'excitation.band'),
-    ({'duration': -1.0}, 'duration = -1.0'),
+    ({'period': -1.0}, 'period = -1.0'),
     ({'scenarios': ('tcp_damping',)}, 'must start with baseline'),
 ])
 def test_bad_study_config_names_the_value(override, message):
@@ -131,9 +134,9 @@ def test_bad_study_config_names_the_value(override, message):
 def test_missing_key_is_named(tmp_path):
     path = tmp_path / 'study.yaml'
     doc = yaml.safe_load(Path(load_study_config.__globals__['default_path']()).read_text())
-    del doc['excitation']['seed']
+    del doc['excitation']['period']
     path.write_text(yaml.safe_dump(doc))
-    with pytest.raises(ConfigError, match=r'study\.yaml: excitation\.seed: missing key'):
+    with pytest.raises(ConfigError, match=r'study\.yaml: excitation\.period: missing key'):
         load_study_config(path)
 
 

@@ -38,8 +38,7 @@ def _short_study(tmp_path: Path) -> Path:
     doc.update(positions=['P1'], scenarios=SCENARIOS)
     doc['step_response']['position'] = 'P1'
     doc['damping']['scenarios'] = ['baseline']     # `scenario ... tcp_damping`: no damping run
-    doc['excitation']['duration'] = 2.0        # s: the testbed run of `scenario` below
-    doc['analysis']['nperseg'] = 2048
+    doc['excitation']['period'] = 0.5          # s: the testbed run of `scenario` below
     path = tmp_path / 'study.yaml'
     path.write_text(yaml.safe_dump(doc))
     return path

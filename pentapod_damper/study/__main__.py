@@ -65,7 +65,7 @@ def _settings(args: argparse.Namespace, positions: tuple[str, ...] | None,
     if args.fe_model and positions:
         raise ConfigError('--positions and --fe-model exclude each other: an imported model '
                           'is the one position of the study')
-    cfg = load_study_config(args.config, duration=args.duration, positions=positions,
+    cfg = load_study_config(args.config, period=args.period, positions=positions,
                             **overrides)
     if args.fe_model:           # named after its file, like the outputs of `modes --fe-model`
         name = Path(args.fe_model).stem
@@ -194,7 +194,7 @@ def _print_rows(rows: list[tables.SummaryRow]) -> None:
     for r in rows:
         dev = r.deviation_db if r.deviation_db is not None else float('nan')
         print(f'{r.position:4} {r.scenario:18} {r.peak_um_per_N:10.4f} {r.peak_reduction:9.2f} '
-              f'{r.rms_reduction:8.2f} {r.stable_depth_gain:10.2f} {dev:12.2f} '
+              f'{r.rms_reduction:8.2f} {r.stable_depth_gain:10.2f} {dev:12.2g} '
               f'{r.steps_per_s or 0:8.0f}')
 
 
@@ -217,7 +217,8 @@ def _print_summary(res: StudyResults, path: Path) -> None:
 def _study_options(parser: argparse.ArgumentParser, one_position: bool = False) -> None:
     parser.add_argument('--config', help='study YAML (default config/study.yaml)')
     parser.add_argument('--out', default='out/study', help='output folder')
-    parser.add_argument('--duration', type=float, help='excited time per run [s]')
+    parser.add_argument('--period', type=float, help='multisine period of the FRF runs [s] '
+                        '(line spacing 1 / period)')
     if not one_position:
         parser.add_argument('--positions', help='comma-separated positions, e.g. P1,P2')
     parser.add_argument('--fe-model', metavar='FILE.yaml', help='an imported FE model '

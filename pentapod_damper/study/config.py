@@ -56,19 +56,17 @@ class StudyConfig:
     direction : str
         Excited and measured TCP direction (x, y or z).
     amplitude : float
-        RMS of the random TCP force [N].
+        Peak of the multisine TCP force of the FRF runs [N].
     band : tuple of float
-        Band of the random force [Hz].
-    duration : float
-        Excited and recorded time per run [s].
-    seed : int
-        Random seed of the excitation.
-    nperseg : int
-        Welch segment length [samples].
+        Band of its lines [Hz].
+    period : float
+        Its period [s] (line spacing 1 / period).
+    periods : int
+        Periods averaged per FRF run.
+    settle_periods : int
+        Periods run before them and discarded (the laws' own start transient).
     f_max : float
         Upper frequency of plots and tables [Hz].
-    coherence_min : float
-        Coherence above which measured and analytic FRFs are compared.
     freq_grid : tuple
         (f_min, f_max, n_points) of the analytic FRFs [Hz].
     pma_force_amplitude : float
@@ -116,11 +114,10 @@ class StudyConfig:
     direction: str
     amplitude: float
     band: tuple[float, ...]
-    duration: float
-    seed: int
-    nperseg: int
+    period: float
+    periods: int
+    settle_periods: int
     f_max: float
-    coherence_min: float
     freq_grid: tuple[float, float, int]
     pma_force_amplitude: float
     step_position: str
@@ -144,6 +141,11 @@ class StudyConfig:
     def dt(self) -> float:
         """Sample time [s] of every run (:func:`pentapod_sim.parameters.sample_time`)."""
         return sample_time(self.sample_rate)
+
+    @property
+    def duration(self) -> float:
+        """Simulated time of an FRF run [s]: its settling and averaged periods."""
+        return (self.settle_periods + self.periods) * self.period
 
 
 @dataclass(frozen=True)
@@ -174,23 +176,23 @@ class PmaRequirements:
 
 @dataclass(frozen=True)
 class Excitation:
-    """Band-limited random force at the TCP of the FRF runs."""
+    """Periodic multisine force at the TCP of the FRF runs, from the periodic steady state."""
 
     direction: str = spec(choices=AXES, description='TCP direction excited and measured')
-    amplitude: float = spec('N', POSITIVE, description='RMS of the random force')
-    band: tuple[float, ...] = spec('Hz', NON_NEGATIVE, length=2, description='force band')
-    duration: float = spec('s', POSITIVE, description='excited and recorded time per run')
-    seed: int = spec('-', NON_NEGATIVE, description='random seed of the excitation')
+    amplitude: float = spec('N', POSITIVE, description='peak of the multisine force')
+    band: tuple[float, ...] = spec('Hz', POSITIVE, length=2, description='band of the lines')
+    period: float = spec('s', POSITIVE, description='multisine period (line spacing 1 / '
+                         'period)')
+    periods: int = spec('-', POSITIVE, description='periods averaged')
+    settle_periods: int = spec('-', NON_NEGATIVE, description='periods run before them and '
+                               'discarded')
 
 
 @dataclass(frozen=True)
 class Analysis:
-    """FRF estimation from the bags."""
+    """Plots and tables."""
 
-    nperseg: int = spec('samples', POSITIVE, description='Welch segment length')
     f_max: float = spec('Hz', POSITIVE, description='upper end of plots and tables')
-    coherence_min: float = spec('-', bounds=(0.0, 1.0), closed=(False, False),
-                                description='coherence above which FRFs are compared')
 
 
 @dataclass(frozen=True)
@@ -255,24 +257,21 @@ class StudyFile:
             raise ConfigError(f'scenarios[0] = {self.scenarios[0]!r}: the scenarios must start '
                               'with baseline')
         lo, hi = exc.band
-        if not 0 <= lo < hi < fs / 2:
-            raise ConfigError(f'excitation.band = {list(exc.band)} Hz: must satisfy 0 <= low < '
+        if not 0 < lo < hi < fs / 2:
+            raise ConfigError(f'excitation.band = {list(exc.band)} Hz: must satisfy 0 < low < '
                               f'high < sample_rate / 2 = {fs / 2:g} Hz')
         lo, hi = self.damping.band
         if not 0 < lo < hi < fs / 2:
             raise ConfigError(f'damping.band = {list(self.damping.band)} Hz: must satisfy 0 < '
                               f'low < high < sample_rate / 2 = {fs / 2:g} Hz')
-        if not 16 <= self.analysis.nperseg <= exc.duration * fs:
-            raise ConfigError(f'analysis.nperseg = {self.analysis.nperseg}: must lie in '
-                              f'[16, excitation.duration * sample_rate = {exc.duration * fs:g}]')
 
 
 #: Key path in the file of each :class:`StudyConfig` attribute.
 FILE_KEYS = {'positions': 'positions', 'scenarios': 'scenarios', 'sample_rate': 'sample_rate',
              'direction': 'excitation.direction', 'amplitude': 'excitation.amplitude',
-             'band': 'excitation.band', 'duration': 'excitation.duration',
-             'seed': 'excitation.seed', 'nperseg': 'analysis.nperseg',
-             'f_max': 'analysis.f_max', 'coherence_min': 'analysis.coherence_min',
+             'band': 'excitation.band', 'period': 'excitation.period',
+             'periods': 'excitation.periods',
+             'settle_periods': 'excitation.settle_periods', 'f_max': 'analysis.f_max',
              'freq_grid': 'frequency', 'pma_force_amplitude': 'pma_force_amplitude',
              'step_position': 'step_response.position',
              'step_amplitude': 'step_response.amplitude',

@@ -30,15 +30,17 @@ from pentapod_damper.study.config import StudyConfig
 from pentapod_damper.study.damping import continuous_loop_frf
 from pentapod_damper.study.pma import pma_design, PmaDesign
 from pentapod_damper.study.records import (
+    ComplexArray,
     FloatArray,
     Measured,
     PmaSpec,
     PositionModel,
     ScenarioAnalytic,
 )
-from pentapod_damper.study.runs import RunResult
+from pentapod_damper.study.runs import excitation_params, RunResult
 from pentapod_sim.analysis.bag.reader import open_bag
-from pentapod_sim.analysis.frf.estimation import frf_from_series
+from pentapod_sim.analysis.frf.from_run import frfs_from_bag
+from pentapod_sim.analysis.frf.periodic import synchronous_frf
 from pentapod_sim.errors import ConfigError
 from pentapod_sim.fe.imported.build import load_fe_model
 from pentapod_sim.interface import EXCITATION, PMA_STATE, TCP_STATE
@@ -51,7 +53,13 @@ from pentapod_sim.plant.check_model import (
 from pentapod_sim.plant.config import load_reduction_config
 from pentapod_sim.plant.frf_peaks import exact_peak, plant_pair_frf
 from pentapod_sim.scenario.files import read_scenario
-from pentapod_sim.sim.controllers import controller_of
+from pentapod_sim.sim.controllers import controller_of, LoopSystem
+from pentapod_sim.sim.excitation import Excitation, ExcitationSpec
+from pentapod_sim.sim.periodic_state import (
+    periodic_state,
+    PeriodicState,
+    start_with_laws_at_rest,
+)
 from pentapod_sim.sim.stability import apply_policy, check_loop, LoopCheck
 
 LOG = logging.getLogger(__name__)
@@ -95,10 +103,35 @@ def prepare_model(position: str, out_dir: Path, say: Callable[[str], None],
     return PositionModel(position, plant, Path(path), plant.content_hash(), check)
 
 
-def welch_freq(cfg: StudyConfig) -> FloatArray:
-    """Frequency bins [Hz] of the measured FRFs (Welch segments of ``nperseg``), DC left out."""
-    freq = np.fft.rfftfreq(cfg.nperseg, cfg.dt)
-    return np.asarray(freq[(freq > 0) & (freq <= cfg.f_max)], dtype=np.float64)
+def frf_excitation(cfg: StudyConfig) -> Excitation:
+    """The FRF runs' multisine, sample for sample as the exciter node builds it."""
+    return Excitation(ExcitationSpec(**excitation_params(cfg)), cfg.dt)
+
+
+def line_freq(cfg: StudyConfig) -> FloatArray:
+    """The FRF runs' excited lines [Hz] (multiples of 1 / period in the band)."""
+    return np.asarray(frf_excitation(cfg).lines_hz, dtype=np.float64)
+
+
+def steady_start(cfg: StudyConfig, ana: ScenarioAnalytic) -> PeriodicState:
+    """
+    The periodic steady state of the scenario's sampled loop under the FRF runs' multisine.
+
+    From the linear models of plant and laws (:attr:`ScenarioAnalytic.sampled`). The laws'
+    nodes start at rest, so the plant starts shifted from its periodic state such that the
+    laws' zero start excites only the loop's fastest modes (their filters'), not the lightly
+    damped ones (:func:`pentapod_sim.sim.periodic_state.start_with_laws_at_rest`).
+    """
+    exc, loop = frf_excitation(cfg), ana.sampled
+    assert exc.period_steps is not None and loop is not None
+    forces = exc.series(exc.period_steps)
+    ports = loop.core.input_names
+    e = np.zeros((exc.period_steps, len(ports)))
+    for i, axis in enumerate('xyz'):
+        e[:, ports.index(f'tcp_force_{axis}')] = forces[:, i]
+    system = LoopSystem(loop.a, loop.b, loop.c_y, loop.c_u, loop.augmented)
+    return start_with_laws_at_rest(system, loop.core.n_states,
+                                   periodic_state(system, loop.core.n_states, e))
 
 
 def scenario_pma(scenario: str) -> PmaSpec | None:
@@ -116,7 +149,7 @@ def scenario_analytic(model: PositionModel, scenario: str, cfg: StudyConfig,
 
     The continuous FRF is evaluated on ``freq``, and its peak over [band[0], f_max] searched
     at the resonances (:func:`pentapod_sim.plant.frf_peaks.exact_peak`); the sampled-loop FRF
-    on the bins of the measured FRFs (:func:`welch_freq`), so both can be compared bin by bin.
+    at the lines of the FRF runs' multisine (:func:`line_freq`), so both compare line by line.
     The sampled loop is checked on the plant and the check model
     (:func:`pentapod_sim.sim.stability.check_loop`, policy ``cfg.check_policy``); a loop
     unstable on the plant itself is refused whatever the policy.
@@ -131,7 +164,7 @@ def scenario_analytic(model: PositionModel, scenario: str, cfg: StudyConfig,
     if loop.plant_radius >= 1.0:       # whatever the policy: the run itself would diverge
         raise ConfigError(f'{loop.summary()}; lower its gains or raise the sample rate')
     sampled = sampled_loop(model.plant, laws, dt)
-    disc = discrete_frf(model.plant, laws, dt, welch_freq(cfg), f'tcp_force_{d}', sampled)
+    disc = discrete_frf(model.plant, laws, dt, line_freq(cfg), f'tcp_force_{d}', sampled)
     if dampers is None:         # laws with dynamics of their own: their continuous loop
         frf = continuous_loop_frf(model.plant, laws, f'tcp_displacement_{d}', f'tcp_force_{d}')
         cont, dampers = frf(freq), {}
@@ -202,45 +235,73 @@ def pma_designs(model: PositionModel, ana: ScenarioAnalytic,
 
 
 def measure(run: RunResult, cfg: StudyConfig) -> Measured:
-    """Estimate the TCP FRF (H1, Welch/Hann) and PMA stroke/force FRFs from a run's bag."""
+    """
+    The TCP FRF (and PMA stroke and force FRFs) at the lines of a multisine run's bag.
+
+    Synchronous averaging over the periods after the settling ones
+    (:func:`pentapod_sim.analysis.frf.from_run.frfs_from_bag`), and the periodicity check:
+    the largest difference between the first and the last of those periods of the TCP
+    displacement, relative to its largest value (rounding for a run that started at the
+    periodic steady state of a loop the testbed follows exactly; a transient shows there).
+    """
     d = cfg.direction
+    outputs = [f'{TCP_STATE}.position.tcp_{d}']
+    pma = run.scenario.startswith('pma')
+    if pma:
+        outputs.append(f'{PMA_STATE}.effort.pma_{d}')
+    frfs = frfs_from_bag(run.bag, outputs)
     bag = open_bag(run.bag)
-    force = bag.series(f'{EXCITATION}.force.{d}')
-    tcp = frf_from_series(force, bag.series(f'{TCP_STATE}.position.tcp_{d}'),
-                          'random', cfg.nperseg)
+    y = bag.series(outputs[0]).values
+    n = int(round(cfg.period / cfg.dt))
+    s, e = cfg.settle_periods * n, (cfg.settle_periods + cfg.periods) * n
+    first, last = y[s:s + n], y[e - n:e]
+    periodicity = float(np.abs(last - first).max() / np.abs(y[s:e]).max())
     counts = {t: bag.topic(t).count for t in (TCP_STATE, EXCITATION)}
-    result = Measured(run, tcp.freq, tcp.H, tcp.coherence, n_messages=counts)
-    if run.scenario.startswith('pma'):
-        stroke = frf_from_series(force, bag.series(f'{PMA_STATE}.position.pma_{d}'),
-                                 'random', cfg.nperseg)
-        effort = frf_from_series(force, bag.series(f'{PMA_STATE}.effort.pma_{d}'),
-                                 'random', cfg.nperseg)
-        result.pma_stroke, result.pma_force = stroke.H, effort.H
+    result = Measured(run, frfs.freq, frfs.H[0, 0], periodicity, n_messages=counts)
+    if pma:
+        result.pma_force = frfs.H[1, 0]
+        stroke = bag.series(f'{PMA_STATE}.position.pma_{d}').values[:e]
+        result.pma_stroke = _stroke_frf(bag.series(f'{EXCITATION}.force.{d}').values[:e],
+                                        stroke, cfg, frfs.freq)
     return result
 
 
-def deviation_db(measured: Measured, disc: DiscreteFrf, output: str, cfg: StudyConfig,
-                 f_lo: float) -> tuple[float, float]:
+def _stroke_frf(force: FloatArray, stroke: FloatArray, cfg: StudyConfig,
+                lines: FloatArray) -> ComplexArray:
     """
-    Largest |dB| difference between measured and sampled-loop analytic FRF.
+    Stroke / force at the lines, the proof mass's drift removed.
 
-    Only bins in [f_lo, f_max] with coherence >= coherence_min count.
+    An ideal PMA has no spring: any constant proof-mass velocity is a solution, and its node
+    starts the mass at rest, not at the periodic solution's mean velocity. The stroke is then
+    periodic plus a ramp; the ramp's slope is the change of the period mean from the first
+    analysed period to the last, and is removed before the synchronous average.
+    """
+    n = int(round(cfg.period / cfg.dt))
+    s, e = cfg.settle_periods * n, (cfg.settle_periods + cfg.periods) * n
+    slope = 0.0
+    if cfg.periods > 1:
+        slope = ((stroke[e - n:e].mean() - stroke[s:s + n].mean())
+                 / ((cfg.periods - 1) * n))
+    flat = stroke - slope * np.arange(stroke.size)
+    frf = synchronous_frf(force, flat, cfg.dt, n, cfg.settle_periods, lines)
+    return np.asarray(frf.H, dtype=np.complex128)
+
+
+def deviation_db(measured: Measured, disc: DiscreteFrf, output: str) -> tuple[float, float]:
+    """
+    Largest |dB| difference between measured and sampled-loop analytic FRF over every line.
 
     Returns
     -------
-    max_db, share : float
-        Largest deviation [dB] and the share of the band's bins that were compared.
+    max_db, peak_db : float
+        Largest deviation [dB] over all lines, and the measured peak over the analytic one,
+        both the largest over the lines [dB].
     """
-    idx = np.searchsorted(measured.freq, disc.freq)
-    if np.any(idx >= measured.freq.size) or not np.allclose(measured.freq[idx], disc.freq):
-        raise ValueError('measured FRF bins differ from the analytic ones (nperseg, rate)')
-    h_mes, coh = measured.h[idx], measured.coherence[idx]
-    band = disc.freq >= f_lo
-    good = band & (coh >= cfg.coherence_min)
-    if not np.any(good):
-        return float('nan'), 0.0
-    diff = 20 * np.log10(np.abs(h_mes[good]) / np.abs(disc.outputs[output][good]))
-    return float(np.max(np.abs(diff))), float(good.sum() / band.sum())
+    if measured.freq.shape != disc.freq.shape or not np.allclose(measured.freq, disc.freq):
+        raise ValueError('measured FRF lines differ from the analytic ones (period, band, rate)')
+    h_mes, h_ana = np.abs(measured.h), np.abs(disc.outputs[output])
+    diff = 20 * np.log10(h_mes / h_ana)
+    return float(np.max(np.abs(diff))), float(20 * np.log10(h_mes.max() / h_ana.max()))
 
 
 def step_series(run: RunResult,

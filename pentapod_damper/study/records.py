@@ -113,7 +113,7 @@ class Measured:
     run: RunResult
     freq: FloatArray
     h: ComplexArray
-    coherence: FloatArray
+    periodicity: float                         # last vs first period, relative (measure)
     pma_stroke: ComplexArray | None = None     # stroke / TCP force [m/N]
     pma_force: ComplexArray | None = None      # force / TCP force [N/N]
     n_messages: dict[str, int] = field(default_factory=dict)
@@ -122,23 +122,24 @@ class Measured:
 @dataclass
 class FrfRun:
     """
-    A random-excitation testbed run and its FRF against the sampled loop's.
+    A multisine testbed run from the periodic steady state; its FRF against the sampled loop's.
 
-    ``deviation_db``: largest |dB| difference over the bins with enough coherence;
-    ``compared_share``: the share of the band's bins compared.
+    ``deviation_db``: largest |dB| difference over every line of the band;
+    ``peak_deviation_db``: measured over analytic peak (the largest over the lines) [dB].
     """
 
     measured: Measured
     deviation_db: float
-    compared_share: float
+    peak_deviation_db: float
 
     def describe(self) -> str:
         run = self.measured.run
         recorded = ', '.join(f'{n} {t}' for t, n in self.measured.n_messages.items())
         return (f'run {run.scenario} at {run.position}: {run.steps} steps in '
                 f'{run.wall_time:.1f} s ({run.steps / run.wall_time:.0f} steps/s, lockstep); '
-                f'recorded {recorded}; measured vs analytic: max {self.deviation_db:.2f} dB '
-                f'over {self.compared_share:.0%} of the bins')
+                f'recorded {recorded}; measured vs analytic over all {self.measured.freq.size} '
+                f'lines: max {self.deviation_db:.2g} dB, peaks {self.peak_deviation_db:+.2g} '
+                f'dB; periods differ by {self.measured.periodicity:.1e} of the peak')
 
 
 @dataclass

@@ -28,6 +28,7 @@ from pentapod_sim.registry import PLANT, RECORDER
 from pentapod_sim.scenario.files import read_scenario, Scenario
 from pentapod_sim.scenario.runner import run_scenario
 from pentapod_sim.scenario.warm_start import WarmStarter
+from pentapod_sim.sim.periodic_state import PeriodicState, save_initial_state
 
 LOG = logging.getLogger(__name__)
 
@@ -54,14 +55,22 @@ class RunResult:
     steps: int
 
 
-def excitation_params(cfg: StudyConfig, kind: str = 'random') -> dict[str, Any]:
-    """Exciter parameters of a study run (random FRF run or PMA step run)."""
+def excitation_params(cfg: StudyConfig, kind: str = 'frf') -> dict[str, Any]:
+    """
+    Exciter parameters of a study run (FRF run or PMA step run).
+
+    An FRF run starts near the loop's periodic steady state
+    (:func:`pentapod_damper.study.pipeline.steady_start`): ``cfg.settle_periods`` periods
+    (the laws' own fast start transient) are discarded, the ``cfg.periods`` after them
+    averaged.
+    """
     if kind == 'step':
         return {'kind': 'step', 'amplitude': cfg.step_amplitude,
                 'direction': DIRECTIONS[cfg.direction], 'duration': 0.0, 'start_delay': 0.01}
-    return {'kind': 'random', 'amplitude': cfg.amplitude, 'direction': DIRECTIONS[cfg.direction],
-            'f_start': float(cfg.band[0]), 'f_end': float(cfg.band[1]),
-            'duration': cfg.duration, 'seed': cfg.seed}
+    return {'kind': 'multisine', 'amplitude': cfg.amplitude,
+            'direction': DIRECTIONS[cfg.direction], 'f_start': float(cfg.band[0]),
+            'f_end': float(cfg.band[1]), 'period': cfg.period, 'phases': 'schroeder',
+            'settle_periods': cfg.settle_periods, 'duration': cfg.duration}
 
 
 def damping_excitation(cfg: StudyConfig, settle: float) -> dict[str, Any]:
@@ -81,14 +90,16 @@ def damping_excitation(cfg: StudyConfig, settle: float) -> dict[str, Any]:
 
 
 def study_scenario(scenario: str, position: str, model_file: Path, cfg: StudyConfig,
-                   bag_dir: Path, run_info: dict[str, Any], kind: str = 'random',
-                   exciter: dict[str, Any] | None = None) -> Scenario:
+                   bag_dir: Path, run_info: dict[str, Any], kind: str = 'frf',
+                   exciter: dict[str, Any] | None = None,
+                   initial_state: Path | None = None) -> Scenario:
     """
     One run: the scenario's nodes with the study settings, and a recorder (typed, checked).
 
     Every node at the study's sample rate; ``exciter`` replaces the exciter parameters of
     ``kind`` (damping runs), and the run then lasts the exciter's ``duration``. The
-    scenario's own recorders are replaced by the run's, which every node waits for.
+    scenario's own recorders are replaced by the run's, which every node waits for. The plant
+    starts from the state in the file ``initial_state`` if given, else from rest.
     """
     base = read_scenario(scenario)
     run = base.without(n.name for n in base.of_role(RECORDER) if n.name != 'recorder')
@@ -108,7 +119,8 @@ def study_scenario(scenario: str, position: str, model_file: Path, cfg: StudyCon
                            timing='lockstep', steps=0, output_file='', loop_check='off',
                            # the waited-for recorder gets every step even if it matches late
                            # (transient-local per-step writers; in a composition the hand-off)
-                           subscriber_settle=0.0)
+                           subscriber_settle=0.0,
+                           initial_state_file=str(initial_state) if initial_state else '')
         if node.role == RECORDER:
             continue                              # replaced below
         if node.kind == 'exciter':
@@ -127,19 +139,22 @@ def run_duration(cfg: StudyConfig, kind: str, exciter: dict[str, Any] | None = N
     """Simulated time of a run [s]: the exciter's duration if given, else the study's."""
     if exciter:
         return float(exciter['duration'])
-    return cfg.duration if kind == 'random' else cfg.step_duration
+    return cfg.duration if kind == 'frf' else cfg.step_duration
 
 
 def run_on_testbed(scenario: str, position: str, model_file: Path, model_hash: str,
-                   cfg: StudyConfig, out_dir: Path, kind: str = 'random',
+                   cfg: StudyConfig, out_dir: Path, kind: str = 'frf',
                    timeout: float = 900.0, exciter: dict[str, Any] | None = None,
-                   composed: bool = True) -> RunResult:
+                   composed: bool = True,
+                   initial_state: PeriodicState | None = None) -> RunResult:
     """
     Run one scenario at one position in lockstep and record it.
 
     ``composed`` (default) runs every node in one process on one executor
     (:mod:`pentapod_sim.nodes.composed`), forked from :data:`WARM`: the same node classes
-    and, bit for bit, the same run as separate processes, but faster.
+    and, bit for bit, the same run as separate processes, but faster. ``initial_state``: the
+    plant's state at step 0 (written to ``initial_state.npz`` in the run's folder and named
+    in the bag's metadata), else rest.
 
     Raises
     ------
@@ -147,15 +162,20 @@ def run_on_testbed(scenario: str, position: str, model_file: Path, model_hash: s
         If a node fails or the bag is missing; the message names the run and its log folder.
     """
     # a shipped scenario's name, or a scenario file (named after its file)
-    name = f'{position}_{Path(scenario).stem}' + ('' if kind == 'random' else f'_{kind}')
+    name = f'{position}_{Path(scenario).stem}' + ('' if kind == 'frf' else f'_{kind}')
     run_dir = out_dir / 'runs' / name
     bag_dir = run_dir / 'bag'
     run_dir.mkdir(parents=True, exist_ok=True)
     shutil.rmtree(bag_dir, ignore_errors=True)   # a bag of an earlier run of this name
     info = {'study_run': name, 'scenario': scenario, 'position': position,
             'excitation': kind, 'model_file': str(model_file), 'model_hash': model_hash,
-            'sample_rate': cfg.sample_rate, 'package_version': __version__}
-    run = study_scenario(scenario, position, model_file, cfg, bag_dir, info, kind, exciter)
+            'sample_rate': cfg.sample_rate, 'package_version': __version__,
+            'initial_state': 'rest' if initial_state is None else
+            'periodic steady state of the linear loop (plant state; laws from zero)'}
+    x0_file = (None if initial_state is None else
+               save_initial_state(run_dir / 'initial_state.npz', initial_state))
+    run = study_scenario(scenario, position, model_file, cfg, bag_dir, info, kind, exciter,
+                         x0_file)
     params_file = run_dir / 'scenario.yaml'
     env = dict(os.environ, ROS_LOG_DIR=str(run_dir / 'ros_log'))
     t0 = time.perf_counter()

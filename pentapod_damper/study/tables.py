@@ -49,7 +49,7 @@ class SummaryRow:
     sampled_loop: str
     measured_peak_um_per_N: float | None = None
     deviation_db: float | None = None
-    compared_share: float | None = None
+    period_difference: float | None = None
     steps_per_s: float | None = None
 
 
@@ -116,7 +116,8 @@ def summary_rows(res: StudyResults) -> list[SummaryRow]:
                 mes = run.measured
                 inside = (mes.freq >= lo) & (mes.freq <= hi)
                 row.measured_peak_um_per_N = float(np.abs(mes.h[inside]).max() * 1e6)
-                row.deviation_db, row.compared_share = run.deviation_db, run.compared_share
+                row.deviation_db = run.deviation_db
+                row.period_difference = mes.periodicity
                 row.steps_per_s = mes.run.steps / mes.run.wall_time
             rows.append(row)
     return rows

@@ -36,6 +36,12 @@ class PlantParams(Sampled):
     position: str = param('P1', 'position name of config/positions.yaml to build the model for '
                           '(cached)')
     model_cache_dir: str = param('out/models', 'folder of cached built models')
+    initial_state_file: str = param('', 'start from this plant state instead of rest: a .npz '
+                                    'with x (the plant state at step 0, as the plant steps it) '
+                                    'and optionally u_previous (the input of step -1), e.g. the '
+                                    'periodic steady state of a multisine (pentapod_sim.sim.'
+                                    'periodic_state); empty: from rest. The run status and the '
+                                    "bag's metadata name it")
     substeps: int = param(1, 'plant steps per exchange: the plant integrates at sample_rate * '
                           'substeps (exact zero-order hold, forces held over the substeps) and '
                           'exchanges /clock, states and forces at sample_rate; the full-rate '

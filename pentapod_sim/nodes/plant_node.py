@@ -39,6 +39,7 @@ from pentapod_sim.nodes.testbed_node import TestbedNode
 from pentapod_sim.nodes.writers import WriterCheck
 from pentapod_sim.plant.build import load_or_build_model
 from pentapod_sim.sim.multirate import MultiRatePlant
+from pentapod_sim.sim.periodic_state import load_initial_state
 from pentapod_sim.sim.realtime import RealTime
 from pentapod_sim.sim.stepping import ForceMixer, parse_sources
 from pentapod_sim.sim.timing import Lockstep, Timing, Waits
@@ -61,6 +62,13 @@ class PlantNode(TestbedNode):
             f'plant model {origin}: {self.model.n_modes} modes, {len(self.model.input_names)} '
             f'inputs, {len(self.model.output_names)} outputs, dt = {self.core.dt:.6g} s, '
             f'{self.core.substeps} substep(s)')
+        self.initial_state = 'rest'
+        if p.initial_state_file:
+            self.core.reset(*load_initial_state(p.initial_state_file, self.core.n_states,
+                                                len(self.core.input_names)))
+            self.initial_state = f'file {p.initial_state_file}'
+            self.get_logger().info(f'starting from the state in {p.initial_state_file}, not '
+                                   'from rest')
         self.mixer = ForceMixer(self.core.input_names, parse_sources(p.sources, ports),
                                 max_effort=p.max_effort)
         self.n_steps = self._n_steps()
@@ -74,7 +82,8 @@ class PlantNode(TestbedNode):
                                   shared_ok=p.shared_source_topics, writers=self.writers)
         self.poller = AnswerPoller(self, self.inputs, p.answer_poll_time if lockstep else 0.0)
         self.status = RunStatusPublisher(self, self.core.dt, p.status_period,
-                                         lambda: self.announce(interface.RUN_RUNNING, True))
+                                         lambda: self.announce(interface.RUN_RUNNING, True),
+                                         self.initial_state)
         for topic in self.outputs.topics() + [interface.RUN_STATUS]:
             self.writers.watch(topic)
         self.loop_check = TruncationCheck(

@@ -2,24 +2,23 @@
 Recorder node: writes chosen topics (default every /pentapod/* topic and /clock) to a bag.
 
 Subscriptions are raw (CDR bytes, no deserialisation) and reliable with a deep queue unless a
-publisher only offers best effort; the bag is written by the ROS-free
-:class:`pentapod_sim.recording.BagWriter`. The log time of a message is its header stamp (sim
-time) when its type starts with a std_msgs/Header or a builtin Time (Clock), else the
-receive time of the node clock. With ``stop_at_run_end`` the recorder closes the bag once the
-plant announced the end of the run (:data:`pentapod_sim.interface.RUN_STATUS`) and every
-per-step topic holds the last step, or ``drain_timeout`` s after the announcement; it logs
-unique vs expected steps per topic and stores them in the bag
-(:mod:`pentapod_sim.recording.run_end`, docs/recording.md); missing steps, a conflicting copy of
-a step or a second writer on a recorded topic (:mod:`pentapod_sim.nodes.writers`) fail the
-recording: exit code 3 after the bag is closed. SIGINT/SIGTERM close the bag completely; after
-a SIGKILL the bag is readable up to the last periodic flush. The node publishes nothing.
+publisher only offers best effort; the ROS-free :class:`pentapod_sim.recording.BagWriter` writes
+the bag. A message's log time is its header stamp (sim time) when its type starts with a
+std_msgs/Header or a builtin Time (Clock), else the receive time of the node clock. With
+``stop_at_run_end`` the recorder closes the bag once the plant announced the end of the run
+(:data:`pentapod_sim.interface.RUN_STATUS`) and every per-step topic holds the last step, or
+``drain_timeout`` s after the announcement; it logs unique vs expected steps per topic and stores
+them in the bag (:mod:`pentapod_sim.recording.run_end`, docs/recording.md); missing steps, a
+conflicting copy of a step or a second writer on a recorded topic
+(:mod:`pentapod_sim.nodes.writers`) fail the recording: exit code 3 after the bag is closed.
+SIGINT/SIGTERM close the bag completely; after a SIGKILL it is readable up to the last flush.
+Where the plant started (status ``initial_state``) goes into the metadata. It publishes nothing.
 
 In a composed run the recorder takes the plant's and the in-process sources' per-step topics
 from the composition's bus as message objects (:meth:`RecorderNode.take_from_bus`,
-:mod:`pentapod_sim.nodes.local_bus`) and serialises them itself to the bytes DDS delivers
-(:mod:`pentapod_sim.nodes.wire_cdr`); they are written as the DDS messages are (same channels,
-log times, duplicate skipping, counts), and its DDS subscriptions of those topics record
-nothing.
+:mod:`pentapod_sim.nodes.local_bus`) and serialises them to the bytes DDS delivers
+(:mod:`pentapod_sim.nodes.wire_cdr`), written as the DDS messages are (same channels, log
+times, duplicate skipping, counts); its DDS subscriptions of those topics record nothing.
 
 Parameters: :class:`pentapod_sim.nodes.parameter_tables.RecorderParams` (docs/parameters.md).
 """
@@ -50,7 +49,7 @@ from pentapod_sim.nodes.recorder_qos import (
 from pentapod_sim.nodes.testbed_node import TestbedNode
 from pentapod_sim.nodes.wire_cdr import serializer, type_name
 from pentapod_sim.nodes.writers import WriterCheck
-from pentapod_sim.recording import BagWriter
+from pentapod_sim.recording import BagWriter, run_end
 from pentapod_sim.recording.msgdefs import has_header_stamp
 from pentapod_sim.recording.run_end import failures, report_record, RunStatus, StepLedger
 
@@ -241,6 +240,7 @@ class RecorderNode(TestbedNode):
             except BagError as err:
                 self.get_logger().error(f'{interface.RUN_STATUS}: {err}')
                 return
+            run_end.note_start(self.writer, status)       # a start not at rest is noted
             if status.ended:
                 self.end, self.end_seen = status, time.monotonic()
                 self.get_logger().info(f'run {status.state} after {status.steps} steps; '

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 import time
-from typing import Callable, Iterable, Mapping
+from typing import Any, Callable, Iterable, Mapping
 
 import yaml
 
@@ -25,6 +25,9 @@ from pentapod_sim.interface import (
     RUN_STOPPED,
 )
 
+#: MCAP metadata record (metadata.yaml ``custom_data`` key ``pentapod_start.initial_state``)
+#: where the recorder notes where the plant started: ``rest`` or ``file <path>``.
+START_RECORD = 'pentapod_start'
 
 @dataclass(frozen=True)
 class RunStatus:
@@ -43,6 +46,8 @@ class RunStatus:
         Stamp [ns] of the last step run; -1 if none.
     step_topics : tuple of str
         Topics the plant published or awaited every step.
+    initial_state : str
+        ``rest``, or ``file <path>``: the plant's state at step 0 came from that file.
     """
 
     state: str
@@ -50,6 +55,7 @@ class RunStatus:
     dt: float
     last_stamp_ns: int
     step_topics: tuple[str, ...]
+    initial_state: str = 'rest'
 
     @property
     def ended(self) -> bool:
@@ -73,7 +79,13 @@ class RunStatus:
         if steps < 0:
             raise BagError(f'run status has steps = {steps} < 0')
         topics = tuple(t for t in values['step_topics'].split(',') if t)
-        return cls(state, steps, dt, last, topics)
+        return cls(state, steps, dt, last, topics, values.get('initial_state', 'rest'))
+
+
+def note_start(writer: Any, status: RunStatus) -> None:
+    """Store where the plant started (:data:`START_RECORD`) in ``writer``'s bag, once."""
+    if writer.custom_data.get(f'{START_RECORD}.initial_state') != status.initial_state:
+        writer.add_record(START_RECORD, {'initial_state': status.initial_state})
 
 
 class StepLedger:

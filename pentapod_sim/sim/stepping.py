@@ -120,11 +120,15 @@ class DiscretePlant:
             raise ConfigError(f'x0 has shape {value.shape}, expected ({self.n_states},)')
         self._x[:] = value
 
-    def reset(self, x0: npt.ArrayLike | None = None) -> None:
-        """Set step 0 with state ``x0`` (default zero) and u_{-1} = 0."""
+    def reset(self, x0: npt.ArrayLike | None = None,
+              u_prev: npt.ArrayLike | None = None) -> None:
+        """Set step 0 with state ``x0`` and input u_{-1} ``u_prev`` (defaults zero)."""
         self.k = 0
         self.x = np.zeros(self.n_states) if x0 is None else x0
-        self.u_prev = np.zeros(len(self.input_names))
+        n_in = len(self.input_names)
+        self.u_prev = np.zeros(n_in) if u_prev is None else np.array(u_prev, dtype=float)
+        if self.u_prev.shape != (n_in,):
+            raise ConfigError(f'u_prev has shape {self.u_prev.shape}, expected ({n_in},)')
 
     def outputs(self, out: npt.NDArray[np.float64] | None = None) -> npt.NDArray[np.float64]:
         """
