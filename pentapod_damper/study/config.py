@@ -98,6 +98,8 @@ class StudyConfig:
         Peak of the multisine force [N].
     damping_periods : int
         Periods averaged after settling.
+    damping_start : str
+        ``'steady'`` (from the loop's periodic steady state) or ``'rest'``.
     damping_time_constants : float
         Settling time in decay time constants of the slowest dominant mode of the loop.
     machining_operations : tuple of str
@@ -133,6 +135,7 @@ class StudyConfig:
     damping_period: float
     damping_amplitude: float
     damping_periods: int
+    damping_start: str
     damping_time_constants: float
     machining_operations: tuple[str, ...]
     cutting_runs: tuple[str, ...]
@@ -217,7 +220,12 @@ class DampingRuns:
     amplitude: float = spec('N', POSITIVE, description='peak of the multisine force')
     periods: int = spec('-', POSITIVE, description='periods averaged after settling')
     time_constants: float = spec('-', POSITIVE, description='settling time in decay time '
-                                 'constants of the slowest dominant mode of the loop')
+                                 'constants of the slowest dominant mode of the loop (start: '
+                                 'rest)')
+    start: str = spec(choices=('steady', 'rest'), default='steady',
+                      description="steady: each run starts at its loop's periodic steady state "
+                      "and settles excitation.settle_periods periods (the laws' own start); "
+                      'rest: from rest, settled time_constants decay times')
 
 
 @dataclass(frozen=True)
@@ -284,6 +292,7 @@ FILE_KEYS = {'positions': 'positions', 'scenarios': 'scenarios', 'sample_rate': 
              'damping_scenarios': 'damping.scenarios', 'damping_band': 'damping.band',
              'damping_period': 'damping.period', 'damping_amplitude': 'damping.amplitude',
              'damping_periods': 'damping.periods',
+             'damping_start': 'damping.start',
              'damping_time_constants': 'damping.time_constants',
              'machining_operations': 'machining.operations',
              'cutting_runs': 'machining.cutting_runs'}

@@ -113,16 +113,21 @@ def line_freq(cfg: StudyConfig) -> FloatArray:
     return np.asarray(frf_excitation(cfg).lines_hz, dtype=np.float64)
 
 
-def steady_start(cfg: StudyConfig, ana: ScenarioAnalytic) -> PeriodicState:
+def steady_start(cfg: StudyConfig, ana: ScenarioAnalytic,
+                 exciter: dict[str, Any] | None = None) -> PeriodicState:
     """
-    The periodic steady state of the scenario's sampled loop under the FRF runs' multisine.
+    The periodic steady state of the scenario's sampled loop under a run's multisine.
+
+    ``exciter``: the run's exciter parameters (default: the FRF runs', :func:`frf_excitation`).
 
     From the linear models of plant and laws (:attr:`ScenarioAnalytic.sampled`). The laws'
     nodes start at rest, so the plant starts shifted from its periodic state such that the
     laws' zero start excites only the loop's fastest modes (their filters'), not the lightly
     damped ones (:func:`pentapod_sim.sim.periodic_state.start_with_laws_at_rest`).
     """
-    exc, loop = frf_excitation(cfg), ana.sampled
+    exc = (frf_excitation(cfg) if exciter is None
+           else Excitation(ExcitationSpec(**exciter), cfg.dt))
+    loop = ana.sampled
     assert exc.period_steps is not None and loop is not None
     forces = exc.series(exc.period_steps)
     ports = loop.core.input_names

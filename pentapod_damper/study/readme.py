@@ -18,7 +18,7 @@ import shutil
 import textwrap
 
 from pentapod_damper.study.config import load_study_config, StudyConfig
-from pentapod_damper.study.measured_damping import SETTLE_MODES
+from pentapod_damper.study.records import settling_text
 from pentapod_damper.study.report import read_csv
 from pentapod_sim.reference import replace_section
 
@@ -157,9 +157,8 @@ def study_section(results: Path, cfg: StudyConfig) -> str:
                'the damping ratio of the plant, of the sampled closed loop (its poles: plant, '
                'laws, their dynamics and delay), of the continuous loop without sampling, and '
                'identified (pLSCF + LSFD, `analyze modes`) from a recorded run excited by a '
-               f'{cfg.damping_band[0]:g}-{cfg.damping_band[1]:g} Hz Schroeder multisine, settled '
-               f'{cfg.damping_time_constants:g} decay times of the slowest of the '
-               f'{SETTLE_MODES} modes with the largest terms in the response, then '
+               f'{cfg.damping_band[0]:g}-{cfg.damping_band[1]:g} Hz Schroeder multisine, '
+               f'{settling_text(cfg)}, then '
                f'{cfg.damping_periods} periods of {cfg.damping_period:g} s averaged. Peaks: '
                'identified and analytic sampled-loop FRF, each maximised at the mode. '
                '`damping.csv` holds every scenario and direction (analytic).'),

@@ -156,13 +156,25 @@ class StepRun:
                 f'{self.run.steps} steps in {self.run.wall_time:.1f} s')
 
 
+def settling_text(cfg: StudyConfig) -> str:
+    """How the study's damping runs settle, in words (docs, report)."""
+    if cfg.damping_start == 'steady':
+        return ("started at the loop's periodic steady state under the multisine (from the "
+                f"linear models of plant and laws), {max(1, cfg.settle_periods)} period(s) "
+                "discarded for the laws' own start")
+    return (f'settled {cfg.damping_time_constants:g} decay times of the slowest of the '
+            f'{SETTLE_MODES} modes with the largest terms in the response')
+
+
 @dataclass
 class DampingRun:
     """
     A multisine testbed run, its identified modes and their comparison with the loop's poles.
 
-    ``settle_periods`` periods of ``period`` s settle (``time_constants`` decay times of the
-    slowest of the loop's :data:`SETTLE_MODES` strongest modes), then ``periods`` are averaged.
+    ``settle_periods`` periods of ``period`` s settle (``start`` ``'steady'``: the run starts at
+    the loop's periodic steady state and they settle only the laws' own start; ``'rest'``:
+    ``time_constants`` decay times of the slowest of the loop's :data:`SETTLE_MODES` strongest
+    modes), then ``periods`` are averaged.
     """
 
     run: RunResult
@@ -173,13 +185,16 @@ class DampingRun:
     identified: Identified
     modes: list[IdentifiedMode]
     figures: tuple[Path, Path]
+    start: str = 'rest'
 
     def describe(self) -> str:
         worst = max((abs(m.zeta_error) for m in self.modes), default=math.nan)
         run = self.run
+        why = ("from the loop's periodic steady state" if self.start == 'steady' else
+               f'{self.time_constants:g} decay times of the slowest of the {SETTLE_MODES} '
+               'strongest modes')
         return (f'damping run {run.scenario} at {run.position}: multisine, settle '
-                f'{self.settle_periods * self.period:g} s ({self.time_constants:g} decay times '
-                f'of the slowest of the {SETTLE_MODES} strongest modes) + {self.periods} '
+                f'{self.settle_periods * self.period:g} s ({why}) + {self.periods} '
                 f'periods of {self.period:g} s; {run.steps} steps in {run.wall_time:.1f} s '
                 f'({run.steps / run.wall_time:.0f} steps/s); '
                 f'{len(self.identified.model.freq_hz)} modes identified; dominant modes: '

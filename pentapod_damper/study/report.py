@@ -17,8 +17,7 @@ from typing import Iterable
 
 from pentapod_damper.study import tables
 from pentapod_damper.study.config import StudyConfig
-from pentapod_damper.study.measured_damping import SETTLE_MODES
-from pentapod_damper.study.records import as_row, Row, StudyResults
+from pentapod_damper.study.records import as_row, Row, settling_text, StudyResults
 from pentapod_sim import __version__
 
 #: The report's tables, in its order (CSV files of the output folder).
@@ -219,9 +218,7 @@ def _damping_text(cfg: StudyConfig) -> str:
         '(plant, laws, their dynamics and delay); continuous_zeta: the continuous loop without '
         'sampling; measured_zeta: identified (pLSCF + LSFD) from the damping run of the '
         f'scenario, a {cfg.damping_band[0]:g}-{cfg.damping_band[1]:g} Hz Schroeder multisine of '
-        f'{cfg.damping_amplitude:g} N peak along {cfg.direction}, settled '
-        f'{cfg.damping_time_constants:g} decay times of the slowest of the '
-        f'{SETTLE_MODES} modes with the largest terms in the response, then '
+        f'{cfg.damping_amplitude:g} N peak along {cfg.direction}, {settling_text(cfg)}, then '
         f'{cfg.damping_periods} periods of {cfg.damping_period:g} s averaged synchronously. '
         'Peaks: the identified FRF and the analytic sampled-loop FRF, each maximised near the '
         f'mode. Only the rows of the damping runs ({cfg.direction}{cfg.direction}) are shown; '

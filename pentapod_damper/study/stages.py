@@ -75,21 +75,29 @@ def damping_run(cfg: StudyConfig, out_dir: Path, model: PositionModel,
     """
     A multisine run on the testbed, its modes identified and paired with the loop's poles.
 
-    It settles for :attr:`StudyConfig.damping_time_constants` decay times of the slowest of
-    the loop's strongest modes (:attr:`ScenarioAnalytic.settle_modes`).
+    With ``damping.start: steady`` it starts at the loop's periodic steady state under its
+    multisine (:func:`pipeline.steady_start`) and settles ``excitation.settle_periods``
+    periods (the laws' own start); from rest it settles
+    :attr:`StudyConfig.damping_time_constants` decay times of the slowest of the loop's
+    strongest modes (:attr:`ScenarioAnalytic.settle_modes`). Either way the identification
+    sees only the periods after that.
     """
     pos, scn, d = model.position, analytic.name, cfg.direction
-    settle = damping.settling_time(analytic.settle_modes, cfg.damping_time_constants)
+    steady = cfg.damping_start == 'steady'
+    settle = (cfg.settle_periods * cfg.damping_period if steady else
+              damping.settling_time(analytic.settle_modes, cfg.damping_time_constants))
     exciter = damping_excitation(cfg, settle)
+    start = pipeline.steady_start(cfg, analytic, exciter) if steady else None
     run = run_on_testbed(scn, pos, model.model_file, model.model_hash, cfg, out_dir,
-                         kind='damping', exciter=exciter)
+                         kind='damping', exciter=exciter, initial_state=start)
     ident = measured_damping.identify_run(run.bag, d, cfg.damping_band)
     modes = measured_damping.compare(analytic.modes, ident, model.plant, analytic.laws, cfg.dt,
                                      d, analytic.sampled)
     with FIGURE_LOCK:
         paths = measured_damping.figures(ident, out_dir / 'figures', f'{pos}_{scn}')
     return DampingRun(run, int(exciter['settle_periods']), cfg.damping_period,
-                      cfg.damping_periods, cfg.damping_time_constants, ident, modes, paths)
+                      cfg.damping_periods, cfg.damping_time_constants, ident, modes, paths,
+                      cfg.damping_start)
 
 
 def step_run(cfg: StudyConfig, out_dir: Path, model: PositionModel, scenario: str) -> StepRun:
