@@ -16,13 +16,24 @@ import pytest
 _LEASES = []
 
 
+#: Set to the domain this session reserved, so that a parallel worker can tell it from a
+#: domain its caller chose.
+_SESSION_DOMAIN = 'PENTAPOD_TEST_SESSION_DOMAIN'
+
+
 def pytest_configure(config):
     """Reserve the session's ROS domain and export the isolation variables."""
-    from pentapod_sim.scenario.domain import isolation
+    from pentapod_sim.scenario.domain import DOMAIN_VAR, isolation
+    if (os.environ.get('PYTEST_XDIST_WORKER')
+            and os.environ.get(_SESSION_DOMAIN) == os.environ.get(DOMAIN_VAR)):
+        # a worker of a parallel session (pytest -n) inherited the controller's domain: it
+        # reserves its own, so that the two workers' runs never see each other's nodes
+        os.environ.pop(DOMAIN_VAR, None)
     changes, lease = isolation(os.environ)
     os.environ.update(changes)
     if lease is not None:
         _LEASES.append(lease)
+        os.environ[_SESSION_DOMAIN] = os.environ[DOMAIN_VAR]
 
 
 def pytest_unconfigure(config):

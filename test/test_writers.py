@@ -104,6 +104,29 @@ def test_messages_are_refused_while_dds_matched_a_second_writer(monkeypatch):
         check.check()
 
 
+def test_the_final_check_refuses_a_second_matched_writer_at_once(monkeypatch):
+    """A recorder's last check (at close) does not wait GRAPH_LAG for the graph to show it."""
+    now = [0.0]
+    monkeypatch.setattr(writers.time, 'monotonic', lambda: now[0])
+    graph = Graph()
+    check = WriterCheck(graph)
+    check.watch(TOPIC)
+    graph.pubs[TOPIC] = [info(gid(1, 10))]
+    sub = SimpleNamespace(get_publisher_count=lambda: 2)
+    assert not check.message_ok(TOPIC, sub)
+    assert check.check_each() == {}              # a periodic check waits for the graph
+    assert 'DDS matched a second writer' in check.check_each(final=True)[TOPIC]
+    graph.pubs[TOPIC].append(info(gid(2, 10)))   # the graph shows it: named by its process
+    assert 'process id' in check.check_each(final=True)[TOPIC]
+    # a recorder takes every message (evidence): it looks at its reader's match count at the end
+    other = WriterCheck(Graph())
+    other.watch(TOPIC)
+    other.note_matched(TOPIC, SimpleNamespace(get_publisher_count=lambda: 1))
+    assert other.check_each(final=True) == {}
+    other.note_matched(TOPIC, sub)
+    assert '(0 message(s) refused)' in other.check_each(final=True)[TOPIC]
+
+
 # ---- real participants on the session's domain ---------------------------------------------
 
 

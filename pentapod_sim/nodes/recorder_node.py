@@ -61,6 +61,10 @@ ORPHAN_QUIET = 0.5
 #: one discovered only at the end of a short run is subscribed then, and its writer's kept
 #: message takes a moment to arrive.
 LATCHED_WAIT = 2.0
+#: Wall time [s] a recorder of a stopped run keeps looking for a foreign writer at its end.
+FOREIGN_WAIT = 2.0
+#: Wall time [s] between looks for the writers of ``fresh_topics`` while the known topics wait.
+HOLD_BACK_PERIOD = 0.02
 #: Name of the MCAP metadata record (and custom_data key) with expected vs recorded counts.
 RECORDING_RECORD = 'pentapod_recording'
 
@@ -114,9 +118,25 @@ class RecorderNode(TestbedNode):
         self.subs = {}  # topic -> (subscription or None, msg_type, level: level_for)
         self.from_bus = set()    # topics taken from a composition's bus (take_from_bus)
         self._records = {}       # topic -> callback writing one message's CDR bytes
-        for topic, msg_type in KNOWN_TOPICS.items():
-            if self._selected(topic) or topic == interface.RUN_STATUS:
+        # the writers of fresh topics are matched first: until then the plant, waiting for this
+        # recorder on its own topics, cannot start, so no answer of a source that outlives
+        # runs (and so has no history for a late reader) is published before it is matched
+        self._release_timer = None
+        self.held_back = [t for t in KNOWN_TOPICS
+                          if self._selected(t) or t == interface.RUN_STATUS]
+        for topic in self.fresh:
+            msg_type = interface.TOPIC_TYPES.get(topic)
+            if msg_type is None and topic.startswith(interface.FORCE_PREFIX):
+                msg_type = interface.JOINT_STATE
+            if msg_type is not None and self._selected(topic):
                 self._subscribe(topic, msg_type)
+        if self.fresh:
+            self.get_logger().info('waiting for the writer(s) of ' + ', '.join(sorted(self.fresh))
+                                   + " (fresh_topics) before subscribing to the plant's topics")
+        if not self.release_held_back():     # looked for often: the plant waits for it
+            self._release_timer = self.create_timer(
+                HOLD_BACK_PERIOD, self.release_held_back,
+                clock=Clock(clock_type=ClockType.STEADY_TIME))
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.create_timer(params.discovery_period, self.discover, clock=steady)
         self.create_timer(params.flush_period, self.flush, clock=steady)
@@ -128,6 +148,29 @@ class RecorderNode(TestbedNode):
             return topic in self.wanted
         return interface.is_testbed_topic(topic) and not topic.startswith(interface.LIVE_PREFIX)
 
+    def release_held_back(self) -> bool:
+        """
+        Subscribe the known topics once every fresh topic's writer is matched.
+
+        True once they are subscribed (at once without ``fresh_topics``).
+        """
+        if not self.held_back:
+            return True
+        fresh = sorted(t for t in self.fresh if self._selected(t))
+        if any(t not in self.subs or self.subs[t][0] is None
+               or self.subs[t][0].get_publisher_count() == 0 for t in fresh):
+            return False
+        if self._release_timer is not None:
+            self.destroy_timer(self._release_timer)
+            self._release_timer = None
+        if fresh:
+            self.get_logger().info('matched the writer(s) of ' + ', '.join(fresh))
+        for topic in self.held_back:
+            if topic not in self.subs:
+                self._subscribe(topic, KNOWN_TOPICS[topic])
+        self.held_back = []
+        return True
+
     def discover(self) -> None:
         """
         Subscribe to new selected topics with a publisher; follow what publishers offer.
@@ -137,12 +180,10 @@ class RecorderNode(TestbedNode):
         the topic is subscribed again at that publisher's level, with a warning (its messages
         before the new subscription matched are lost). The level never goes back up.
         """
-        for topic, refusal in self.writers.check_each().items():
-            if topic not in self.foreign:
-                self.foreign[topic] = refusal
-                self.get_logger().error(f'foreign writer: {refusal}; the recording will fail')
+        self.note_foreign()
+        released = self.release_held_back()
         for topic, types in self.get_topic_names_and_types():
-            if not self._selected(topic):
+            if not self._selected(topic) or not (released or topic in self.fresh):
                 continue
             known = self.subs.get(topic)
             if known is not None and (known[0] is None or known[2] == BEST_EFFORT):
@@ -162,6 +203,18 @@ class RecorderNode(TestbedNode):
             except (BagError, ImportError, AttributeError, ValueError) as err:
                 self.get_logger().error(f'cannot record {topic} [{types[0]}]: {err}')
                 self.subs[topic] = (None, types[0], BEST_EFFORT)  # do not retry every period
+
+    def note_foreign(self, final: bool = False) -> None:
+        """Check the watched topics' writers now (:meth:`WriterCheck.check_each`); log refusals."""
+        if final:      # what DDS matched, whether or not the graph shows it yet
+            for topic in self.writers.topics:
+                sub = self.subs.get(topic, (None,))[0]
+                if sub is not None:
+                    self.writers.note_matched(topic, sub)
+        for topic, refusal in self.writers.check_each(final).items():
+            if topic not in self.foreign:
+                self.foreign[topic] = refusal
+                self.get_logger().error(f'foreign writer: {refusal}; the recording will fail')
 
     def _subscribe(self, topic: str, msg_type: str, level: int | None = None) -> None:
         """Subscribe at ``level`` (:func:`level_for`; None: the topic's own, no publisher)."""
@@ -331,6 +384,17 @@ class RecorderNode(TestbedNode):
 
     def store_report(self) -> None:
         """Log unique vs expected steps per topic and why it failed; store them in the bag."""
+        # a last look at the graph: a run stopped by a foreign writer may end before this
+        # recorder's next periodic check, and the bag must still name the writer; a run that
+        # was stopped (by a node's error) gets up to FOREIGN_WAIT s more, since this recorder's
+        # participant may discover the writer that made another node stop it only later
+        # (seconds on a loaded host)
+        self.note_foreign(final=True)
+        if self.end is not None and self.end.state == interface.RUN_STOPPED:
+            until = time.monotonic() + FOREIGN_WAIT
+            while not self.foreign and time.monotonic() < until:
+                time.sleep(0.1)
+                self.note_foreign(final=True)
         if self.end is None:       # the bag still says what it holds is not the plant's
             self.failed = [f'{t}: {text}' for t, text in self.foreign.items()]
             self.writer.add_record(RECORDING_RECORD, report_record(None, {}, self.foreign))

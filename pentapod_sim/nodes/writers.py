@@ -149,6 +149,11 @@ class WriterCheck:
         self.refused[topic] = self.refused.get(topic, 0) + 1
         return False
 
+    def note_matched(self, topic: str, sub) -> None:
+        """Suspect ``topic`` if ``sub`` matched more than one writer (no message taken)."""
+        if topic not in self.shared and sub.get_publisher_count() > 1:
+            self.suspect.setdefault(topic, time.monotonic())
+
     def due(self) -> bool:
         """True when the graph should be checked again (every ``period`` s, or suspected)."""
         return bool(self.suspect) or time.monotonic() >= self.next_check
@@ -166,18 +171,23 @@ class WriterCheck:
         self.next_check = time.monotonic() + self.period
         return {topic: self._check(topic) for topic in self.topics}
 
-    def check_each(self) -> dict[str, str]:
-        """Like :meth:`check`, but every topic: topic -> the refusal, for those refused."""
+    def check_each(self, final: bool = False) -> dict[str, str]:
+        """
+        Like :meth:`check`, but every topic: topic -> the refusal, for those refused.
+
+        ``final``: the last check (nothing comes after it), so a second writer DDS matched is
+        refused at once, without waiting :data:`GRAPH_LAG` s for the graph to show it.
+        """
         self.next_check = time.monotonic() + self.period
         refused = {}
         for topic in self.topics:
             try:
-                self._check(topic)
+                self._check(topic, lag=0.0 if final else GRAPH_LAG)
             except RunError as err:
                 refused[topic] = str(err)
         return refused
 
-    def _check(self, topic: str) -> list[Writer]:
+    def _check(self, topic: str, lag: float = GRAPH_LAG) -> list[Writer]:
         """The writers of one topic in the graph (RunError: see :meth:`check`)."""
         now = time.monotonic()
         writers = [Writer.of(i) for i in self.node.get_publishers_info_by_topic(topic)]
@@ -190,10 +200,10 @@ class WriterCheck:
         if len(writers) > 1:
             raise RunError(second_writer(topic, writers))
         since = self.suspect.get(topic)
-        if since is not None and now - since > GRAPH_LAG:
-            raise RunError(f'{topic}: DDS matched a second writer ({self.refused[topic]} '
+        if since is not None and now - since >= lag:
+            raise RunError(f'{topic}: DDS matched a second writer ({self.refused.get(topic, 0)} '
                            'message(s) refused) that has not appeared in the ROS graph '
-                           f'within {GRAPH_LAG:g} s; known writer: '
+                           f'within {now - since:.2g} s; known writer: '
                            f'{writers_text(writers) or "none"}')
         if not writers:
             self.pinned.pop(topic, None)      # it left: a new writer may take its place

@@ -10,10 +10,12 @@ through :func:`pentapod_sim.plant.build.from_modal_data` (files:
 """
 from __future__ import annotations
 
+import contextlib
 from dataclasses import dataclass, field
 import hashlib
 import json
 import logging
+import os
 from pathlib import Path
 from typing import Any
 import zipfile
@@ -300,12 +302,18 @@ class PlantModel:
         path = Path(path)
         header: dict[str, Any] = {n: list(getattr(self, n)) for n in _LISTS}
         header.update(format=FILE_FORMAT, meta=self.meta, content_hash=self.content_hash())
+        # written next to it and renamed: a process reading the same cache file (two studies,
+        # parallel tests) sees the old file or the whole new one, never a half-written one
+        part = path.with_name(f'{path.name}.{os.getpid()}.part')
         try:        # e.g. a cache folder that is a file: one line, not a traceback
             path.parent.mkdir(parents=True, exist_ok=True)
-            with open(path, 'wb') as stream:
+            with open(part, 'wb') as stream:
                 np.savez(stream, header=np.array(json.dumps(header)),
                          **{n: getattr(self, n) for n in _ARRAYS})
+            os.replace(part, path)
         except OSError as err:
+            with contextlib.suppress(OSError):
+                part.unlink()
             raise ModelFileError(f'cannot write plant model {path}: {err.strerror or err} '
                                  f'({err.filename or path})') from None
         LOG.info('saved plant model (%d modes) to %s', self.n_modes, path)
