@@ -21,7 +21,6 @@ from pentapod_sim.machining.cutting_process import MIN_STEPS_PER_TOOTH, simulate
 from pentapod_sim.machining.loop_lobes import (
     check_runs,
     loop_lobes,
-    RUN_E_FOLDINGS,
     RUN_MIN_TOOTH_PERIODS,
     RUN_SETTLE_SHARE,
 )
@@ -67,7 +66,7 @@ def point():
     return check_runs(PLANT, [], DT, table, lobes, speed=1829.0)
 
 
-def test_the_runs_last_two_e_foldings_of_the_floquet_rate(point):
+def test_the_runs_last_three_e_foldings_of_growth_and_two_of_decay(point):
     """At least 40 tooth periods after the settling quarter (the fit of the verdict)."""
     below, above = point.runs
     assert point.speed == check_speed(1829.0, 4, DT)
@@ -75,10 +74,11 @@ def test_the_runs_last_two_e_foldings_of_the_floquet_rate(point):
     for run in point.runs:
         cond = run.conditions(load_machining())
         assert run.growth_rate == sampled_floquet(PLANT, [], cond, DT).growth_rate
-        active = max(RUN_E_FOLDINGS / abs(run.growth_rate),
+        active = max((3.0 if run.growth_rate > 0 else 2.0) / abs(run.growth_rate),
                      RUN_MIN_TOOTH_PERIODS * cond.tooth_period)
         assert run.duration == pytest.approx(active / (1 - RUN_SETTLE_SHARE))
-    assert above.duration * (1 - RUN_SETTLE_SHARE) * above.growth_rate == pytest.approx(2.0)
+    assert above.duration * (1 - RUN_SETTLE_SHARE) * above.growth_rate == pytest.approx(3.0)
+    assert below.duration * (1 - RUN_SETTLE_SHARE) * below.growth_rate == pytest.approx(-2.0)
     # the case: the averaged loop predicts a growth three times too fast above the limit
     assert above.averaged_rate > 2.5 * above.growth_rate
     assert above.kind == 'hopf'

@@ -5,7 +5,7 @@ For each position and recorded law, the law's tuned record becomes a scenario fi
 (:func:`pentapod_damper.design.scenarios.scenario_text`, the gains of that position), which
 runs through the study's damping stage: the study's reduced plant of the position, the laws
 stepped by the damper node in lockstep at the table's sample rate, a periodic multisine on the
-TCP settled for :attr:`StudyConfig.damping_time_constants` decay times, recorded, its FRF
+TCP from the loop's periodic steady state (``damping.start``, as the study), recorded, its FRF
 identified (pLSCF + LSFD) and each mode that dominates TCP xx paired with the sampled loop's
 pole (:mod:`pentapod_damper.study.measured_damping`). The analytic reference is the sampled
 loop of the laws' own linear models: the same filters, hold and delay the node runs. ROS
@@ -29,11 +29,11 @@ import numpy as np
 
 from pentapod_damper.design.report import best_strut_law, Record
 from pentapod_damper.design.scenarios import node_params, scenario_text, SCENARIOS
-from pentapod_damper.study import damping, measured_damping, stages
+from pentapod_damper.study import stages
 from pentapod_damper.study.config import load_study_config, StudyConfig
 from pentapod_damper.study.measured_damping import IdentifiedMode
 from pentapod_damper.study.records import PositionModel
-from pentapod_damper.study.runs import damping_excitation, run_on_testbed, RunResult
+from pentapod_damper.study.runs import RunResult
 from pentapod_sim.errors import ConfigError
 from pentapod_sim.sim.design_models import load_design_model
 
@@ -51,7 +51,7 @@ COLUMNS = ('position', 'law', 'direction', 'rank', 'mode', 'fe_mode', 'cause',
            'sampled_freq_hz', 'sampled_zeta', 'continuous_zeta', 'measured_freq_hz',
            'measured_zeta', 'zeta_error', 'freq_error', 'peak_analytic_um_per_N',
            'peak_error_db', 'within', 'sample_rate_hz', 'delay_steps', 'settle_s',
-           'periods', 'period_s', 'wall_s')
+           'periods', 'period_s', 'wall_s', 'start')
 
 
 @dataclass(frozen=True)
@@ -81,6 +81,7 @@ class RecordedMode:
     periods: int
     period_s: float
     wall_s: float
+    start: str          # 'steady' (the loop's periodic steady state) or 'rest'
 
 
 def within_tolerances(zeta_error: float, freq_error: float, peak_error_db: float) -> bool:
@@ -118,24 +119,19 @@ def record_law(cfg: StudyConfig, model: PositionModel, scenario: Path, out_dir: 
     """
     One scenario's damping run at ``model``'s position, compared with the sampled loop.
 
-    The study's damping stage: the loop checked and its poles computed, a multisine settled
-    :attr:`StudyConfig.damping_time_constants` decay times of the slowest strong mode,
-    recorded in lockstep, identified, each mode that dominates the TCP paired with its pole.
+    The study's damping stage (:func:`pentapod_damper.study.stages.record_damping`): the loop
+    checked and its poles computed, the multisine run recorded in lockstep from the loop's
+    periodic steady state (or from rest, ``damping.start``), identified, each mode that
+    dominates the TCP paired with its pole.
     """
     freq = np.linspace(1.0, cfg.f_max, 400)
     ana = stages.analyse_scenario(cfg, freq, model, str(scenario), damping_run=True)
     if ana.loop is not None:
         say(ana.loop.summary())
-    settle = damping.settling_time(ana.settle_modes, cfg.damping_time_constants)
-    exciter = damping_excitation(cfg, settle)
-    say(f'recording {exciter["duration"]:.0f} s at {cfg.sample_rate:g} Hz '
-        f'({exciter["settle_periods"]} settling periods)')
-    run = run_on_testbed(str(scenario), model.position, model.model_file, model.model_hash,
-                         cfg, out_dir, kind='damping', exciter=exciter)
-    d = cfg.direction
-    ident = measured_damping.identify_run(run.bag, d, cfg.damping_band)
-    compared = measured_damping.compare(ana.modes, ident, model.plant, ana.laws, cfg.dt, d,
-                                        ana.sampled)
+    start = 'the periodic steady state' if cfg.damping_start == 'steady' else 'rest'
+    say(f'recording {cfg.damping_periods} periods of {cfg.damping_period:g} s at '
+        f'{cfg.sample_rate:g} Hz from {start}')
+    run, exciter, _, compared = stages.record_damping(cfg, out_dir, model, ana)
     return compared, exciter, run
 
 
@@ -177,7 +173,7 @@ def record_position(records: Sequence[Record], position: str, out_dir: Path,
                 within_tolerances(m.zeta_error, m.freq_error, m.peak_error_db), rate,
                 int(record['delay_steps']), float(exciter['settle_periods'])
                 * run_cfg.damping_period, run_cfg.damping_periods, run_cfg.damping_period,
-                run.wall_time))
+                run.wall_time, run_cfg.damping_start))
             say(f'  mode {row.mode} ({row.sampled_freq_hz:.2f} Hz): zeta sampled loop '
                 f'{row.sampled_zeta:.5f}, identified {m.measured_zeta:.5f} '
                 f'({m.zeta_error:+.1%}), peak {m.peak_error_db:+.2f} dB')
@@ -218,6 +214,15 @@ def _pct(text: str) -> str:
     return '-' if math.isnan(value) else f'{value:+.1%}'
 
 
+def _start_text(row: dict[str, str]) -> str:
+    """How a recorded run started and settled (rows of files without ``start``: from rest)."""
+    settle = float(row['settle_s'])
+    if row.get('start') == 'steady':
+        return (f"from the loop's periodic steady state under it, {settle:g} s discarded for "
+                "the laws' own start")
+    return f'from rest, {settle:g} s of settling (decay times of the strongest modes)'
+
+
 def markdown(rows: Sequence[dict[str, str]]) -> str:
     """The docs block: per position and law, identified against sampled-loop damping."""
     if not rows:
@@ -228,8 +233,8 @@ def markdown(rows: Sequence[dict[str, str]]) -> str:
         f'Hz with {first["delay_steps"]} sample(s) of computational delay; the analytic '
         "reference is the sampled loop's poles **with the laws' own dynamics** (their filters, "
         "hold and delay: the linear model of what the node steps) on the study's plant of the "
-        'position. Multisine 2-200 Hz on TCP x, settled 5 decay times of the slowest of the 8 '
-        f'strongest modes, then {first["periods"]} periods of {float(first["period_s"]):g} s '
+        f'position. Multisine 2-200 Hz on TCP x, {_start_text(first)}, then '
+        f'{first["periods"]} periods of {float(first["period_s"]):g} s '
         "averaged; pLSCF + LSFD. Tolerances (the recorded-run test's): "
         f'ζ within {ZETA_TOLERANCE:.0%}, f within {FREQ_TOLERANCE:.1%}, peak within '
         f'{PEAK_TOLERANCE_DB:g} dB.', '',

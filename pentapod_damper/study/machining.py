@@ -85,10 +85,11 @@ def cutting_check(cfg: StudyConfig, out_dir: Path, model: PositionModel,
     """Cuts at 0.8x and 1.2x of the predicted limit, recorded and judged."""
     table = load_machining()
     op = cfg.machining_operations[0]
-    # one Floquet candidate (the averaged loop's shortest that the Floquet rates confirm):
-    # a monodromy matrix per run costs about a second on the machine's loop
-    point = check_runs(model.plant, analytic.laws, cfg.dt, table, lobes.operations[op],
-                       floquet_candidates=1)
+    # three Floquet candidates, as `statespace lobes --check` (a monodromy matrix per run costs
+    # about a second on the machine's loop): with one, P2's TCP damper was cut at 833 rpm, where
+    # 1.2x grows at only +0.12 1/s (a 22 s run whose entry transient of the 0.1 % modes hid
+    # the growth), instead of 437 rpm, +0.19 1/s and 14 s
+    point = check_runs(model.plant, analytic.laws, cfg.dt, table, lobes.operations[op])
     base = study_cut_scenario(analytic.name, cfg)
     cuts = []
     for run in point.runs:
@@ -143,8 +144,8 @@ def cuts_table(checks: list[CuttingCheck]) -> Table:
                          'as_predicted': cut.as_expected, 'wall_s': cut.wall_time})
     text = ('Cuts with the cutting node on the testbed (composed, recorded), at the lobe bottom '
             'whose runs are shortest (moved to a whole number of steps per tooth period), 0.8x '
-            'and 1.2x of the predicted limiting depth; each lasts two e-foldings of the growth '
-            'or decay from the critical Floquet multiplier of the sampled loop with the '
+            'and 1.2x of the predicted limiting depth; each lasts three e-foldings of the growth '
+            '(two of the decay) from the critical Floquet multiplier of the sampled loop with the '
             'time-varying cut (predicted_growth_per_s; the averaged loop, which the zero-order '
             'limit rests on, beside it) plus a quarter for the entry, which the verdict leaves '
             'out.')

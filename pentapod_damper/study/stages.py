@@ -9,10 +9,12 @@ each needs and runs them. ROS appears only in the testbed runs
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 from pentapod_damper.study import bending, damping, measured_damping, pipeline
 from pentapod_damper.study.config import StudyConfig
 from pentapod_damper.study.figures import FIGURE_LOCK
+from pentapod_damper.study.measured_damping import Identified, IdentifiedMode
 from pentapod_damper.study.records import (
     BendingComparison,
     DampingRun,
@@ -23,7 +25,7 @@ from pentapod_damper.study.records import (
     ScenarioAnalytic,
     StepRun,
 )
-from pentapod_damper.study.runs import damping_excitation, run_on_testbed
+from pentapod_damper.study.runs import damping_excitation, run_on_testbed, RunResult
 
 
 def build_model(cfg: StudyConfig, out_dir: Path, position: str,
@@ -70,8 +72,9 @@ def frf_run(cfg: StudyConfig, out_dir: Path, model: PositionModel,
     return FrfRun(mes, dev, peak)
 
 
-def damping_run(cfg: StudyConfig, out_dir: Path, model: PositionModel,
-                analytic: ScenarioAnalytic) -> DampingRun:
+def record_damping(cfg: StudyConfig, out_dir: Path, model: PositionModel,
+                   analytic: ScenarioAnalytic
+                   ) -> tuple[RunResult, dict[str, Any], Identified, list[IdentifiedMode]]:
     """
     A multisine run on the testbed, its modes identified and paired with the loop's poles.
 
@@ -80,21 +83,29 @@ def damping_run(cfg: StudyConfig, out_dir: Path, model: PositionModel,
     periods (the laws' own start); from rest it settles
     :attr:`StudyConfig.damping_time_constants` decay times of the slowest of the loop's
     strongest modes (:attr:`ScenarioAnalytic.settle_modes`). Either way the identification
-    sees only the periods after that.
+    sees only the periods after that. Returns the run, the exciter's parameters, the
+    identification and the identified modes paired with the poles.
     """
-    pos, scn, d = model.position, analytic.name, cfg.direction
     steady = cfg.damping_start == 'steady'
     settle = (cfg.settle_periods * cfg.damping_period if steady else
               damping.settling_time(analytic.settle_modes, cfg.damping_time_constants))
     exciter = damping_excitation(cfg, settle)
     start = pipeline.steady_start(cfg, analytic, exciter) if steady else None
-    run = run_on_testbed(scn, pos, model.model_file, model.model_hash, cfg, out_dir,
-                         kind='damping', exciter=exciter, initial_state=start)
-    ident = measured_damping.identify_run(run.bag, d, cfg.damping_band)
+    run = run_on_testbed(analytic.name, model.position, model.model_file, model.model_hash,
+                         cfg, out_dir, kind='damping', exciter=exciter, initial_state=start)
+    ident = measured_damping.identify_run(run.bag, cfg.direction, cfg.damping_band)
     modes = measured_damping.compare(analytic.modes, ident, model.plant, analytic.laws, cfg.dt,
-                                     d, analytic.sampled)
+                                     cfg.direction, analytic.sampled)
+    return run, exciter, ident, modes
+
+
+def damping_run(cfg: StudyConfig, out_dir: Path, model: PositionModel,
+                analytic: ScenarioAnalytic) -> DampingRun:
+    """:func:`record_damping` of one scenario, with the identification's figures."""
+    run, exciter, ident, modes = record_damping(cfg, out_dir, model, analytic)
     with FIGURE_LOCK:
-        paths = measured_damping.figures(ident, out_dir / 'figures', f'{pos}_{scn}')
+        paths = measured_damping.figures(ident, out_dir / 'figures',
+                                         f'{model.position}_{analytic.name}')
     return DampingRun(run, int(exciter['settle_periods']), cfg.damping_period,
                       cfg.damping_periods, cfg.damping_time_constants, ident, modes, paths,
                       cfg.damping_start)

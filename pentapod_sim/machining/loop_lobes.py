@@ -41,9 +41,15 @@ from pentapod_sim.sim.stability import plant_radius
 
 #: Band [Hz] of the chatter frequencies the lobes consider (the plant's modes of interest).
 DEFAULT_BAND = (1.0, 1000.0)
-#: e-foldings of the predicted growth (or decay) a check run lasts after its settling part
-#: (the verdict needs a twofold growth or decay, 0.69 e-foldings).
-RUN_E_FOLDINGS = 2.0
+#: e-foldings of the predicted growth a check run above the limit lasts after its settling
+#: part. The verdict needs a twofold growth (0.69 e-foldings), but the tool leaving the cut,
+#: which the Floquet model leaves out, slows a recorded cut's growth: to 0.29-0.31 of the
+#: Floquet rate at P2 with the TCP damper at 3 kHz (833 and 437 rpm), 0.45-0.65 at 5 kHz, so
+#: two e-foldings grew 1.8-fold there; three give 2.4-fold at 0.29 (docs/machining.md).
+RUN_E_FOLDINGS_GROWTH = 3.0
+#: e-foldings of the predicted decay a check run below the limit lasts (the tool leaving the
+#: cut speeds the decay: -0.58 against -0.24 1/s on that P2 cut at 0.8x).
+RUN_E_FOLDINGS_DECAY = 2.0
 #: Fewest tooth periods a check run spans after its settling part (the verdict's growth fit
 #: needs 17; a fast rate on a small model would otherwise give too few).
 RUN_MIN_TOOTH_PERIODS = 40
@@ -227,8 +233,14 @@ def _averaged_rate(plant: PlantModel, controllers: list[DiscreteController], dt:
     return math.log(radius) / dt
 
 
+def run_e_foldings(rate: float) -> float:
+    """e-foldings of ``rate`` [1/s] a check run lasts after its settling part."""
+    return RUN_E_FOLDINGS_GROWTH if rate > 0 else RUN_E_FOLDINGS_DECAY
+
+
 def _duration(rate: float, durations: tuple[float, float], tooth_period: float) -> float:
-    active = max(RUN_E_FOLDINGS / max(abs(rate), 1e-9), RUN_MIN_TOOTH_PERIODS * tooth_period)
+    active = max(run_e_foldings(rate) / max(abs(rate), 1e-9),
+                 RUN_MIN_TOOTH_PERIODS * tooth_period)
     return min(max(active / (1.0 - RUN_SETTLE_SHARE), durations[0]), durations[1])
 
 
@@ -262,7 +274,7 @@ def check_runs(plant: PlantModel, laws: Sequence[Any], dt: float, table: Machini
     envelope there), so that the loop with the cut is periodic and its Floquet
     multipliers (:func:`pentapod_sim.machining.sampled_floquet.sampled_floquet`) give each
     run's growth or decay rate with the time-varying directional matrix; a run lasts
-    ``RUN_E_FOLDINGS`` e-foldings of it after the settling share, within ``durations`` (min,
+    :func:`run_e_foldings` e-foldings of it after the settling share, within ``durations`` (min,
     max) [s]. The speed is chosen among the ``candidates`` lowest lobe bottoms
     (:func:`lobe_bottoms`): the ``floquet_candidates`` whose runs the averaged loop predicts
     shortest get their Floquet rates (about a second each on the machine's loop), and of those
