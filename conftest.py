@@ -6,7 +6,8 @@ DDS on the loopback interface only (the package's Fast DDS profile with
 ``ROS_AUTOMATIC_DISCOVERY_RANGE=SYSTEM_DEFAULT``, pentapod_sim/scenario/network.py) and a free
 ``ROS_DOMAIN_ID``, reserved by this pytest process until it exits, are put into the environment
 before any test starts a node, so concurrent test runs, studies and users on this host never
-share a domain, and nothing of a test listens on the network.
+share a domain, and nothing of a test listens on the network. In a parallel session (pytest -n,
+tools/test.sh) each worker reserves a domain of its own.
 """
 import os
 import signal

@@ -12,5 +12,7 @@ cd "$ROOT"
 # the ecosystem's lint rules (ruff.toml: ament's flake8/pep257 settings) and the core's types
 ruff check --no-cache -q .
 mypy --no-incremental --cache-dir=/dev/null
-# the slowest tests are listed at the end: CI must stay under 30 minutes
-exec python -m pytest -q -p no:cacheprovider --durations=30 "$@"
+# one worker per core (PENTAPOD_TEST_WORKERS overrides: 0 runs in this process), each on a
+# ROS domain of its own; the slowest tests are listed at the end: CI must stay under 30 minutes
+exec python -m pytest -q -p no:cacheprovider -n "${PENTAPOD_TEST_WORKERS:-auto}" \
+    --dist worksteal --durations=30 "$@"

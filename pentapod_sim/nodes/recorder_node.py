@@ -20,6 +20,8 @@ from the composition's bus as message objects (:meth:`RecorderNode.take_from_bus
 (:mod:`pentapod_sim.nodes.wire_cdr`), written as the DDS messages are (same channels, log
 times, duplicate skipping, counts); its DDS subscriptions of those topics record nothing.
 
+Which topics it subscribes to, at which QoS and when:
+:mod:`pentapod_sim.nodes.recorder_subscriptions`.
 Parameters: :class:`pentapod_sim.nodes.parameter_tables.RecorderParams` (docs/parameters.md).
 """
 import datetime
@@ -38,14 +40,8 @@ from pentapod_sim import interface, shutdown
 from pentapod_sim.errors import BagError, ConfigError, RecordingError
 from pentapod_sim.nodes.common import run_node
 from pentapod_sim.nodes.parameter_tables import RecorderParams
-from pentapod_sim.nodes.recorder_qos import (
-    BEST_EFFORT,
-    LATE_JOINER,
-    level_for,
-    LEVELS,
-    offered_qos,
-    subscription_qos,
-)
+from pentapod_sim.nodes.recorder_qos import LATE_JOINER, offered_qos
+from pentapod_sim.nodes.recorder_subscriptions import Subscriptions
 from pentapod_sim.nodes.testbed_node import TestbedNode
 from pentapod_sim.nodes.wire_cdr import serializer, type_name
 from pentapod_sim.nodes.writers import WriterCheck
@@ -63,8 +59,6 @@ ORPHAN_QUIET = 0.5
 LATCHED_WAIT = 2.0
 #: Wall time [s] a recorder of a stopped run keeps looking for a foreign writer at its end.
 FOREIGN_WAIT = 2.0
-#: Wall time [s] between looks for the writers of ``fresh_topics`` while the known topics wait.
-HOLD_BACK_PERIOD = 0.02
 #: Name of the MCAP metadata record (and custom_data key) with expected vs recorded counts.
 RECORDING_RECORD = 'pentapod_recording'
 
@@ -111,32 +105,13 @@ class RecorderNode(TestbedNode):
             raise ConfigError(f'parameter run_info is not YAML: {err}') from None
         if not isinstance(run_info, dict):
             raise ConfigError(f'parameter run_info must be a YAML mapping, got {run_info!r}')
-        self.depth = params.queue_depth
-        self.fresh = set(params.fresh_topics)   # never transient local: no earlier run's history
         self.writer = BagWriter(Path(params.output_dir) / name, run_info=run_info,
                                 flush_period_s=0.0)
-        self.subs = {}  # topic -> (subscription or None, msg_type, level: level_for)
         self.from_bus = set()    # topics taken from a composition's bus (take_from_bus)
         self._records = {}       # topic -> callback writing one message's CDR bytes
-        # the writers of fresh topics are matched first: until then the plant, waiting for this
-        # recorder on its own topics, cannot start, so no answer of a source that outlives
-        # runs (and so has no history for a late reader) is published before it is matched
-        self._release_timer = None
-        self.held_back = [t for t in KNOWN_TOPICS
-                          if self._selected(t) or t == interface.RUN_STATUS]
-        for topic in self.fresh:
-            msg_type = interface.TOPIC_TYPES.get(topic)
-            if msg_type is None and topic.startswith(interface.FORCE_PREFIX):
-                msg_type = interface.JOINT_STATE
-            if msg_type is not None and self._selected(topic):
-                self._subscribe(topic, msg_type)
-        if self.fresh:
-            self.get_logger().info('waiting for the writer(s) of ' + ', '.join(sorted(self.fresh))
-                                   + " (fresh_topics) before subscribing to the plant's topics")
-        if not self.release_held_back():     # looked for often: the plant waits for it
-            self._release_timer = self.create_timer(
-                HOLD_BACK_PERIOD, self.release_held_back,
-                clock=Clock(clock_type=ClockType.STEADY_TIME))
+        self.readers = Subscriptions(self, KNOWN_TOPICS, self._selected, self._callback_of,
+                                     message_class, self.writers.watch, params.queue_depth,
+                                     params.fresh_topics)
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.create_timer(params.discovery_period, self.discover, clock=steady)
         self.create_timer(params.flush_period, self.flush, clock=steady)
@@ -148,67 +123,16 @@ class RecorderNode(TestbedNode):
             return topic in self.wanted
         return interface.is_testbed_topic(topic) and not topic.startswith(interface.LIVE_PREFIX)
 
-    def release_held_back(self) -> bool:
-        """
-        Subscribe the known topics once every fresh topic's writer is matched.
-
-        True once they are subscribed (at once without ``fresh_topics``).
-        """
-        if not self.held_back:
-            return True
-        fresh = sorted(t for t in self.fresh if self._selected(t))
-        if any(t not in self.subs or self.subs[t][0] is None
-               or self.subs[t][0].get_publisher_count() == 0 for t in fresh):
-            return False
-        if self._release_timer is not None:
-            self.destroy_timer(self._release_timer)
-            self._release_timer = None
-        if fresh:
-            self.get_logger().info('matched the writer(s) of ' + ', '.join(fresh))
-        for topic in self.held_back:
-            if topic not in self.subs:
-                self._subscribe(topic, KNOWN_TOPICS[topic])
-        self.held_back = []
-        return True
-
     def discover(self) -> None:
-        """
-        Subscribe to new selected topics with a publisher; follow what publishers offer.
-
-        A topic is first subscribed as :func:`level_for` says for the publishers known then; a
-        later publisher that offers less (volatile, best effort) cannot match that reader, so
-        the topic is subscribed again at that publisher's level, with a warning (its messages
-        before the new subscription matched are lost). The level never goes back up.
-        """
+        """Look for foreign writers and new topics (:meth:`Subscriptions.discover`)."""
         self.note_foreign()
-        released = self.release_held_back()
-        for topic, types in self.get_topic_names_and_types():
-            if not self._selected(topic) or not (released or topic in self.fresh):
-                continue
-            known = self.subs.get(topic)
-            if known is not None and (known[0] is None or known[2] == BEST_EFFORT):
-                continue  # unrecordable, or already best effort (matches every publisher)
-            publishers = self.get_publishers_info_by_topic(topic)
-            if not publishers:
-                continue
-            level = level_for(topic, publishers, topic in self.fresh)
-            if known is not None and level >= known[2]:
-                continue
-            if known is not None:  # the reader asks more than a publisher offers
-                self.destroy_subscription(known[0])
-                self.get_logger().warning(f'{topic}: a publisher offers only {LEVELS[level]}; '
-                                          're-subscribed, messages may be lost')
-            try:
-                self._subscribe(topic, types[0], level)
-            except (BagError, ImportError, AttributeError, ValueError) as err:
-                self.get_logger().error(f'cannot record {topic} [{types[0]}]: {err}')
-                self.subs[topic] = (None, types[0], BEST_EFFORT)  # do not retry every period
+        self.readers.discover()
 
     def note_foreign(self, final: bool = False) -> None:
         """Check the watched topics' writers now (:meth:`WriterCheck.check_each`); log refusals."""
         if final:      # what DDS matched, whether or not the graph shows it yet
             for topic in self.writers.topics:
-                sub = self.subs.get(topic, (None,))[0]
+                sub = self.readers.reader(topic)
                 if sub is not None:
                     self.writers.note_matched(topic, sub)
         for topic, refusal in self.writers.check_each(final).items():
@@ -216,25 +140,12 @@ class RecorderNode(TestbedNode):
                 self.foreign[topic] = refusal
                 self.get_logger().error(f'foreign writer: {refusal}; the recording will fail')
 
-    def _subscribe(self, topic: str, msg_type: str, level: int | None = None) -> None:
-        """Subscribe at ``level`` (:func:`level_for`; None: the topic's own, no publisher)."""
-        if level is None:
-            level = level_for(topic, [], topic in self.fresh)
-        status = topic == interface.RUN_STATUS
-        # transient local (per-step streams, run status, excitation spec): a recorder that
-        # matched a writer late gets what the writer still holds
-        qos = subscription_qos(level, self.depth)
-        callback = self._record(topic, msg_type)
-        if status:
-            callback = self._status_callback(callback)
-        else:
-            callback = self._from_dds(topic, callback)
-        sub = self.create_subscription(message_class(msg_type), topic, callback, qos, raw=True)
-        if topic == interface.RUN_STATUS or interface.is_step_topic(topic):
-            self.writers.watch(topic)
-        self.subs[topic] = (sub, msg_type, level)
-        self.get_logger().info(f'subscribed {topic} [{msg_type}]'
-                               f'{" best effort" if level == BEST_EFFORT else ""}')
+    def _callback_of(self, topic: str, msg_type: str):
+        """The raw callback of a subscribed topic: the run status's, or the DDS one."""
+        record = self._record(topic, msg_type)
+        if topic == interface.RUN_STATUS:
+            return self._status_callback(record)
+        return self._from_dds(topic, record)
 
     def _register(self, topic: str, msg_type: str) -> None:
         """Add the topic to the bag at its first message, with the publishers' offered QoS."""
@@ -341,7 +252,7 @@ class RecorderNode(TestbedNode):
     def expected_topics(self) -> list:
         """Per-step topics that must hold every step of the announced run."""
         present = set(self.writer.topic_counts()) | {
-            t for t, (sub, _, _) in self.subs.items()
+            t for t, (sub, _, _) in self.readers.subs.items()
             if sub is not None and self.count_publishers(t) > 0}
         return self.ledger.expected_topics(self.end, present)
 
@@ -378,7 +289,7 @@ class RecorderNode(TestbedNode):
     def unheard_latched(self) -> list[str]:
         """Recorded latched topics, subscribed as such, with a publisher and no message yet."""
         counts = self.writer.topic_counts()
-        return [t for t, (sub, _, level) in self.subs.items()
+        return [t for t, (sub, _, level) in self.readers.subs.items()
                 if sub is not None and level == LATE_JOINER and t not in counts
                 and self._selected(t) and self.count_publishers(t)]
 
