@@ -84,14 +84,21 @@ def test_shared_topics_allow_several_writers_and_record_them():
     assert check.foreign() == {}
 
 
-def test_messages_are_refused_while_dds_matched_a_second_writer(monkeypatch):
-    """Per message: two matched publishers refuse every message; the graph check then stops."""
+@pytest.fixture
+def one_writer(monkeypatch):
+    """(clock [s], graph, check): a check of TOPIC with one writer, on a clock the test sets."""
     now = [0.0]
     monkeypatch.setattr(writers.time, 'monotonic', lambda: now[0])
     graph = Graph()
     check = WriterCheck(graph)
     check.watch(TOPIC)
     graph.pubs[TOPIC] = [info(gid(1, 10))]
+    return now, graph, check
+
+
+def test_messages_are_refused_while_dds_matched_a_second_writer(one_writer):
+    """Per message: two matched publishers refuse every message; the graph check then stops."""
+    now, graph, check = one_writer
     check.check()
     sub = SimpleNamespace(count=1, get_publisher_count=lambda: sub.count)
     assert check.message_ok(TOPIC, sub)
@@ -104,14 +111,9 @@ def test_messages_are_refused_while_dds_matched_a_second_writer(monkeypatch):
         check.check()
 
 
-def test_the_final_check_refuses_a_second_matched_writer_at_once(monkeypatch):
+def test_the_final_check_refuses_a_second_matched_writer_at_once(one_writer):
     """A recorder's last check (at close) does not wait GRAPH_LAG for the graph to show it."""
-    now = [0.0]
-    monkeypatch.setattr(writers.time, 'monotonic', lambda: now[0])
-    graph = Graph()
-    check = WriterCheck(graph)
-    check.watch(TOPIC)
-    graph.pubs[TOPIC] = [info(gid(1, 10))]
+    _, graph, check = one_writer
     sub = SimpleNamespace(get_publisher_count=lambda: 2)
     assert not check.message_ok(TOPIC, sub)
     assert check.check_each() == {}              # a periodic check waits for the graph
