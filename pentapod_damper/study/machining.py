@@ -86,9 +86,9 @@ def cutting_check(cfg: StudyConfig, out_dir: Path, model: PositionModel,
     table = load_machining()
     op = cfg.machining_operations[0]
     # three Floquet candidates, as `statespace lobes --check` (a monodromy matrix per run costs
-    # about a second on the machine's loop): with one, P2's TCP damper was cut at 833 rpm, where
-    # 1.2x grows at only +0.12 1/s (a 22 s run whose entry transient of the 0.1 % modes hid
-    # the growth), instead of 437 rpm, +0.19 1/s and 14 s
+    # about a second on the machine's loop): with one, P2's TCP damper was cut at 833 rpm,
+    # where 1.2x grows at only +0.12 1/s by Floquet (a 22 s run; the tool leaving the cut
+    # slowed it further and it read stable); with three, at 375 rpm, +1.41 1/s and 2.8 s
     point = check_runs(model.plant, analytic.laws, cfg.dt, table, lobes.operations[op])
     base = study_cut_scenario(analytic.name, cfg)
     cuts = []
