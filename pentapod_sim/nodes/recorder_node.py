@@ -205,6 +205,7 @@ class RecorderNode(TestbedNode):
                 self.get_logger().error(f'{interface.RUN_STATUS}: {err}')
                 return
             run_end.note_start(self.writer, status)       # a start not at rest is noted
+            self.readers.expect(status.step_topics)       # found by discovery or not
             if status.ended:
                 self.end, self.end_seen = status, time.monotonic()
                 self.get_logger().info(f'run {status.state} after {status.steps} steps; '

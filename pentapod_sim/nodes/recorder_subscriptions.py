@@ -12,7 +12,8 @@ Fresh topics (recorder parameter ``fresh_topics``: the answers of a source that 
 recorded volatile, without its earlier runs' history) are subscribed first, and the known
 topics only once every fresh topic's writer is matched: the plant, waiting for the recorder
 on its own topics, cannot start before, so no answer is published before the recorder's
-reader can take it (test/test_recorder_fresh.py).
+reader can take it (test/test_recorder_fresh.py). The per-step topics a run status
+announces are subscribed when it comes (:meth:`Subscriptions.expect`), found or not.
 """
 from __future__ import annotations
 
@@ -26,6 +27,14 @@ from pentapod_sim.nodes.recorder_qos import BEST_EFFORT, level_for, LEVELS, subs
 
 #: Wall time [s] between looks for the writers of ``fresh_topics`` while the known topics wait.
 HOLD_BACK_PERIOD = 0.02
+
+
+def _type_of(topic: str) -> str | None:
+    """The message type of a testbed topic known by name (forces: any source's), else None."""
+    msg_type = interface.TOPIC_TYPES.get(topic)
+    if msg_type is None and topic.startswith(interface.FORCE_PREFIX):
+        msg_type = interface.JOINT_STATE
+    return msg_type
 
 
 class Subscriptions:
@@ -62,9 +71,7 @@ class Subscriptions:
         self.held_back = [t for t in known if selected(t) or t == interface.RUN_STATUS]
         self._release_timer = None
         for topic in sorted(self.fresh):
-            msg_type = interface.TOPIC_TYPES.get(topic)
-            if msg_type is None and topic.startswith(interface.FORCE_PREFIX):
-                msg_type = interface.JOINT_STATE
+            msg_type = _type_of(topic)
             if msg_type is not None and selected(topic):
                 self.subscribe(topic, msg_type)
         if self.fresh:
@@ -97,6 +104,22 @@ class Subscriptions:
                 self.subscribe(topic, self.known[topic])
         self.held_back = []
         return True
+
+    def expect(self, topics: Any) -> None:
+        """
+        Subscribe to the per-step topics a run status announces, before discovery finds them.
+
+        The plant names the force topics it takes in its status; a recorder whose participant
+        has not found a source's writer yet (DDS discovery can take an announcement period)
+        would otherwise miss that source's steps of a short run. Its writers keep the run's
+        steps for late readers, so the steps come once the writer is matched.
+        """
+        if self.held_back:
+            return
+        for topic in topics:
+            msg_type = _type_of(topic)
+            if topic not in self.subs and msg_type is not None and self.selected(topic):
+                self.subscribe(topic, msg_type)
 
     def discover(self) -> None:
         """Subscribe to new selected topics with a publisher; follow what publishers offer."""
