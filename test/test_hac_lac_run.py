@@ -66,6 +66,18 @@ def test_lockstep_hac_lac_run_is_the_offline_loop(tmp_path):
         drives = bag.custom_data['pentapod_start.drives']
         assert drives.endswith('drives.yaml on struts [1, 2, 3, 4, 5]'), drives
         assert bag.topic(interface.STRUT_STATES).count == STEPS
+        # the motor ports on their topics: the encoder beside the drive joint, the command
+        # on the damper's force topic
+        trace = traces[tag]
+        names = [list(trace['output_names']), list(trace['input_names'])]
+        for i in (1, 5):
+            for field in ('position', 'velocity'):
+                got = bag.series(f'{interface.STRUT_STATES}.{field}.strut{i}_motor').values
+                want = trace['y'][:, names[0].index(f'strut{i}_motor_{field}')]
+                assert np.array_equal(got, want), (i, field)
+            got = bag.series(f'{interface.force_topic("damper")}.effort.strut{i}_motor_force')
+            assert np.array_equal(got.values,
+                                  trace['u'][:, names[1].index(f'strut{i}_motor_force')])
     # the offline loop: the same discrete plant with drives, the same laws, the same force
     core = MultiRatePlant.from_model(
         DriveSet(load_drives()).on(PlantModel.load(tmp_path / 'model.npz')), RATE)
