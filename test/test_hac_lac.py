@@ -5,8 +5,8 @@ The damper node's law (``drive_struts``) is ``FeedDrives.discrete(dt)``; with th
 a constant TCP force settles at the FE model's static TCP displacement on the plant with the
 drives' rotors (the velocity loop's integral holds each rotor); the truncation check with
 ``drives`` closes the loop on plant and check model with their rotors and refuses a drive
-delay that makes it unstable (radius as python-control's closed loop); bad drive settings are
-named.
+delay that makes it unstable (radius as python-control's closed loop); a multi-rate plant with
+drives is the single-rate loop; bad drive settings are named.
 """
 import dataclasses
 
@@ -124,5 +124,24 @@ def test_bad_drive_settings_are_named():
         drives_path('nope.yaml')
     with pytest.raises(ConfigError, match=r'distinct numbers 1\.\.5, got \[1, 7\]'):
         DriveSet(load_drives(), (1, 7))
-    with pytest.raises(ConfigError, match='drive_file.*not found|not found'):
+    with pytest.raises(ConfigError, match="drives file 'missing.yaml' not found"):
         damper_laws({'drive_struts': [1], 'drive_file': 'missing.yaml', 'sample_rate': RATE})
+
+
+def test_a_multi_rate_plant_with_drives_is_the_single_rate_loop():
+    """Substeps N: the ZOH over the exchange step, so the same loop to rounding."""
+    _, plant = drives_plant()
+    driven = DriveSet(load_drives()).on(plant)
+    laws = list(damper_laws(dict(HAC_LAC, sample_rate=RATE)).values())
+    steps = 400
+    force = np.random.default_rng(2).standard_normal((steps, 1)) * 50.0
+    runs = []
+    for substeps in (1, 4):
+        core = MultiRatePlant.from_model(driven, RATE, substeps)
+        for law in laws:
+            law.reset()
+        runs.append(simulate(core, laws, excitation_matrix(core, ['tcp_force_x'], force,
+                                                           steps)))
+    scale = np.abs(runs[0].y).max(axis=0) + 1e-300
+    assert np.abs(runs[0].y).max() > 0
+    assert (np.abs(runs[1].y - runs[0].y) / scale).max() < 1e-8
