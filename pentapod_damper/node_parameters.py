@@ -16,6 +16,7 @@ from pentapod_damper.laws import (
     band_pass_velocity,
     chord_damper,
     Dynamics,
+    feed_drives,
     integral_force_feedback,
     lag_displacement_feedback,
     positive_position_feedback,
@@ -28,6 +29,7 @@ from pentapod_damper.laws import (
 )
 from pentapod_sim.errors import ConfigError
 from pentapod_sim.parameters import NodeParams, param, Sampled, SourceParams
+from pentapod_sim.plant.drives import drives_path, load_drives
 
 #: Upper bound of the damper gains.
 MAX_GAIN = 1.0e9
@@ -108,12 +110,28 @@ class ActiveLawParams(NodeParams):
     ppf_frequency_hz: float = param(27.0, 'filter frequency w_f / 2 pi (near the mode)', 'Hz',
                                     bounds=(1.0e-3, 1.0e5))
     ppf_damping: float = param(0.3, 'filter damping ratio zeta_f', bounds=(1.0e-3, 10.0))
+    drive_struts: tuple[int, ...] = param((), "struts (1..5) whose feed drives' servo cascade "
+                                          'the node runs (position P and velocity PI on the '
+                                          'motor encoder strut<i>_motor_position, _velocity, '
+                                          "with the drives' own delay, into "
+                                          'strut<i>_motor_force); needs a plant with the '
+                                          "drives (its parameter drives); [] or [0] = none")
+    drive_file: str = param('drives.yaml', "the drives' parameters (a bare name is looked up "
+                            "in the package's config folder): the plant's drives file")
+    drive_iff_gain: float = param(0.0, 'HAC-LAC: IFF gain g of w = -g / (s + omega_i) F from '
+                                  'the load cell strut<i>_force into the force command, '
+                                  "through the node's low-pass, its delay_steps added to the "
+                                  "drives' own delay; 0 = the feed drives alone", '1/s',
+                                  bounds=(0.0, MAX_GAIN))
+    drive_iff_omega: float = param(0.0, 'HAC-LAC: IFF corner omega_i', 'rad/s',
+                                   bounds=(0.0, 1.0e6))
 
     def active_laws(self, dyn: Dynamics, dt: float, source: str = '') -> dict[str, SteppedLaw]:
         """
         The active laws configured, keyed by the name of their gain parameter.
 
-        ``iff_gain``, ``lag_gain``, ``bandpass_gain``, ``ppf_gain`` -> law, in this order, with
+        ``iff_gain``, ``lag_gain``, ``bandpass_gain``, ``ppf_gain``, ``drive_iff_gain`` (the
+        drives' cascade, its IFF gain read-only) -> law, in this order, with
         the dynamics ``dyn`` at the sample time ``dt`` [s]. ConfigError (naming ``source``) for
         a combination the laws refuse.
         """
@@ -138,6 +156,10 @@ class ActiveLawParams(NodeParams):
                     _per_port(self.ppf_stiffness, self.ppf_struts, 'ppf_stiffness'),
                     self.ppf_frequency_hz, self.ppf_damping, dt, dyn)
                 laws['ppf_gain'].set_gain(self.ppf_gain)
+            if self.drive_struts:
+                laws['drive_iff_gain'] = feed_drives(
+                    list(self.drive_struts), load_drives(drives_path(self.drive_file)), dt,
+                    self.drive_iff_gain, self.drive_iff_omega, dyn)
         except ConfigError as err:
             raise ConfigError(f'{source}: {err}' if source else str(err)) from None
         return laws

@@ -137,9 +137,11 @@ RUN_STATUS_KEYS = ('state', 'steps', 'dt', 'last_stamp_ns', 'step_topics')
 #: messages the plant rejected so far) and ``rejected_by_reason`` (``source/reason=count``,
 #: comma-separated; ``stale`` and ``duplicate``: expected copies of re-published steps), and
 #: ``initial_state`` (``rest``, or ``file <path>``: the plant started from the state in that
-#: file, parameter ``initial_state_file``; the recorder stores it in the bag's metadata).
+#: file, parameter ``initial_state_file``; the recorder stores it in the bag's metadata) and
+#: ``drives`` (``none``, or ``<file> on struts [...]``: the plant steps the feed drives' rotors,
+#: parameter ``drives``; stored in the bag's metadata too).
 RUN_PROGRESS_KEYS = ('step_rate', 'deadline_misses', 'rejected_messages', 'rejected_by_reason',
-                     'initial_state')
+                     'initial_state', 'drives')
 
 
 def force_topic(source: str) -> str:
@@ -299,6 +301,10 @@ def _table() -> dict[str, tuple[str, str, str]]:
         table[f'strut{i}_drive_displacement'] = (STRUT_STATES, f'strut{i}_drive', 'position')
         table[f'strut{i}_drive_velocity'] = (STRUT_STATES, f'strut{i}_drive', 'velocity')
         table[f'strut{i}_force'] = (STRUT_STATES, f'strut{i}_drive', 'effort')
+        # the motor encoder of a plant with the feed drives' rotors (plant parameter drives):
+        # the rotor along the strut, relative to the gimbal
+        table[f'strut{i}_motor_position'] = (STRUT_STATES, f'strut{i}_motor', 'position')
+        table[f'strut{i}_motor_velocity'] = (STRUT_STATES, f'strut{i}_motor', 'velocity')
         for k in (2, 3):
             table[f'strut{i}_chord_{k}'] = (STRUT_STATES, f'strut{i}_chord_{k}', 'position')
             table[f'strut{i}_chord_velocity_{k}'] = (STRUT_STATES, f'strut{i}_chord_{k}',

@@ -6,8 +6,8 @@ band-pass velocity, PPF) with the gains tuned at one position (``python -m
 pentapod_damper.design --scenarios config/scenarios``), so the shipped files cannot drift from
 the table (test/test_damper_docs.py). The lag and PPF stiffnesses are written per port: the
 tuned fraction times each strut's reference stiffness at that position. IFF inside the drives'
-loops (HAC-LAC) and the drives themselves need the plant with the drives' rotors, which the
-plant node does not run yet: no scenario.
+loops (HAC-LAC) and the drives alone run on the plant with the drives' rotors (plant parameter
+``drives``), their cascade in the damper node (``drive_struts``).
 
 Units: SI, as the damper node's parameters (docs/parameters.md).
 """
@@ -30,7 +30,13 @@ SCENARIOS = {
     'band-pass velocity, bending': ('bandpass_struts', 'velocity feedback through a band-pass '
                                                        'on the strut bending ports'),
     'PPF, bending': ('ppf_struts', 'positive position feedback on the strut bending ports'),
+    'IFF + position loop (HAC-LAC)': ('hac_lac_struts', "integral force feedback inside the "
+                                                        "feed drives' position loops (HAC-LAC)"),
+    'feed drives alone (position loops)': ('drives_struts', "the feed drives' position loops "
+                                                            'alone'),
 }
+#: The drives file of the scenarios with the drives (config/drives.yaml, as the table's).
+DRIVES = 'drives.yaml'
 STRUTS = [1, 2, 3, 4, 5]
 
 
@@ -61,6 +67,12 @@ def node_params(record: Record, stiff: StrutStiffness) -> dict[str, Any]:
     if law.startswith('band-pass'):
         return {'bandpass_struts': STRUTS, 'bandpass_port': 'bending', 'bandpass_gain': g['gain'],
                 'bandpass_highpass_hz': g['highpass_hz'], 'bandpass_lowpass_hz': g['lowpass_hz']}
+    if law.startswith('IFF + position loop'):
+        return {'drive_struts': STRUTS, 'drive_file': DRIVES, 'drive_iff_gain': g['gain'],
+                'drive_iff_omega': g['omega_ratio'] * g['gain'], 'filter_order': 2,
+                'bandwidth_hz': g['lowpass_hz']}
+    if law.startswith('feed drives alone'):
+        return {'drive_struts': STRUTS, 'drive_file': DRIVES}
     if law.startswith('PPF'):
         sensors = [f'strut{i}_bending_{k}' for i in STRUTS for k in (2, 3)]
         return {'ppf_struts': STRUTS, 'ppf_port': 'bending',
@@ -99,7 +111,8 @@ def scenario_text(record: Record, params: Mapping[str, Any]) -> str:
         f'    sample_rate: {_value(rate)}            # plant sample rate [Hz] (the tuned rate)',
         '', 'plant:', '  ros__parameters:',
         f'    position: {record["position"]}                   # the position the gains were '
-        'tuned at',
+        'tuned at', *([f"    drives: {DRIVES}            # the feed drives' rotors (config/"
+                       'drives.yaml)'] if 'drive_struts' in params else []),
         '    timing: lockstep               # lockstep | realtime',
         '    duration: 4.0                  # simulated time [s]',
         '    sources: [exciter, damper_struts]',

@@ -12,12 +12,13 @@ space from ``discrete_model()``; memoryless linear laws their gain matrix from
   through actuator/sensor dynamics (:class:`Dynamics`);
 * :mod:`.pma`: the ideal proof-mass actuator, optionally with a high-pass and limits;
 * :mod:`.linear`: integral force feedback, band-pass velocity, lag displacement and positive
-  position feedback (docs/dampers.md).
+  position feedback, the feed drives' cascade with IFF inside (HAC-LAC) (docs/dampers.md).
 
 Units: forces N, moments N m, velocities m/s, angular rates rad/s, masses kg, gains as stated.
 """
 from pentapod_damper.laws.linear import (  # noqa: F401 (the package's API)
     band_pass_velocity,
+    feed_drives,
     integral_force_feedback,
     lag_displacement_feedback,
     positive_position_feedback,
@@ -33,7 +34,8 @@ from pentapod_damper.laws.viscous import (  # noqa: F401
 )
 from pentapod_sim.sim.law_models import Dynamics, FILTER_ORDERS, HOLDS  # noqa: F401
 
-__all__ = ['band_pass_velocity', 'chord_damper', 'Dynamics', 'FILTER_ORDERS', 'HOLDS',
+__all__ = ['band_pass_velocity', 'chord_damper', 'Dynamics', 'feed_drives', 'FILTER_ORDERS',
+           'HOLDS',
            'integral_force_feedback', 'lag_displacement_feedback', 'positive_position_feedback',
            'ProofMassActuator', 'SteppedLaw', 'strut_axial_damper', 'strut_bending_damper',
            'tcp_damper', 'ViscousDamper']

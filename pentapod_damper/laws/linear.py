@@ -2,7 +2,9 @@
 Laws with linear dynamics stepped sample by sample.
 
 Integral force feedback, band-pass velocity, lag displacement and positive position feedback
-on strut ports (their transfer functions: :mod:`pentapod_sim.sim.law_models`).
+on strut ports (their transfer functions: :mod:`pentapod_sim.sim.law_models`), and the feed
+drives' servo cascade with IFF inside (HAC-LAC) or alone (:func:`feed_drives`, its discrete
+state space :class:`pentapod_sim.sim.drives.FeedDrives`).
 
 A :class:`SteppedLaw` holds the discrete state space of its law at the plant's sample time and
 answers ``u_k`` to ``y_k`` (lockstep convention, docs/architecture.md); ``discrete_model()``
@@ -21,8 +23,10 @@ import numpy.typing as npt
 
 from pentapod_damper.laws.viscous import _struts
 from pentapod_sim.errors import ConfigError
+from pentapod_sim.plant.drives import DriveParams
 from pentapod_sim.plant.ports import collocated_output
 from pentapod_sim.sim.controllers import DiscreteController
+from pentapod_sim.sim.drives import FeedDrives
 from pentapod_sim.sim.law_models import (
     band_pass,
     Dynamics,
@@ -47,13 +51,13 @@ class SteppedLaw:
 
     Attributes
     ----------
-    law : LinearLaw
-        The law (ports, transfer function, gains, dynamics).
+    law : LinearLaw or FeedDrives
+        The law (ports, transfer function, gains, dynamics), or the feed drives' cascade.
     sensor_ports, actuator_ports : list of str
         Plant output and input ports.
     """
 
-    def __init__(self, law: LinearLaw, dt: float) -> None:
+    def __init__(self, law: LinearLaw | FeedDrives, dt: float) -> None:
         self.law = law
         self.dt = positive('sample time dt [s]', dt)
         self.sensor_ports = list(law.sensor_ports)
@@ -159,3 +163,18 @@ def positive_position_feedback(kind: str, struts: Sequence[int], gain: float | S
     ports = _strut_pairs(kind, struts)
     return SteppedLaw(ppf([collocated_output(p, 'displacement') for p in ports], ports, gain,
                           frequency_hz, damping, dynamics or Dynamics()), dt)
+
+
+def feed_drives(struts: Sequence[int], params: DriveParams, dt: float, iff_gain: float = 0.0,
+                iff_omega: float = 0.0, dynamics: Dynamics | None = None) -> SteppedLaw:
+    """
+    The feed drives' servo cascade of ``struts``, with IFF inside for ``iff_gain`` > 0 (HAC-LAC).
+
+    Per strut: position P and velocity PI on the motor encoder (``strut<i>_motor_position``
+    [m], ``strut<i>_motor_velocity`` [m/s]) with the drives' own delay, and (HAC-LAC)
+    ``-g / (s + omega_i)`` of the load cell ``strut<i>_force`` [N] through ``dynamics`` into
+    the force command ``strut<i>_motor_force`` [N]; g [1/s], omega_i [rad/s]. Its scale stays
+    1 (the cascade's gains are the drives'). Needs a plant with the drives' rotors.
+    """
+    return SteppedLaw(FeedDrives(params, tuple(_struts(struts)), float(iff_gain),
+                                 float(iff_omega), dynamics or Dynamics()), dt)

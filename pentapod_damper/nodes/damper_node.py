@@ -6,7 +6,8 @@ the bending rates, b [N m s/rad]), strut chord dampers (lateral force pairs alon
 the chord point against the chord, b [N s/m]), strut axial dampers (force from the axial
 velocity, b [N s/m]) and TCP dampers against ground (force from the TCP velocity, b [N s/m]),
 and the active strut laws of docs/dampers.md (integral force feedback from the load cells,
-lag displacement, band-pass velocity and positive position feedback on the strut ports),
+lag displacement, band-pass velocity and positive position feedback on the strut ports, and
+the feed drives' servo cascade with IFF inside, HAC-LAC, on a plant with the drives),
 all optionally through the same low-pass and delay (``filter_order``, ``bandwidth_hz``,
 ``filter_damping``, ``delay_steps``; controller states reset with every new plant run). It answers
 every plant step on /pentapod/forces/<source_name> (lockstep contract, docs/nodes.md). The
@@ -37,7 +38,7 @@ class DamperNode(LockstepSource):
         if not self.laws:
             raise ConfigError('damper node has no damper: set bending_struts, chord_struts, '
                               'axial_struts, tcp_directions, iff_struts, lag_struts, '
-                              'bandpass_struts or ppf_struts')
+                              'bandpass_struts, ppf_struts or drive_struts')
         laws = list(self.laws.values())
         self.setup([p for law in laws for p in law.sensor_ports],
                    [p for law in laws for p in law.actuator_ports])

@@ -111,16 +111,17 @@ def position_lobes(plant: Any, position: str, scenarios: Sequence[str], table: M
     The lobes of every scenario at one position (the study's machining section calls this).
 
     Each scenario's laws are built as its nodes run them, at ``sample_rate`` [Hz] or the
-    scenario's own; ConfigError names a scenario whose loop is unstable.
+    scenario's own, on ``plant`` as its plant node steps it (with the feed drives' rotors if
+    it has ``drives``); ConfigError names a scenario whose loop is unstable.
     """
-    from pentapod_sim.scenario.laws import scenario_dt, scenario_loop_laws
+    from pentapod_sim.scenario.laws import scenario_dt, scenario_loop_laws, scenario_plant
     out = []
     for scenario in scenarios:
         dt = sample_time(sample_rate) if sample_rate else scenario_dt(scenario)
         laws = scenario_loop_laws(scenario, dt)
         label = Path(scenario).stem
-        out.append(loop_lobes(plant, laws, dt, table, operations, speeds, label, position,
-                              band))
+        out.append(loop_lobes(scenario_plant(scenario, plant), laws, dt, table, operations,
+                              speeds, label, position, band))
         LOGGER.info('%s %s: lobes at %g Hz, %d frequencies', position, label, 1 / dt,
                     out[-1].loop.frf.freq.size)
     return out
@@ -249,9 +250,10 @@ CHECK_COLUMNS = ('position', 'scenario', 'operation', 'speed_rpm', 'limit_m', 'c
 def _check(plant: Any, rec: LoopLobes, op: str, table: MachiningTable,
            record: Path | None) -> list[list[Any]]:
     """Print the cutting runs that check one limit; with ``record`` run and judge them."""
-    from pentapod_sim.scenario.laws import scenario_loop_laws
+    from pentapod_sim.scenario.laws import scenario_loop_laws, scenario_plant
     laws = scenario_loop_laws(rec.label, rec.loop.dt)
-    point = check_runs(plant, laws, rec.loop.dt, table, rec.operations[op])
+    point = check_runs(scenario_plant(rec.label, plant), laws, rec.loop.dt, table,
+                       rec.operations[op])
     runs = '; '.join(f'{r.factor:g}x = {r.params["axial_depth"] * 1e3:.4g} mm for '
                      f'{r.duration:.3g} s (rate {r.growth_rate:+.3g} 1/s, {_multiplier(r)}; '
                      f'averaged loop {r.averaged_rate:+.3g} 1/s; expect {r.expected})'

@@ -47,6 +47,7 @@ from pentapod_sim.plant.check_model import (
     CheckStopped,
     load_or_build_check_model,
 )
+from pentapod_sim.plant.drives import DrivenPlant, DriveSet
 from pentapod_sim.plant.model import PlantModel
 from pentapod_sim.sim.controllers import DiscreteController
 from pentapod_sim.sim.stability import apply_policy, check_loop, LoopCheck, UnstableLoopError
@@ -55,7 +56,7 @@ from pentapod_sim.sim.stability import apply_policy, check_loop, LoopCheck, Unst
 MODEL_TIMEOUT = 2.0
 
 
-def sort_models(texts: Mapping[str, str | None], plant: PlantModel
+def sort_models(texts: Mapping[str, str | None], plant: PlantModel | DrivenPlant
                 ) -> tuple[dict[str, DiscreteController], list[str], dict[str, str]]:
     """
     Sort the sources' model texts into linear models, open-loop sources and unchecked ones.
@@ -64,8 +65,8 @@ def sort_models(texts: Mapping[str, str | None], plant: PlantModel
     ----------
     texts : mapping
         Source name -> message text, None for a source that sent none.
-    plant : PlantModel
-        The plant whose ports a model must use.
+    plant : PlantModel or DrivenPlant
+        The plant whose ports a model must use (with the drives' motor ports if it has them).
 
     Returns
     -------
@@ -174,11 +175,17 @@ class TruncationCheck:
         ``model_cache_dir``: check models and loop results are kept there.
     log : logger
         The node's logger.
+    drives : DriveSet, optional
+        The feed drives the plant steps (parameter ``drives``): plant and check model are
+        checked with their rotors.
     """
 
     def __init__(self, models, plant: PlantModel, dt: float, policy: str, sample_rate: float,
-                 f_min: float, cache_dir: str, log):
+                 f_min: float, cache_dir: str, log, drives: DriveSet | None = None):
         self.models, self.plant, self.dt, self.policy = models, plant, dt, policy
+        self.drives = drives
+        #: the ports the sources' models may use: the plant's, with the motors'
+        self.ports: PlantModel | DrivenPlant = plant if drives is None else drives.on(plant)
         self.sample_rate, self.f_min, self.cache_dir, self.log = sample_rate, f_min, cache_dir, log
         self.checked: dict[str, str | None] = {}     # the model texts the last check used
         self._check: tuple[PlantModel | None, str] | None = None    # (check model, name)
@@ -226,7 +233,7 @@ class TruncationCheck:
         result if a stop was requested meanwhile (:func:`pentapod_sim.shutdown.unless_requested`).
         """
         doc = [self.plant.content_hash(), check_name, repr(self.dt), label,
-               [m.to_json() for m in models.values()]]
+               [m.to_json() for m in models.values()], repr(self.drives)]
         key = hashlib.sha256(json.dumps(doc).encode()).hexdigest()[:16]
         path = None if check is None else Path(self.cache_dir) / f'loop_check_{key}.json'
         if path is not None and path.is_file():
@@ -239,7 +246,7 @@ class TruncationCheck:
         try:    # seconds of LAPACK for a check model: a stop signal must not wait for them
             result = shutdown.unless_requested(lambda: check_loop(
                 self.plant, check, list(models.values()), self.dt, 'warn', label,
-                lambda msg: shutdown.requested() or self.log.info(msg)))
+                lambda msg: shutdown.requested() or self.log.info(msg), self.drives))
         finally:
             quiet.disabled = was
         if result is None:
@@ -274,7 +281,7 @@ class TruncationCheck:
         self.checked = dict(texts)
         if shutdown.requested():    # stopped while waiting: no check model, no eigenvalues
             return None
-        models, open_loop, unchecked = sort_models(texts, self.plant)
+        models, open_loop, unchecked = sort_models(texts, self.ports)
         missing = ''.join(f'; unchecked source {s!r}: {why}' for s, why in unchecked.items())
         if unchecked:
             log.warning(f'truncation check: source(s) {", ".join(unchecked)} gave no linear '
@@ -339,7 +346,7 @@ class TruncationCheck:
 
         def work() -> None:
             try:
-                models, _, unchecked = sort_models(texts, self.plant)
+                models, _, unchecked = sort_models(texts, self.ports)
                 outcome['unchecked'] = unchecked
                 if models:
                     check, name = self.check_model()

@@ -42,6 +42,15 @@ class PlantParams(Sampled):
                                     'periodic steady state of a multisine (pentapod_sim.sim.'
                                     'periodic_state); empty: from rest. The run status and the '
                                     "bag's metadata name it")
+    drives: str = param('', "feed drives file (e.g. drives.yaml: a bare name is looked up in "
+                        "the package's config folder): the plant steps the modal plant with "
+                        "the drives' rotors of drive_struts, discretised exactly at its step, "
+                        'with the ports strut<i>_motor_force [N] in and strut<i>_motor_position '
+                        "[m], strut<i>_motor_velocity [m/s] out (docs/dampers.md); the rotors "
+                        "need their servo loops (a damper node's drive_struts). Empty: no "
+                        'drives, the links locked as in the FE model')
+    drive_struts: tuple[int, ...] = param((1, 2, 3, 4, 5), 'struts (1..5) whose feed drives '
+                                          'the plant steps when drives is set')
     substeps: int = param(1, 'plant steps per exchange: the plant integrates at sample_rate * '
                           'substeps (exact zero-order hold, forces held over the substeps) and '
                           'exchanges /clock, states and forces at sample_rate; the full-rate '

@@ -22,7 +22,7 @@ from __future__ import annotations
 import time
 
 from pentapod_sim import interface, shutdown
-from pentapod_sim.errors import ConfigError, RunError
+from pentapod_sim.errors import ConfigError, PortError, RunError
 from pentapod_sim.nodes.answer_poll import AnswerPoller
 from pentapod_sim.nodes.common import (
     run_node,
@@ -38,6 +38,7 @@ from pentapod_sim.nodes.run_status import RunStatusPublisher
 from pentapod_sim.nodes.testbed_node import TestbedNode
 from pentapod_sim.nodes.writers import WriterCheck
 from pentapod_sim.plant.build import load_or_build_model
+from pentapod_sim.plant.drives import drives_path, DriveSet, load_drives
 from pentapod_sim.sim.multirate import MultiRatePlant
 from pentapod_sim.sim.periodic_state import load_initial_state
 from pentapod_sim.sim.realtime import RealTime
@@ -56,12 +57,16 @@ class PlantNode(TestbedNode):
         p = self.params
         ports = p.source_ports
         self.model, origin = load_or_build_model(p.model_file, p.position, p.model_cache_dir)
-        self.core = MultiRatePlant.from_model(self.model, p.sample_rate, p.substeps,
-                                              p.max_state_norm)
+        self.drives = self._drives()
+        self.core = MultiRatePlant.from_model(
+            self.model if self.drives is None else self.drives.on(self.model), p.sample_rate,
+            p.substeps, p.max_state_norm)
         self.get_logger().info(
-            f'plant model {origin}: {self.model.n_modes} modes, {len(self.model.input_names)} '
-            f'inputs, {len(self.model.output_names)} outputs, dt = {self.core.dt:.6g} s, '
-            f'{self.core.substeps} substep(s)')
+            f'plant model {origin}: {self.model.n_modes} modes, {len(self.core.input_names)} '
+            f'inputs, {len(self.core.output_names)} outputs, dt = {self.core.dt:.6g} s, '
+            f'{self.core.substeps} substep(s)'
+            + ('' if self.drives is None else f", feed drives' rotors of "
+               f'{self.drives.describe()}'))
         self.initial_state = 'rest'
         if p.initial_state_file:
             self.core.reset(*load_initial_state(p.initial_state_file, self.core.n_states,
@@ -83,19 +88,34 @@ class PlantNode(TestbedNode):
         self.poller = AnswerPoller(self, self.inputs, p.answer_poll_time if lockstep else 0.0)
         self.status = RunStatusPublisher(self, self.core.dt, p.status_period,
                                          lambda: self.announce(interface.RUN_RUNNING, True),
-                                         self.initial_state)
+                                         self.initial_state, 'none' if self.drives is None
+                                         else self.drives.describe())
         for topic in self.outputs.topics() + [interface.RUN_STATUS]:
             self.writers.watch(topic)
         self.loop_check = TruncationCheck(
             ModelCollector(self, self.mixer.sources, lambda: self.core.k), self.model,
             self.core.dt, p.loop_check, p.sample_rate, p.loop_check_f_min, p.model_cache_dir,
-            self.get_logger())
+            self.get_logger(), self.drives)
         waits = Waits(p.startup_timeout, p.source_timeout, p.resend_period)
         self.timing: Timing = (
             Lockstep(self.core, self.mixer, self.n_steps, waits) if lockstep else
             RealTime(self.core, self.mixer, self.n_steps, waits, report_period=p.report_period,
                      lost_policy=p.lost_source_policy, log=self.get_logger()))
         self.bus_drain: Drain | None = None   # a composed plant's (join_bus)
+
+    def _drives(self) -> DriveSet | None:
+        """The feed drives of parameter ``drives`` (ConfigError naming the bad value)."""
+        p = self.params
+        if not p.drives:
+            return None
+        try:
+            drives = DriveSet(load_drives(drives_path(p.drives)), p.drive_struts)
+            drives.on(self.model)       # the model has the drive ports
+        except (ConfigError, PortError) as err:
+            why = err.args[0] if isinstance(err, PortError) else err
+            raise ConfigError(f"parameter 'drives' = {p.drives!r} (drive_struts "
+                              f'{list(p.drive_struts)}): {why}') from None
+        return drives
 
     def _n_steps(self) -> int:
         """Steps of the run from ``steps`` or ``duration``."""

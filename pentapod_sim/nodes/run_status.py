@@ -23,13 +23,15 @@ from pentapod_sim.nodes.common import qos
 
 def status_values(state: str, steps: int, dt: float, step_topics: list[str],
                   step_rate: float, deadline_misses: int, rejected: int,
-                  by_reason: str = '', initial_state: str = 'rest') -> dict[str, str]:
+                  by_reason: str = '', initial_state: str = 'rest',
+                  drives: str = 'none') -> dict[str, str]:
     """Key/value pairs of one run-status message (units: dt [s], step_rate [steps/s])."""
     values = {'state': state, 'steps': steps, 'dt': repr(dt),
               'last_stamp_ns': stamp_ns(steps - 1, dt) if steps else -1,
               'step_topics': ','.join(step_topics), 'step_rate': f'{step_rate:.6g}',
               'deadline_misses': deadline_misses, 'rejected_messages': rejected,
-              'rejected_by_reason': by_reason, 'initial_state': initial_state}
+              'rejected_by_reason': by_reason, 'initial_state': initial_state,
+              'drives': drives}
     return {k: str(v) for k, v in values.items()}
 
 
@@ -49,12 +51,14 @@ class RunStatusPublisher:
         Called by the timer; publishes a ``running`` message (:meth:`publish`).
     initial_state : str
         Where the run started: ``rest``, or ``file <path>`` (parameter ``initial_state_file``).
+    drives : str
+        The feed drives the plant steps: ``none``, or ``<file> on struts [...]``.
     """
 
     def __init__(self, node, dt: float, period: float, tick: Callable[[], None],
-                 initial_state: str = 'rest'):
+                 initial_state: str = 'rest', drives: str = 'none'):
         self.dt = dt
-        self.initial_state = initial_state
+        self.initial_state, self.drives = initial_state, drives
         self.name = node.get_fully_qualified_name()
         self.pub = node.create_publisher(DiagnosticStatus, interface.RUN_STATUS, qos('status'))
         self.timer = node.create_timer(period, tick,
@@ -83,7 +87,7 @@ class RunStatusPublisher:
         rate = (steps - last_steps) / (now - last_time) if now > last_time else 0.0
         self.last = (now, steps)
         values = status_values(state, steps, self.dt, step_topics, rate, deadline_misses,
-                               rejected, by_reason, self.initial_state)
+                               rejected, by_reason, self.initial_state, self.drives)
         level = DiagnosticStatus.WARN if state == interface.RUN_STOPPED else DiagnosticStatus.OK
         self.pub.publish(DiagnosticStatus(
             level=level, name=self.name, message=state,

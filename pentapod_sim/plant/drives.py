@@ -74,6 +74,23 @@ def load_drives(path: str | os.PathLike[str] | None = None) -> DriveParams:
     return replace(load(DriveParams, path), source=str(path))
 
 
+def drives_path(value: str | os.PathLike[str]) -> Path:
+    """
+    The drives file a node parameter names: the path, or a bare name in the config folder.
+
+    ``drives.yaml`` is config/drives.yaml wherever the node runs (a checkout or installed)
+    unless the working folder has a file of that name. ConfigError names a missing file.
+    """
+    path = Path(value)
+    if path.is_file():
+        return path
+    shipped = config_dir() / path
+    if not path.is_absolute() and path.parent == Path('.') and shipped.is_file():
+        return shipped
+    raise ConfigError(f'drives file {str(value)!r} not found (give a path, or the name of a '
+                      f'file in {config_dir()})')
+
+
 def link_stiffness(plant: PlantModel, strut: int) -> float:
     """
     Axial stiffness k_a [N/m] of strut ``strut``'s drive link, read from the plant's ports.
@@ -199,6 +216,38 @@ class DrivenPlant:
     def n_modes(self) -> int:
         """Modes of the underlying plant."""
         return self.plant.n_modes
+
+
+@dataclass(frozen=True)
+class DriveSet:
+    """
+    The feed drives a plant steps (plant node parameters ``drives``, ``drive_struts``).
+
+    Attributes
+    ----------
+    params : DriveParams
+        The drives (their ``source`` names the file).
+    struts : tuple of int
+        Struts with drives, distinct numbers 1..5.
+    """
+
+    params: DriveParams
+    struts: tuple[int, ...] = (1, 2, 3, 4, 5)
+
+    def __post_init__(self) -> None:
+        struts = tuple(int(i) for i in self.struts)
+        if not struts or any(not 1 <= i <= 5 for i in struts) or len(set(struts)) != len(struts):
+            raise ConfigError('feed-drive struts must be distinct numbers 1..5, got '
+                              f'{list(self.struts)}')
+        object.__setattr__(self, 'struts', struts)
+
+    def on(self, plant: PlantModel) -> DrivenPlant:
+        """``plant`` with these drives' rotors (PortError if it lacks the drive ports)."""
+        return DrivenPlant(plant, self.params, self.struts)
+
+    def describe(self) -> str:
+        """``<file> on struts [...]`` (the run status' ``drives``)."""
+        return f'{self.params.source} on struts {list(self.struts)}'
 
 
 def zoh(a: np.ndarray, b: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:

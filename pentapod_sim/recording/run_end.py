@@ -26,7 +26,8 @@ from pentapod_sim.interface import (
 )
 
 #: MCAP metadata record (metadata.yaml ``custom_data`` key ``pentapod_start.initial_state``)
-#: where the recorder notes where the plant started: ``rest`` or ``file <path>``.
+#: where the recorder notes where the plant started: ``rest`` or ``file <path>``, and (key
+#: ``pentapod_start.drives``) the feed drives it stepped: ``none`` or ``<file> on struts [...]``.
 START_RECORD = 'pentapod_start'
 
 @dataclass(frozen=True)
@@ -48,6 +49,8 @@ class RunStatus:
         Topics the plant published or awaited every step.
     initial_state : str
         ``rest``, or ``file <path>``: the plant's state at step 0 came from that file.
+    drives : str
+        ``none``, or ``<file> on struts [...]``: the plant stepped the feed drives' rotors.
     """
 
     state: str
@@ -56,6 +59,7 @@ class RunStatus:
     last_stamp_ns: int
     step_topics: tuple[str, ...]
     initial_state: str = 'rest'
+    drives: str = 'none'
 
     @property
     def ended(self) -> bool:
@@ -79,13 +83,15 @@ class RunStatus:
         if steps < 0:
             raise BagError(f'run status has steps = {steps} < 0')
         topics = tuple(t for t in values['step_topics'].split(',') if t)
-        return cls(state, steps, dt, last, topics, values.get('initial_state', 'rest'))
+        return cls(state, steps, dt, last, topics, values.get('initial_state', 'rest'),
+                   values.get('drives', 'none'))
 
 
 def note_start(writer: Any, status: RunStatus) -> None:
     """Store where the plant started (:data:`START_RECORD`) in ``writer``'s bag, once."""
-    if writer.custom_data.get(f'{START_RECORD}.initial_state') != status.initial_state:
-        writer.add_record(START_RECORD, {'initial_state': status.initial_state})
+    record = {'initial_state': status.initial_state, 'drives': status.drives}
+    if any(writer.custom_data.get(f'{START_RECORD}.{k}') != v for k, v in record.items()):
+        writer.add_record(START_RECORD, record)
 
 
 class StepLedger:

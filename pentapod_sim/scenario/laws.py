@@ -16,6 +16,8 @@ from typing import Any
 
 from pentapod_sim.errors import ConfigError
 from pentapod_sim.parameters import sample_time
+from pentapod_sim.plant.drives import drives_path, DriveSet, load_drives
+from pentapod_sim.plant.model import PlantModel
 from pentapod_sim.registry import SOURCE
 from pentapod_sim.scenario.files import read_scenario, Scenario
 
@@ -23,6 +25,19 @@ from pentapod_sim.scenario.files import read_scenario, Scenario
 def scenario_dt(scenario: str | Path | Scenario) -> float:
     """Sample time [s] of a scenario: its plant's ``sample_rate``."""
     return sample_time(read_scenario(scenario).plant.params.sample_rate)
+
+
+def scenario_plant(scenario: str | Path | Scenario, plant: PlantModel) -> Any:
+    """
+    ``plant`` as the scenario's plant node steps it (the feed drives' rotors too, if any).
+
+    With the plant parameter ``drives`` set: :class:`pentapod_sim.plant.drives.DrivenPlant`
+    of ``plant`` and those drives; otherwise ``plant`` itself.
+    """
+    params = read_scenario(scenario).plant.params
+    if not params.drives:
+        return plant
+    return DriveSet(load_drives(drives_path(params.drives)), params.drive_struts).on(plant)
 
 
 def scenario_loop_laws(scenario: str | Path | Scenario, dt: float | None = None) -> list[Any]:

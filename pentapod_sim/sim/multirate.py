@@ -38,6 +38,7 @@ from pentapod_sim.parameters import sample_time
 from pentapod_sim.sim.stepping import DEFAULT_MAX_STATE_NORM, DiscretePlant, modal_blocks
 
 if TYPE_CHECKING:
+    from pentapod_sim.plant.drives import DrivenPlant
     from pentapod_sim.plant.model import PlantModel
     from pentapod_sim.sim.controllers import LoopSystem
 
@@ -147,10 +148,13 @@ class MultiRatePlant(DiscretePlant):
         self.fine_dt = fine_plant.dt
 
     @classmethod
-    def from_model(cls, model: PlantModel, sample_rate: float, substeps: int = 1,
+    def from_model(cls, model: PlantModel | DrivenPlant, sample_rate: float, substeps: int = 1,
                    max_state_norm: float = DEFAULT_MAX_STATE_NORM) -> 'MultiRatePlant':
         """
-        From a :class:`pentapod_sim.plant.model.PlantModel`.
+        From a plant model, or the plant with the feed drives' rotors (exact ZOH).
+
+        ``model`` is a :class:`pentapod_sim.plant.model.PlantModel` or a
+        :class:`pentapod_sim.plant.drives.DrivenPlant`.
 
         ``sample_rate`` [Hz] is the exchange rate; the plant integrates at
         ``sample_rate * substeps``.

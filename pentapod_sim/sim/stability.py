@@ -42,6 +42,7 @@ from pentapod_sim.plant.check_model import (
     DEFAULT_CHECK_F_MIN,
     load_or_build_check_model,
 )
+from pentapod_sim.plant.drives import DrivenPlant, DriveSet
 from pentapod_sim.plant.model import PlantModel
 from pentapod_sim.sim.controllers import (  # noqa: F401 (re-exported)
     controller_of,
@@ -115,11 +116,13 @@ def spectral_radius(matrix: np.ndarray, dt: float,
     return float(abs(top)), float(abs(np.angle(top)) / (2 * np.pi * dt))
 
 
-def plant_radius(plant: PlantModel, controllers: Sequence[DiscreteController],
+def plant_radius(plant: PlantModel | DrivenPlant, controllers: Sequence[DiscreteController],
                  dt: float, progress: Callable[[str], None] | None = None
                  ) -> tuple[float, float]:
-    """Spectral radius (and its frequency [Hz]) of the sampled loop of a modal plant."""
-    if not controllers:      # open loop: the eigenvalues of the 2x2 ZOH blocks of the modes
+    """Spectral radius (and its frequency [Hz]) of the sampled loop of a plant."""
+    if not controllers and isinstance(plant, DrivenPlant):     # free rotors: radius 1
+        return spectral_radius(plant.discrete_matrices(dt)[0], dt, progress)
+    if not controllers and isinstance(plant, PlantModel):   # open loop: the 2x2 ZOH blocks
         if plant.n_modes == 0:
             return 0.0, 0.0
         lam = np.linalg.eigvals(plant.zoh_blocks(dt)[0]).ravel()
@@ -228,7 +231,8 @@ def apply_policy(check: LoopCheck, policy: str = DEFAULT_POLICY) -> LoopCheck:
 def check_loop(plant: PlantModel, check_plant: PlantModel | None,
                controllers: Sequence[DiscreteController], dt: float,
                policy: str = DEFAULT_POLICY, label: str = 'loop',
-               progress: Callable[[str], None] | None = None) -> LoopCheck:
+               progress: Callable[[str], None] | None = None,
+               drives: DriveSet | None = None) -> LoopCheck:
     """
     Spectral radius of the sampled loop on the plant and on the check model; apply a policy.
 
@@ -249,16 +253,22 @@ def check_loop(plant: PlantModel, check_plant: PlantModel | None,
         Names the loop in messages.
     progress : callable, optional
         Told the elapsed time of an eigenvalue problem that takes more than a second.
+    drives : DriveSet, optional
+        The feed drives the plant runs with: plant and check model are both checked with
+        their rotors (:class:`pentapod_sim.plant.drives.DrivenPlant`, exact ZOH at ``dt``),
+        the controllers may use the motor ports.
     """
     if not np.isfinite(dt) or dt <= 0:
         raise ConfigError(f'sample time dt must be > 0 s, got {dt!r}')
-    rho_p, f_p = plant_radius(plant, controllers, dt, progress)
+    rho_p, f_p = plant_radius(plant if drives is None else drives.on(plant), controllers, dt,
+                              progress)
     if check_plant is None:
         result = LoopCheck(label, float(dt), rho_p, float('nan'), f_p, float('nan'),
                            plant.n_modes, 0, float('nan'))
         return apply_policy(result, policy)
     check_plant = check_plant.select(plant.input_names, plant.output_names)
-    rho_c, f_c = plant_radius(check_plant, controllers, dt, progress)
+    rho_c, f_c = plant_radius(check_plant if drives is None else drives.on(check_plant),
+                              controllers, dt, progress)
     f_max = float(check_plant.meta.get('check_f_max_hz', check_plant.frequencies_hz.max(
         initial=0.0)))
     result = LoopCheck(label, float(dt), rho_p, rho_c, f_p, f_c, plant.n_modes,
