@@ -12,11 +12,11 @@ cd "$ROOT"
 # the ecosystem's lint rules (ruff.toml: ament's flake8/pep257 settings) and the core's types
 ruff check --no-cache -q .
 mypy --no-incremental --cache-dir=/dev/null
-# in this process by default; PENTAPOD_TEST_WORKERS=2 (or auto) runs the suite on parallel
-# workers, each on a ROS domain of its own: 20 min instead of 35 here, but under that load a
-# recorder's participant can miss a source's force topic for a whole short run
-# (test_stopping's SIGHUP-runner and SIGINT-group failed so), so CI stays serial until the
-# recorder subscribes to the step topics the plant announces. The slowest tests are listed at
-# the end: CI should stay under 30 minutes
-exec python -m pytest -q -p no:cacheprovider -n "${PENTAPOD_TEST_WORKERS:-0}" \
+# on two parallel workers by default (PENTAPOD_TEST_WORKERS: a number, auto, or 0 for one
+# process), each on a ROS domain of its own: 20 min instead of 35 on this 2-core machine. Under
+# that load a recorder once missed a source's forces for a whole short run: DDS discovery took
+# an announcement period, now 0.5 s (config/dds/loopback.xml), and the recorder subscribes to
+# the force topics the plant announces (test_discovery_delay, test_recorder_announced). The
+# slowest tests are listed at the end: CI should stay under 30 minutes
+exec python -m pytest -q -p no:cacheprovider -n "${PENTAPOD_TEST_WORKERS:-2}" \
     --dist worksteal --durations=30 "$@"
