@@ -233,8 +233,10 @@ def markdown(rows: Sequence[dict[str, str]]) -> str:
         f'Recorded lockstep runs through the damper node at {float(first["sample_rate_hz"]):g} '
         f'Hz with {first["delay_steps"]} sample(s) of computational delay; the analytic '
         "reference is the sampled loop's poles **with the laws' own dynamics** (their filters, "
-        "hold and delay: the linear model of what the node steps) on the study's plant of the "
-        f'position. Multisine 2-200 Hz on TCP x, {_start_text(first)}, then '
+        "hold and delay: the linear model of what the node steps) on the plant the scenario's "
+        "plant node steps: the study's plant of the position, for the feed drives' rows "
+        "(HAC-LAC, the drives alone) with the drives' rotors. Multisine 2-200 Hz on TCP x, "
+        f'{_start_text(first)}, then '
         f'{first["periods"]} periods of {float(first["period_s"]):g} s '
         "averaged; pLSCF + LSFD. Tolerances (the recorded-run test's): "
         f'ζ within {ZETA_TOLERANCE:.0%}, f within {FREQ_TOLERANCE:.1%}, peak within '
