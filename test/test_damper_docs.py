@@ -49,10 +49,12 @@ def test_docs_table_and_verdict_are_the_csv():
 
 def test_recorded_runs_match_the_sampled_loop_poles():
     """
-    The recorded runs cover the law to build and IFF at P1 and P2, every mode within.
+    The recorded runs cover the law to build, IFF and the drives' rows at P1 and P2, all within.
 
     Every row's verdict is the tolerances', and every run started at the loop's periodic steady
-    state (from rest, IFF's first mode at P2 missed them: docs/dampers.md).
+    state (from rest, IFF's first mode at P2 missed them: docs/dampers.md). The drives' rows
+    (HAC-LAC, the drives alone) are compared with the loop's poles on the plant with the
+    drives' rotors (test/test_recorded_drives.py checks that path on a small model).
     """
     runs = recorded.read_csv(RECORDED)
     records = read_csv(CSV)
@@ -63,7 +65,11 @@ def test_recorded_runs_match_the_sampled_loop_poles():
         build = best_strut_law([r for r in records if r['position'] == position],
                                low_band=True)
         assert build is not None
-        for law in (build['law'], 'IFF'):
+        # the drives alone at P2 are not in the file: two loop poles 0.16 Hz apart near
+        # 26.7 Hz come out as one identified pole (docs/dampers.md, "Still to do")
+        drives = (('IFF + position loop (HAC-LAC)', 'feed drives alone (position loops)')
+                  if position == 'P1' else ('IFF + position loop (HAC-LAC)',))
+        for law in (build['law'], 'IFF', *drives):
             mine = [r for r in runs if (r['position'], r['law']) == (position, law)]
             assert len(mine) == 3, (position, law)
     assert all(r['within'] == 'True' and r['start'] == 'steady' for r in runs), runs

@@ -11,7 +11,7 @@ redraw) to ``--out``::
                                      [--sample-rate 5000] [--delay 1] [--grid 3]
                                      [--gain-points 8] [--refine 25] [--check-below HZ]
                                      [--quick] [--record FOLDER [--record-laws L1;L2]]
-                                     [--out out/design]
+                                     [--records CSV] [--out out/design]
 
 The full run tunes six families at two positions with the check model (about an hour on two
 busy cores); ``--quick`` uses small grids and no check model (a few minutes).
@@ -32,6 +32,7 @@ from pentapod_damper.design.report import (
     markdown,
     markdown_records,
     plot,
+    read_csv,
     verdict,
     write_csv,
     write_energy_csv,
@@ -92,6 +93,8 @@ def _with_strokes(table: DamperTable) -> DamperTable:
 
 def run(args: argparse.Namespace) -> int:
     """Build the tables (or read them) and write them."""
+    if args.records:
+        return _run_from_csv(args)
     tables = _tables(args)
     args.out.mkdir(parents=True, exist_ok=True)
     for table in tables:
@@ -116,19 +119,38 @@ def run(args: argparse.Namespace) -> int:
                                   corners=False)
         for path in write_scenarios(records, model.stiffness, position, args.scenarios):
             print(f'wrote {path}')
-    recorded_csv = _record(args, records)
-    if args.docs:
-        path = Path(args.docs)
-        kept = path.parent / RECORDED_DOCS_CSV
-        if recorded_csv is not None and recorded_csv.resolve() != kept.resolve():
-            shutil.copyfile(recorded_csv, kept)
-        runs = recorded.read_csv(kept) if kept.is_file() else []
-        doc = fill(path.read_text(), 'dampers-table', markdown_records(records, runs))
-        doc = fill(doc, 'dampers-energy', energy_lines(energy))
-        doc = fill(doc, 'dampers-recorded', recorded.markdown(runs))
-        path.write_text(fill(doc, 'dampers-verdict', verdict(records)))
-        print(f'updated {path}')
+    _docs(args, records, _record(args, records), energy)
     return 0
+
+
+def _run_from_csv(args: argparse.Namespace) -> int:
+    """
+    ``--records``: record (``--record``) and fill the docs from the table's CSVs, no tables.
+
+    The records are the rows of a ``dampers.csv`` (docs/results/dampers.csv), the strain
+    energy that of ``dampers_energy.csv`` beside it: what the docs blocks are generated from.
+    """
+    records = read_csv(args.records)
+    recorded_csv = _record(args, records)
+    _docs(args, records, recorded_csv, Path(args.records).parent / 'dampers_energy.csv')
+    return 0
+
+
+def _docs(args: argparse.Namespace, records: list[dict[str, str]], recorded_csv: Path | None,
+          energy: Path) -> None:
+    """With ``--docs``: the recorded runs' CSV kept beside the page, its blocks filled."""
+    if not args.docs:
+        return
+    path = Path(args.docs)
+    kept = path.parent / RECORDED_DOCS_CSV
+    if recorded_csv is not None and recorded_csv.resolve() != kept.resolve():
+        shutil.copyfile(recorded_csv, kept)
+    runs = recorded.read_csv(kept) if kept.is_file() else []
+    doc = fill(path.read_text(), 'dampers-table', markdown_records(records, runs))
+    doc = fill(doc, 'dampers-energy', energy_lines(energy))
+    doc = fill(doc, 'dampers-recorded', recorded.markdown(runs))
+    path.write_text(fill(doc, 'dampers-verdict', verdict(records)))
+    print(f'updated {path}')
 
 
 def _record(args: argparse.Namespace, records: list[dict[str, str]]) -> Path | None:
@@ -143,7 +165,7 @@ def _record(args: argparse.Namespace, records: list[dict[str, str]]) -> Path | N
     wanted = args.positions.split(',')
     for position in dict.fromkeys(r['position'] for r in records if r['position'] in wanted):
         rows += recorded.record_position(records, position, args.record, print, names,
-                                         args.record_period)
+                                         args.record_period, build=not args.record_no_build)
     path = recorded.write_csv(rows, args.record / 'recorded.csv')
     print(f'wrote {path}')
     return path
@@ -196,6 +218,12 @@ def main(argv: list[str] | None = None) -> int:
                         metavar='LAW[;LAW]',
                         help='the laws recorded besides the law to build (table row names, '
                              f"';'-separated; default {'; '.join(recorded.DEFAULT_LAWS)})")
+    parser.add_argument('--record-no-build', action='store_true',
+                        help="record only --record-laws, not also the verdict's law to build")
+    parser.add_argument('--records', default='', metavar='CSV',
+                        help="the table's records from its CSV (docs/results/dampers.csv; its "
+                             'dampers_energy.csv beside it) instead of computing or reading '
+                             'tables: to --record and to fill the --docs blocks')
     parser.add_argument('--record-period', type=float, default=None, metavar='S',
                         help="the recorded runs' multisine period [s] (default: the study's, "
                              'config/study.yaml damping.period)')

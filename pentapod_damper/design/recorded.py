@@ -91,16 +91,17 @@ def within_tolerances(zeta_error: float, freq_error: float, peak_error_db: float
 
 
 def laws_to_record(records: Sequence[Record], position: str,
-                   names: Sequence[str] = DEFAULT_LAWS) -> list[Record]:
+                   names: Sequence[str] = DEFAULT_LAWS, build: bool = True) -> list[Record]:
     """
-    The locked machine's records of ``position`` to record: the law to build and ``names``.
+    The locked table's records of ``position`` to record: the law to build (``build``), ``names``.
 
-    Only laws a damper node runs (:data:`pentapod_damper.design.scenarios.SCENARIOS`): the
-    drives' loops (HAC-LAC) need a plant node with the drives' rotors.
+    Only laws a scenario runs (:data:`pentapod_damper.design.scenarios.SCENARIOS`); the
+    drives' rows (HAC-LAC, the drives alone) run on the plant with the drives' rotors (their
+    scenarios' plant parameter ``drives``), and their reference is that loop's poles.
     """
     mine = [r for r in records if r['position'] == position and r['machine'] == 'locked']
-    build = best_strut_law(mine, low_band=True)
-    wanted = ([build['law']] if build is not None else []) + list(names)
+    best = best_strut_law(mine, low_band=True) if build else None
+    wanted = ([best['law']] if best is not None else []) + list(names)
     out: list[Record] = []
     for name in dict.fromkeys(wanted):
         if name not in SCENARIOS:
@@ -137,15 +138,15 @@ def record_law(cfg: StudyConfig, model: PositionModel, scenario: Path, out_dir: 
 
 def record_position(records: Sequence[Record], position: str, out_dir: Path,
                     say: Callable[[str], None], names: Sequence[str] = DEFAULT_LAWS,
-                    period: float | None = None) -> list[RecordedMode]:
+                    period: float | None = None, build: bool = True) -> list[RecordedMode]:
     """
     Record the laws of one position and compare their identified damping with the poles.
 
     The study's settings (config/study.yaml) at each record's sample rate; ``period``
     replaces its multisine period [s] (finer lines: at P2 the two lowest modes lie 0.14 Hz
-    apart).
+    apart). ``build``: also the verdict's law to build (:func:`laws_to_record`).
     """
-    chosen = laws_to_record(records, position, names)
+    chosen = laws_to_record(records, position, names, build)
     stiffness = None
     result: list[RecordedMode] = []
     models = {}
@@ -232,8 +233,10 @@ def markdown(rows: Sequence[dict[str, str]]) -> str:
         f'Recorded lockstep runs through the damper node at {float(first["sample_rate_hz"]):g} '
         f'Hz with {first["delay_steps"]} sample(s) of computational delay; the analytic '
         "reference is the sampled loop's poles **with the laws' own dynamics** (their filters, "
-        "hold and delay: the linear model of what the node steps) on the study's plant of the "
-        f'position. Multisine 2-200 Hz on TCP x, {_start_text(first)}, then '
+        "hold and delay: the linear model of what the node steps) on the plant the scenario's "
+        "plant node steps: the study's plant of the position, for the feed drives' rows "
+        "(HAC-LAC, the drives alone) with the drives' rotors. Multisine 2-200 Hz on TCP x, "
+        f'{_start_text(first)}, then '
         f'{first["periods"]} periods of {float(first["period_s"]):g} s '
         "averaged; pLSCF + LSFD. Tolerances (the recorded-run test's): "
         f'ζ within {ZETA_TOLERANCE:.0%}, f within {FREQ_TOLERANCE:.1%}, peak within '

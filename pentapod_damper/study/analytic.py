@@ -16,6 +16,7 @@ from typing import Any, Sequence
 import numpy as np
 import numpy.typing as npt
 
+from pentapod_sim.plant.drives import DrivenPlant
 from pentapod_sim.plant.frf import closed_loop_frf, modal_frf
 from pentapod_sim.plant.model import PlantModel
 from pentapod_sim.sim.closed_loop import closed_loop_system
@@ -67,7 +68,7 @@ class SampledLoop:
     vec: np.ndarray
 
 
-def sampled_loop(plant: PlantModel, laws: Sequence[Any], dt: float) -> SampledLoop:
+def sampled_loop(plant: PlantModel | DrivenPlant, laws: Sequence[Any], dt: float) -> SampledLoop:
     """The sampled loop of ``plant`` (discretised with zero-order hold at ``dt`` [s]) and laws."""
     core = DiscretePlant(plant.discretize(dt))
     a, b, c_y, c_u, augmented = closed_loop_system(core, laws)
@@ -109,8 +110,9 @@ def _resolvent_columns(a: np.ndarray, b: np.ndarray, z: np.ndarray,
     return np.stack([np.linalg.solve(zf * eye - a, b) for zf in z], axis=1)
 
 
-def discrete_frf(plant: PlantModel, laws: Sequence[Any], dt: float, freq_hz: npt.ArrayLike,
-                 input_: str, loop: SampledLoop | None = None) -> DiscreteFrf:
+def discrete_frf(plant: PlantModel | DrivenPlant, laws: Sequence[Any], dt: float,
+                 freq_hz: npt.ArrayLike, input_: str,
+                 loop: SampledLoop | None = None) -> DiscreteFrf:
     """
     FRFs of the lockstep sampled loop (u_k answers y_k, zero-order hold) from an external input.
 
@@ -159,8 +161,8 @@ class SampledPairFrf:
     :func:`sampled_loop` of the same plant, laws and ``dt``, if already built.
     """
 
-    def __init__(self, plant: PlantModel, laws: Sequence[Any], dt: float, output: str,
-                 input_: str, loop: SampledLoop | None = None) -> None:
+    def __init__(self, plant: PlantModel | DrivenPlant, laws: Sequence[Any], dt: float,
+                 output: str, input_: str, loop: SampledLoop | None = None) -> None:
         loop = sampled_loop(plant, laws, dt) if loop is None else loop
         core, b, c_y, c_u, augmented = loop.core, loop.b, loop.c_y, loop.c_u, loop.augmented
         j, o = core.input_names.index(input_), core.output_names.index(output)

@@ -29,6 +29,7 @@ from pentapod_damper.scenario_laws import scenario_laws
 from pentapod_damper.study.config import load_study_config
 from pentapod_sim.errors import ConfigError
 from pentapod_sim.plant.build import load_or_build_model
+from pentapod_sim.plant.drives import DrivenPlant
 from pentapod_sim.plant.frf_peaks import PoleResidueFrf
 from pentapod_sim.plant.model import PlantModel
 from pentapod_sim.scenario.files import read_scenario
@@ -104,7 +105,7 @@ def continuous_controller(law: Any) -> DiscreteController:
     return DiscreteController.static(law.sensor_ports, law.actuator_ports, gain)
 
 
-def continuous_loop_frf(plant: PlantModel, laws: Sequence[Any], output: str,
+def continuous_loop_frf(plant: PlantModel | DrivenPlant, laws: Sequence[Any], output: str,
                         input_: str) -> PoleResidueFrf:
     """
     FRF ``output / input_`` of the continuous loop of the laws' own continuous models.
@@ -123,7 +124,7 @@ def continuous_loop_frf(plant: PlantModel, laws: Sequence[Any], output: str,
     return PoleResidueFrf.from_state_space(a, b[:, i], c_y[o], float(direct))
 
 
-def loop_poles(plant: PlantModel, laws: Sequence[Any],
+def loop_poles(plant: PlantModel | DrivenPlant, laws: Sequence[Any],
                dt: float) -> tuple[LoopPoles, LoopPoles]:
     """Poles per mode of the sampled loop at ``dt`` [s] and of the continuous loop."""
     sampled = closed_loop_poles(plant, [controller_of(law) for law in laws], dt)
@@ -138,7 +139,7 @@ def _pole(poles: LoopPoles, j: int) -> tuple[float, float, float]:
     return float(poles.freq_hz[j]), float(poles.zeta[j]), float(poles.mac[j])
 
 
-def damping_rows(plant: PlantModel, laws: Sequence[Any], dt: float,
+def damping_rows(plant: PlantModel | DrivenPlant, laws: Sequence[Any], dt: float,
                  band: tuple[float, float] = BAND, directions: str = 'xyz',
                  count: int = COUNT, poles: tuple[LoopPoles, LoopPoles] | None = None,
                  position: str = '', scenario: str = '') -> list[ModeDamping]:
@@ -147,8 +148,8 @@ def damping_rows(plant: PlantModel, laws: Sequence[Any], dt: float,
 
     Parameters
     ----------
-    plant : PlantModel
-        Modal plant with the TCP ports.
+    plant : PlantModel or DrivenPlant
+        Modal plant with the TCP ports (or one with the feed drives' rotors).
     laws : sequence
         Linear laws (:func:`pentapod_damper.scenario_laws.scenario_laws`); empty: open loop.
     dt : float
@@ -192,7 +193,7 @@ def settling_time(table: Sequence[ModeDamping], time_constants: float = 5.0) -> 
     return time_constants * max((r.decay_time_s for r in table), default=0.0)
 
 
-def scenario_rows(plant: PlantModel, position: str, scenario: str, dt: float,
+def scenario_rows(plant: PlantModel | DrivenPlant, position: str, scenario: str, dt: float,
                   laws: Sequence[Any] | None = None, **options: Any) -> list[ModeDamping]:
     """
     :func:`damping_rows` of a scenario's laws, labelled with position and scenario.

@@ -29,6 +29,7 @@ from pentapod_sim.analysis.ema.poles import Tolerances
 from pentapod_sim.analysis.frf.from_run import frfs_from_bag, RunFrfs
 from pentapod_sim.errors import BagError
 from pentapod_sim.interface import TCP_STATE
+from pentapod_sim.plant.drives import DrivenPlant
 from pentapod_sim.plant.frf_peaks import maximise_near_poles
 from pentapod_sim.plant.model import PlantModel
 from pentapod_sim.sim.loop_poles import LoopPoles
@@ -126,7 +127,7 @@ def _local_band(f0: float, zeta: float) -> tuple[float, float]:
     return max(f0 - half, 1e-3), f0 + half
 
 
-def compare(rows: Sequence[ModeDamping], ident: Identified, plant: PlantModel,
+def compare(rows: Sequence[ModeDamping], ident: Identified, plant: PlantModel | DrivenPlant,
             laws: Sequence[Any], dt: float, direction: str,
             loop: SampledLoop | None = None) -> list[IdentifiedMode]:
     """
@@ -171,7 +172,7 @@ def figures(ident: Identified, folder: Path, tag: str) -> tuple[Path, Path]:
                                        title=f'{tag}: measured and identified FRF'))
 
 
-def settle_rows(plant: PlantModel, laws: Sequence[Any], dt: float, direction: str,
+def settle_rows(plant: PlantModel | DrivenPlant, laws: Sequence[Any], dt: float, direction: str,
                 poles: tuple[LoopPoles, LoopPoles] | None = None) -> list[ModeDamping]:
     """
     The :data:`SETTLE_MODES` modes with the largest terms in TCP dd (their decay times).

@@ -51,8 +51,10 @@ from pentapod_sim.plant.check_model import (
     load_or_build_check_model,
 )
 from pentapod_sim.plant.config import load_reduction_config
+from pentapod_sim.plant.drives import DriveSet
 from pentapod_sim.plant.frf_peaks import exact_peak, plant_pair_frf
 from pentapod_sim.scenario.files import read_scenario
+from pentapod_sim.scenario.laws import scenario_drives
 from pentapod_sim.sim.controllers import controller_of, LoopSystem
 from pentapod_sim.sim.excitation import Excitation, ExcitationSpec
 from pentapod_sim.sim.periodic_state import (
@@ -161,29 +163,34 @@ def scenario_analytic(model: PositionModel, scenario: str, cfg: StudyConfig,
     """
     d = cfg.direction
     dt = cfg.dt
-    sections = read_scenario(scenario).sections
-    laws = scenario_laws(sections, dt)
+    parsed = read_scenario(scenario)
+    laws = scenario_laws(parsed.sections, dt)
     dampers = viscous_equivalent(laws)
+    drives = scenario_drives(parsed)
+    plant = model.plant if drives is None else drives.on(model.plant)
     loop = checked_loop(model, [controller_of(law) for law in laws], dt, cfg.check_policy,
-                        f'scenario {scenario} at {model.position}')
+                        f'scenario {scenario} at {model.position}', drives)
     if loop.plant_radius >= 1.0:       # whatever the policy: the run itself would diverge
         raise ConfigError(f'{loop.summary()}; lower its gains or raise the sample rate')
-    sampled = sampled_loop(model.plant, laws, dt)
-    disc = discrete_frf(model.plant, laws, dt, line_freq(cfg), f'tcp_force_{d}', sampled)
+    sampled = sampled_loop(plant, laws, dt)
+    disc = discrete_frf(plant, laws, dt, line_freq(cfg), f'tcp_force_{d}', sampled)
     if dampers is None:         # laws with dynamics of their own: their continuous loop
-        frf = continuous_loop_frf(model.plant, laws, f'tcp_displacement_{d}', f'tcp_force_{d}')
+        frf = continuous_loop_frf(plant, laws, f'tcp_displacement_{d}', f'tcp_force_{d}')
         cont, dampers = frf(freq), {}
+    elif drives is not None:
+        raise ConfigError(f'scenario {scenario}: viscous dampers on a plant with the feed '
+                          "drives' rotors have no continuous model here")
     else:
         cont = continuous_frf(model.plant, dampers, freq, f'tcp_displacement_{d}',
                               f'tcp_force_{d}')
         frf = plant_pair_frf(model.plant, f'tcp_displacement_{d}', f'tcp_force_{d}', dampers)
     peak = exact_peak(frf, float(cfg.band[0]), float(cfg.f_max), freq)
     return ScenarioAnalytic(scenario, laws, dampers, cont, disc, scenario_pma(scenario), frf,
-                            peak, loop, sampled, model.position)
+                            peak, loop, sampled, model.position, plant=plant)
 
 
 def checked_loop(model: PositionModel, controllers: list[Any], dt: float, policy: str,
-                 label: str) -> LoopCheck:
+                 label: str, drives: DriveSet | None = None) -> LoopCheck:
     """
     :func:`pentapod_sim.sim.stability.check_loop` of a position's sampled loop, kept on disk.
 
@@ -191,12 +198,13 @@ def checked_loop(model: PositionModel, controllers: list[Any], dt: float, policy
     work, so its result is kept in :data:`CHECK_CACHE` as ``study_loop_check_<key>.json``,
     keyed by the content of plant and check model, ``dt`` and the controllers; a study run
     again reads it (the radii exactly: JSON keeps every digit) and applies ``policy`` as
-    check_loop does. Without a check model nothing is kept (the check is quick).
+    check_loop does. Without a check model nothing is kept (the check is quick). ``drives``:
+    the feed drives the scenario's plant steps (plant and check model with their rotors).
     """
     if model.check_plant is None:
-        return check_loop(model.plant, None, controllers, dt, policy, label)
+        return check_loop(model.plant, None, controllers, dt, policy, label, drives=drives)
     doc = [model.plant.content_hash(), model.check_plant.content_hash(), repr(dt),
-           [c.to_json() for c in controllers]]
+           [c.to_json() for c in controllers]] + ([] if drives is None else [repr(drives)])
     key = hashlib.sha256(json.dumps(doc).encode()).hexdigest()[:16]
     path = CHECK_CACHE / f'study_loop_check_{key}.json'
     try:
@@ -205,7 +213,8 @@ def checked_loop(model: PositionModel, controllers: list[Any], dt: float, policy
         kept = None                 # none yet, or unreadable: computed (and written) again
     if kept is not None:
         return apply_policy(kept, policy)
-    result = check_loop(model.plant, model.check_plant, controllers, dt, policy, label)
+    result = check_loop(model.plant, model.check_plant, controllers, dt, policy, label,
+                        drives=drives)
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         part = path.with_name(f'{path.name}.{os.getpid()}.{threading.get_ident()}.part')

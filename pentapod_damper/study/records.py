@@ -97,6 +97,9 @@ class ScenarioAnalytic:
     position: str = ''
     modes: list[ModeDamping] = field(default_factory=list)
     settle_modes: list[ModeDamping] = field(default_factory=list)
+    #: The plant the scenario's plant node steps (the position's, with the feed drives'
+    #: rotors if the scenario has ``drives``): every loop above is closed on it.
+    plant: Any = None
 
     def describe(self) -> str:
         assert self.loop is not None

@@ -43,15 +43,17 @@ def analyse_scenario(cfg: StudyConfig, freq: FloatArray, model: PositionModel, s
     Analytic FRFs, truncation check and the dominant modes of one scenario's loop.
 
     One computation of the loop's poles serves the table of dominant modes and, if the
-    scenario has a ``damping_run``, the modes that set its settling time.
+    scenario has a ``damping_run``, the modes that set its settling time. The loop is the one
+    the scenario's nodes close: on the plant its plant node steps (``ana.plant``, with the
+    feed drives' rotors if the scenario has ``drives``).
     """
     ana = pipeline.scenario_analytic(model, scenario, cfg, freq)
     dt = cfg.dt
-    poles = damping.loop_poles(model.plant, ana.laws, dt)
-    ana.modes = damping.scenario_rows(model.plant, model.position, scenario, dt, laws=ana.laws,
+    poles = damping.loop_poles(ana.plant, ana.laws, dt)
+    ana.modes = damping.scenario_rows(ana.plant, model.position, scenario, dt, laws=ana.laws,
                                       poles=poles)
     if damping_run:
-        ana.settle_modes = measured_damping.settle_rows(model.plant, ana.laws, dt,
+        ana.settle_modes = measured_damping.settle_rows(ana.plant, ana.laws, dt,
                                                         cfg.direction, poles)
     return ana
 
@@ -94,7 +96,7 @@ def record_damping(cfg: StudyConfig, out_dir: Path, model: PositionModel,
     run = run_on_testbed(analytic.name, model.position, model.model_file, model.model_hash,
                          cfg, out_dir, kind='damping', exciter=exciter, initial_state=start)
     ident = measured_damping.identify_run(run.bag, cfg.direction, cfg.damping_band)
-    modes = measured_damping.compare(analytic.modes, ident, model.plant, analytic.laws, cfg.dt,
+    modes = measured_damping.compare(analytic.modes, ident, analytic.plant, analytic.laws, cfg.dt,
                                      cfg.direction, analytic.sampled)
     return run, exciter, ident, modes
 

@@ -38,7 +38,7 @@ from pentapod_sim.nodes.run_status import RunStatusPublisher
 from pentapod_sim.nodes.testbed_node import TestbedNode
 from pentapod_sim.nodes.writers import WriterCheck
 from pentapod_sim.plant.build import load_or_build_model
-from pentapod_sim.plant.drives import drives_path, DriveSet, load_drives
+from pentapod_sim.plant.drives import drive_set, DriveSet
 from pentapod_sim.sim.multirate import MultiRatePlant
 from pentapod_sim.sim.periodic_state import load_initial_state
 from pentapod_sim.sim.realtime import RealTime
@@ -106,11 +106,10 @@ class PlantNode(TestbedNode):
     def _drives(self) -> DriveSet | None:
         """The feed drives of parameter ``drives`` (ConfigError naming the bad value)."""
         p = self.params
-        if not p.drives:
-            return None
         try:
-            drives = DriveSet(load_drives(drives_path(p.drives)), p.drive_struts)
-            drives.on(self.model)       # the model has the drive ports
+            drives = drive_set(p.drives, p.drive_struts)
+            if drives is not None:
+                drives.on(self.model)   # the model has the drive ports
         except (ConfigError, PortError) as err:
             why = err.args[0] if isinstance(err, PortError) else err
             raise ConfigError(f"parameter 'drives' = {p.drives!r} (drive_struts "

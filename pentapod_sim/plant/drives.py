@@ -91,6 +91,20 @@ def drives_path(value: str | os.PathLike[str]) -> Path:
                       f'file in {config_dir()})')
 
 
+def drive_set(value: str | os.PathLike[str], struts: Sequence[int] = (1, 2, 3, 4, 5)
+              ) -> 'DriveSet | None':
+    """
+    The feed drives of the plant parameters ``drives`` and ``drive_struts``; None for ``''``.
+
+    The one reading of those parameters: the plant node steps them, and every offline model of
+    a scenario (:func:`pentapod_sim.scenario.laws.scenario_plant`) closes its laws on them.
+    ConfigError names a missing or bad file or bad struts.
+    """
+    if not str(value):
+        return None
+    return DriveSet(load_drives(drives_path(value)), tuple(struts))
+
+
 def link_stiffness(plant: PlantModel, strut: int) -> float:
     """
     Axial stiffness k_a [N/m] of strut ``strut``'s drive link, read from the plant's ports.
@@ -216,6 +230,21 @@ class DrivenPlant:
     def n_modes(self) -> int:
         """Modes of the underlying plant."""
         return self.plant.n_modes
+
+    # the open-loop modes a loop's poles are paired with are the underlying plant's
+    @property
+    def frequencies_hz(self) -> np.ndarray:
+        """Natural frequencies [Hz] of the underlying plant's modes."""
+        return self.plant.frequencies_hz
+
+    @property
+    def zeta(self) -> np.ndarray:
+        """Modal damping ratios [-] of the underlying plant's modes."""
+        return self.plant.zeta
+
+    def fe_mode(self, mode: int) -> tuple[int, str]:
+        """FE mode number and cause of the underlying plant's mode ``mode`` (1-based)."""
+        return self.plant.fe_mode(mode)
 
 
 @dataclass(frozen=True)

@@ -67,12 +67,14 @@ class PoleResidueFrf:
         ConfigError
             If ``a`` is (nearly) defective, so that residues are unreliable.
         """
-        a = np.asarray(a, dtype=float)
+        # balanced first (a similarity, the same FRF): a loop with the feed drives' rotors
+        # has entries from 1 to 1e10, whose unbalanced eigenvectors look defective
+        a, t = sla.matrix_balance(np.asarray(a, dtype=float))
         lam, vec = sla.eig(a)
         if not np.linalg.cond(vec) < MAX_COND:
             raise ConfigError('state matrix is (nearly) defective; no pole-residue form')
-        left = np.asarray(c, dtype=float).ravel() @ vec
-        right = np.linalg.solve(vec, np.asarray(b, dtype=float).ravel())
+        left = (np.asarray(c, dtype=float).ravel() @ t) @ vec
+        right = np.linalg.solve(vec, np.linalg.solve(t, np.asarray(b, dtype=float).ravel()))
         return cls(lam, left * right, float(d))
 
     def bound(self, f_lo: float, f_hi: float) -> float:

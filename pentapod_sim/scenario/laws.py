@@ -16,7 +16,7 @@ from typing import Any
 
 from pentapod_sim.errors import ConfigError
 from pentapod_sim.parameters import sample_time
-from pentapod_sim.plant.drives import drives_path, DriveSet, load_drives
+from pentapod_sim.plant.drives import drive_set, DriveSet
 from pentapod_sim.plant.model import PlantModel
 from pentapod_sim.registry import SOURCE
 from pentapod_sim.scenario.files import read_scenario, Scenario
@@ -27,17 +27,21 @@ def scenario_dt(scenario: str | Path | Scenario) -> float:
     return sample_time(read_scenario(scenario).plant.params.sample_rate)
 
 
+def scenario_drives(scenario: str | Path | Scenario) -> DriveSet | None:
+    """The feed drives a scenario's plant node steps (its ``drives``, ``drive_struts``)."""
+    params = read_scenario(scenario).plant.params
+    return drive_set(params.drives, params.drive_struts)
+
+
 def scenario_plant(scenario: str | Path | Scenario, plant: PlantModel) -> Any:
     """
     ``plant`` as the scenario's plant node steps it (the feed drives' rotors too, if any).
 
     With the plant parameter ``drives`` set: :class:`pentapod_sim.plant.drives.DrivenPlant`
-    of ``plant`` and those drives; otherwise ``plant`` itself.
+    of ``plant`` and those drives (:func:`scenario_drives`); otherwise ``plant`` itself.
     """
-    params = read_scenario(scenario).plant.params
-    if not params.drives:
-        return plant
-    return DriveSet(load_drives(drives_path(params.drives)), params.drive_struts).on(plant)
+    drives = scenario_drives(scenario)
+    return plant if drives is None else drives.on(plant)
 
 
 def scenario_loop_laws(scenario: str | Path | Scenario, dt: float | None = None) -> list[Any]:

@@ -32,6 +32,7 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 from pentapod_sim.errors import ConfigError
+from pentapod_sim.plant.drives import DrivenPlant
 from pentapod_sim.plant.model import PlantModel
 from pentapod_sim.sim.controllers import controller_blocks, DiscreteController, loop_system
 from pentapod_sim.sim.loop_frf import LinearPlant
@@ -92,22 +93,39 @@ def continuous_loop_system(plant: LinearPlant, controllers: Sequence[DiscreteCon
     return a_cl, b_cl, y_of
 
 
-def _open_loop_start(plant: PlantModel, controllers: Sequence[DiscreteController], size: int,
-                     dt: float | None) -> tuple[np.ndarray, np.ndarray]:
+def _open_loop_start(plant: PlantModel | DrivenPlant, controllers: Sequence[DiscreteController],
+                     size: int, dt: float | None) -> tuple[np.ndarray, np.ndarray]:
     """Eigenvalues at t = 0 and their origin: mode index (>= 0) or -1 (controller)."""
     m = plant.n_modes
-    if dt is None:
+    if not isinstance(plant, PlantModel):
+        lam, origin = _labelled_start(plant, dt)
+    elif dt is None:
         w, z = plant.omega, plant.zeta
         root = np.sqrt((z ** 2 - 1).astype(complex))
         lam = np.concatenate([w * (-z + root), w * (-z - root)])
+        origin = np.concatenate([np.arange(m), np.arange(m)])
     else:
         lam = np.linalg.eigvals(plant.zoh_blocks(dt)[0]).T.ravel()
-    origin = np.concatenate([np.arange(m), np.arange(m)])
+        origin = np.concatenate([np.arange(m), np.arange(m)])
     blocks = [np.linalg.eigvals(k.a) for k in controllers if k.n_states]
     ctrl = np.concatenate(blocks) if blocks else np.zeros(0)
-    rest = size - 2 * m - ctrl.size           # input memory u_{k-1}: eigenvalues 0 at t = 0
+    rest = size - lam.size - ctrl.size        # input memory u_{k-1}: eigenvalues 0 at t = 0
     lam = np.concatenate([lam, ctrl, np.zeros(rest)]).astype(complex)
     return lam, np.concatenate([origin, np.full(ctrl.size + rest, -1, dtype=int)])
+
+
+def _labelled_start(plant: DrivenPlant, dt: float | None) -> tuple[np.ndarray, np.ndarray]:
+    """
+    Eigenvalues of a plant with the drives' rotors (no controller), every one structural.
+
+    The rotors are part of the machine and couple the modes (with free rotors several struts'
+    motions share eigenvalues), so no eigenvalue is one mode's: each is labelled with its own
+    index (>= 0, structural), and the structural poles of the loop are paired with the modes
+    by MAC at the end (:func:`_poles`). Only the controllers' states start as -1.
+    """
+    a = plant.state_matrices()[0] if dt is None else plant.discrete_matrices(dt)[0]
+    lam = np.linalg.eigvals(a)
+    return lam, np.arange(lam.size)
 
 
 def _match(old: np.ndarray, old_origin: np.ndarray, new: np.ndarray) -> tuple[np.ndarray, bool]:
@@ -228,7 +246,7 @@ class LoopPoles:
             width = (np.abs(self.lam.real) if self.dt is None else 1.0 - np.abs(self.lam))
             return np.where(width > 0, np.abs(r) / width, np.inf)
 
-    def rows(self, plant: PlantModel) -> list[dict[str, float | str]]:
+    def rows(self, plant: PlantModel | DrivenPlant) -> list[dict[str, float | str]]:
         """
         One dict per pole by frequency: class, frequency, damping, mode, MAC.
 
@@ -249,8 +267,9 @@ class LoopPoles:
         return out
 
 
-def _poles(plant: PlantModel, lam: np.ndarray, vectors: np.ndarray, origin: np.ndarray,
-           dt: float | None, system: tuple[np.ndarray, np.ndarray, np.ndarray]) -> LoopPoles:
+def _poles(plant: PlantModel | DrivenPlant, lam: np.ndarray, vectors: np.ndarray,
+           origin: np.ndarray, dt: float | None,
+           system: tuple[np.ndarray, np.ndarray, np.ndarray]) -> LoopPoles:
     """Keep one pole per conjugate pair, classify, pair the structural ones by MAC."""
     index = np.flatnonzero(lam.imag >= 0)
     kept, origin = lam[index], origin[index]
@@ -271,15 +290,19 @@ def _poles(plant: PlantModel, lam: np.ndarray, vectors: np.ndarray, origin: np.n
     return LoopPoles(s, kept, structural, mode, mac, dt, index, lam, vectors, *system)
 
 
-def closed_loop_poles(plant: PlantModel, controllers: Sequence[DiscreteController], dt: float,
+def closed_loop_poles(plant: PlantModel | DrivenPlant,
+                      controllers: Sequence[DiscreteController], dt: float,
                       steps: int = FOLLOW_STEPS) -> LoopPoles:
     """
     Poles of the sampled lockstep loop (:func:`sampled_loop`) per mode.
 
     Parameters
     ----------
-    plant : PlantModel
-        Continuous modal plant (discretised with zero-order hold at ``dt``).
+    plant : PlantModel or DrivenPlant
+        Continuous modal plant (discretised with zero-order hold at ``dt``), or one with the
+        feed drives' rotors (:class:`pentapod_sim.plant.drives.DrivenPlant`: its structural
+        poles are those that start at the modes it couples, paired with the underlying
+        plant's modes).
     controllers : sequence of DiscreteController
         The laws' discrete models at ``dt`` (:func:`pentapod_sim.sim.controllers.controller_of`).
     dt : float
@@ -306,7 +329,8 @@ def closed_loop_poles(plant: PlantModel, controllers: Sequence[DiscreteControlle
     return _poles(plant, lam, vectors, labels, dt, (loop.b, loop.c_y, late))
 
 
-def continuous_loop_poles(plant: PlantModel, controllers: Sequence[DiscreteController],
+def continuous_loop_poles(plant: PlantModel | DrivenPlant,
+                          controllers: Sequence[DiscreteController],
                           steps: int = FOLLOW_STEPS) -> LoopPoles:
     """
     Poles of the continuous loop (no sampling, no delay) per mode.
