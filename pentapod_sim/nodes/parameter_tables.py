@@ -77,7 +77,9 @@ class PlantParams(Sampled):
                                     'plant and every other process that works each step have a '
                                     'CPU each (0: never poll)', 's', bounds=(0.0, 1.0))
     max_state_norm: float = param(DEFAULT_MAX_STATE_NORM, 'instability bound on the norm of the '
-                                  'modal state ||x||; larger or NaN stops the run',
+                                  'state ||x|| (the modal coordinates; with drives also the '
+                                  "rotors' position [m], velocity [m/s] and motor force [N]); "
+                                  'larger or NaN stops the run',
                                   bounds=(1e-12, 1e150))
     report_period: float = param(2.0, 'realtime: log timing every this wall time', 's',
                                  bounds=(0.1, 3600.0))
