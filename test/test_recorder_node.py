@@ -29,9 +29,17 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from geometry_msgs.msg import WrenchStamped
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
+from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+from pentapod_sim.nodes.common import qos as testbed_qos
+from pentapod_sim.nodes.run_status import status_values
 n, dt = int(sys.argv[1]), int(sys.argv[2])
 rclpy.init()
 node = rclpy.create_node('test_publisher')
+# a run announced before its first step, as the plant does (else the states are foreign)
+status = node.create_publisher(DiagnosticStatus, '/pentapod/run_status', testbed_qos('status'))
+status.publish(DiagnosticStatus(name='/test_publisher', message='running', values=[
+    KeyValue(key=k, value=v) for k, v in status_values('running', 0, dt * 1e-9, [], 0.0, 0,
+                                                       0).items()]))
 qos = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
 pubs = [node.create_publisher(JointState, '/pentapod/tcp_state', qos),
         node.create_publisher(WrenchStamped, '/pentapod/excitation', qos),
@@ -111,7 +119,8 @@ def test_recorded_bag_is_read_by_rosbags_with_all_messages(tmp_path, ros_env, si
     bag_dir = tmp_path / 'run'
     with AnyReader([bag_dir], default_typestore=get_typestore(Stores.ROS2_JAZZY)) as reader:
         types = {c.topic: c.msgtype for c in reader.connections}
-        assert types == {'/pentapod/tcp_state': 'sensor_msgs/msg/JointState',
+        assert types == {'/pentapod/run_status': 'diagnostic_msgs/msg/DiagnosticStatus',
+                         '/pentapod/tcp_state': 'sensor_msgs/msg/JointState',
                          '/pentapod/excitation': 'geometry_msgs/msg/WrenchStamped',
                          '/clock': 'rosgraph_msgs/msg/Clock',
                          '/pentapod/forces/best_effort': 'sensor_msgs/msg/JointState'}
@@ -124,7 +133,9 @@ def test_recorded_bag_is_read_by_rosbags_with_all_messages(tmp_path, ros_env, si
             seen[conn.topic].append((log_time, reader.deserialize(raw, conn.msgtype)))
     counts = {t: len(v) for t, v in seen.items()}
     assert 0 < counts.pop('/pentapod/forces/best_effort') <= N_STEPS  # best effort may drop
-    assert counts == {t: N_STEPS for t in types if t != '/pentapod/forces/best_effort'}
+    assert counts.pop('/pentapod/run_status') == 1
+    assert counts == {t: N_STEPS for t in types
+                      if t not in ('/pentapod/forces/best_effort', '/pentapod/run_status')}
     states = sorted(seen['/pentapod/tcp_state'], key=lambda item: item[0])
     k = np.arange(N_STEPS)
     assert_allclose([s.position[0] for _, s in states], 1e-6 * k)

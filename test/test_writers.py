@@ -179,6 +179,39 @@ def test_a_source_refuses_a_second_writer_on_the_state_it_reads(tmp_path):
 
 
 @pytest.mark.ros
+def test_a_state_recorded_without_any_run_announced_names_its_writer(tmp_path):
+    """
+    The forger is the only writer the recorder ever saw: the bag still names it.
+
+    In the runner's run above, the damper can refuse the forged state and the run be stopped
+    before the recorder's participant has found the real plant (a two-worker suite,
+    2026-12-04), so the recorder never saw two writers. The plant announces its run before its
+    first step: state messages without any run announced are not the plant's.
+    """
+    from fixtures.processes import NodeProcesses
+    procs = NodeProcesses(tmp_path)
+    fake = spoofer(RATE, 'free')
+    try:
+        procs.start('recorder', 'pentapod_sim.nodes.recorder_node', f"output_dir:='{tmp_path}'",
+                    'bag_name:=run')
+        procs.wait_for('recorder', f'subscribed {TOPIC}')
+        time.sleep(2.0)          # the forged states are recorded
+        code = procs.stop('recorder')
+    finally:
+        procs.close()
+        fake.kill()
+        fake.wait()
+    log = procs.log('recorder')
+    assert code == exits.RECORDING_FAILED, log
+    with open(next((tmp_path / 'run').glob('*.mcap')), 'rb') as stream:
+        record = {m.name: dict(m.metadata) for m in make_reader(stream).iter_metadata()}[
+            RECORDING_RECORD]
+    assert record['run_state'] == NO_END, record
+    assert 'no run announced' in record['foreign'], record
+    assert f'process id {fake.pid & 0xffff} ' in record['foreign'], record
+
+
+@pytest.mark.ros
 @pytest.mark.slow
 @pytest.mark.parametrize('when', ['before', 'during'])
 def test_a_forged_plant_state_stops_the_run_and_no_forged_force_is_applied(

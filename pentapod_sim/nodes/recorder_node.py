@@ -44,7 +44,7 @@ from pentapod_sim.nodes.recorder_qos import LATE_JOINER, offered_qos
 from pentapod_sim.nodes.recorder_subscriptions import Subscriptions
 from pentapod_sim.nodes.testbed_node import TestbedNode
 from pentapod_sim.nodes.wire_cdr import serializer, type_name
-from pentapod_sim.nodes.writers import WriterCheck
+from pentapod_sim.nodes.writers import WriterCheck, writers_text
 from pentapod_sim.recording import BagWriter, run_end
 from pentapod_sim.recording.msgdefs import has_header_stamp
 from pentapod_sim.recording.run_end import failures, report_record, RunStatus, StepLedger
@@ -99,6 +99,7 @@ class RecorderNode(TestbedNode):
         self.writers = WriterCheck(self)
         self.foreign: dict[str, str] = {}   # topic -> the refusal of its writers
         self.conflicts: set[str] = set()      # topics with a conflicting copy of a step
+        self.announced = False               # a run status came (the plant's run exists)
         try:
             run_info = yaml.safe_load(params.run_info or '{}') or {}
         except yaml.YAMLError as err:
@@ -204,6 +205,7 @@ class RecorderNode(TestbedNode):
             except BagError as err:
                 self.get_logger().error(f'{interface.RUN_STATUS}: {err}')
                 return
+            self.announced = True
             run_end.note_start(self.writer, status)       # a start not at rest is noted
             self.readers.expect(status.step_topics)       # found by discovery or not
             if status.ended:
@@ -307,6 +309,8 @@ class RecorderNode(TestbedNode):
             while not self.foreign and time.monotonic() < until:
                 time.sleep(0.1)
                 self.note_foreign(final=True)
+        if not self.announced:
+            self.note_unannounced()
         if self.end is None:       # the bag still says what it holds is not the plant's
             self.failed = [f'{t}: {text}' for t, text in self.foreign.items()]
             self.writer.add_record(RECORDING_RECORD, report_record(None, {}, self.foreign))
@@ -322,6 +326,21 @@ class RecorderNode(TestbedNode):
         else:
             self.get_logger().info(f'unique/expected steps: {text}; none missing, no '
                                    'conflicting copy, no foreign writer')
+
+    def note_unannounced(self) -> None:
+        """
+        Name the writers of the plant's state topics that hold messages though no run came.
+
+        The plant announces its run before its first step, so such messages are not a run's;
+        a forger whose run was stopped before this recorder saw the real plant is named so.
+        """
+        counts = self.writer.topic_counts()
+        for topic in (interface.CLOCK, *interface.STATE_TOPICS):
+            if counts.get(topic) and topic not in self.foreign:
+                writers = writers_text(self.writers.seen.get(topic, {}).values())
+                self.foreign[topic] = (f'{topic}: {counts[topic]} message(s) but no run '
+                                       f'announced, from {writers or "a writer now gone"}')
+                self.get_logger().error(f'foreign writer: {self.foreign[topic]}')
 
     def close(self) -> None:
         """Store the counts, finish the bag (summary, footer, metadata.yaml)."""
