@@ -27,6 +27,7 @@ from rclpy.serialization import deserialize_message
 import yaml
 
 from fixtures.demo_model import demo_model
+from fixtures.processes import END_WATCHER
 from pentapod_damper.scenario_laws import scenario_laws
 from pentapod_sim import interface
 from pentapod_sim.analysis.bag.reader import open_bag
@@ -333,3 +334,72 @@ def test_an_outside_subscriber_still_gets_its_topic_over_dds(tmp_path):
     every_step = np.arange(steps) * round(1e9 / RATE)
     for topic in STEP_TOPICS:
         assert np.array_equal(bag.topic(topic).log_time_ns, every_step), topic
+
+
+#: Counts the messages of one force topic (reliable, as a recorder), then prints the count once
+#: none came for 3 s.
+COUNTER = r"""
+import sys, time
+import rclpy
+from sensor_msgs.msg import JointState
+from pentapod_sim.nodes.common import FORCE_QOS
+rclpy.init()
+node = rclpy.create_node('echo')
+got = []
+node.create_subscription(JointState, sys.argv[1], lambda msg: got.append(time.monotonic()),
+                         FORCE_QOS)
+print('ready', flush=True)
+while not got or time.monotonic() - got[-1] < 3.0:
+    rclpy.spin_once(node, timeout_sec=0.1)
+print(len(got), flush=True)
+"""
+
+
+def test_a_composition_ends_once_its_sources_messages_are_acknowledged(tmp_path):
+    """
+    A subscriber outside a composition that only takes a source's topic gets every step.
+
+    The composition's sources publish on DDS while someone outside subscribes, and their
+    messages, like the plant's, must be acknowledged before the process ends: a recorder
+    behind the run repairs what it lost from the writers' histories, which end with the
+    process. The subscriber here takes only the PMA's forces and is frozen for the whole run
+    (its socket holds far fewer than the run's 3000 messages); it is continued after the plant
+    finished. Without the wait the composition ended as soon as the plant's own topics were
+    acknowledged (none has a subscriber outside), and the subscriber lacked most steps.
+    """
+    steps = 3000
+    counter = subprocess.Popen([sys.executable, '-c', COUNTER, force_topic('pma')],
+                               stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                               cwd=ROOT)
+    composed = None
+    try:
+        assert counter.stdout.readline().strip() == 'ready'
+        path = _scenario(tmp_path, steps, record=False)
+        doc = yaml.safe_load(path.read_text())
+        doc['plant']['ros__parameters']['wait_for_subscribers'] = ['echo']
+        path.write_text(dump_params(doc))
+        log = tmp_path / 'composed.log'
+        composed = subprocess.Popen(
+            [sys.executable, '-m', 'pentapod_sim.nodes.composed', str(path)], cwd=ROOT,
+            stdout=open(log, 'w'), stderr=subprocess.STDOUT)  # noqa: SIM115
+        end = time.monotonic() + 120
+        while 'lockstep run of' not in log.read_text():
+            assert time.monotonic() < end and composed.poll() is None, log.read_text()
+            time.sleep(0.01)
+        counter.send_signal(signal.SIGSTOP)
+        # the plant announced the end (it logs its summary only after the acknowledgements)
+        subprocess.run([sys.executable, '-c', END_WATCHER], timeout=120, check=True, cwd=ROOT)
+        time.sleep(1.0)
+        # the race is on: the run is over and the subscriber has taken (almost) nothing
+        assert composed.poll() is None, ('the composition ended before the subscriber '
+                                         'acknowledged its messages', log.read_text())
+        counter.send_signal(signal.SIGCONT)
+        out, _ = counter.communicate(timeout=120)
+        assert composed.wait(timeout=60) == 0, log.read_text()
+    finally:
+        for proc in (counter, composed):
+            if proc is not None and proc.poll() is None:
+                proc.send_signal(signal.SIGCONT)
+                proc.kill()
+                proc.wait()
+    assert int(out.split()[-1]) == steps, out

@@ -18,6 +18,7 @@ from mcap.reader import make_reader
 import pytest
 import yaml
 
+from fixtures.processes import END_WATCHER
 from pentapod_sim import interface
 from pentapod_sim.errors import BagError
 from pentapod_sim.recording.run_end import RunStatus, shortfalls, StepLedger
@@ -25,20 +26,6 @@ from pentapod_sim.scenario.files import read_scenario
 
 ROOT = Path(__file__).resolve().parents[1]
 OLD_FORCE_DEPTH = 100   # force history before this change: a 1.5 s stall lost messages
-#: Exits when the plant announces the end of the run (transient local: also if already sent).
-END_WATCHER = r"""
-import rclpy
-from rclpy.qos import DurabilityPolicy, QoSProfile
-from diagnostic_msgs.msg import DiagnosticStatus
-rclpy.init()
-node = rclpy.create_node('end_watcher')
-ended = []
-node.create_subscription(DiagnosticStatus, '/pentapod/run_status',
-                         lambda m: ended.append(m.message in ('finished', 'stopped')),
-                         QoSProfile(depth=4, durability=DurabilityPolicy.TRANSIENT_LOCAL))
-while not any(ended):
-    rclpy.spin_once(node, timeout_sec=0.1)
-"""
 SCENARIO = """
 /**:
   ros__parameters:
@@ -114,32 +101,35 @@ def test_run_status_parsing_and_ledger():
 
 # --- real nodes ----------------------------------------------------------------------------
 
-def start(module: str, name: str, params: Path, log: Path) -> subprocess.Popen:
+def start(module: str, name: str, params: Path, log: Path,
+          env: dict | None = None) -> subprocess.Popen:
     cmd = [sys.executable, '-m', module, '--ros-args', '-r', f'__node:={name}',
            '--params-file', str(params)]
-    env = dict(os.environ, PYTHONPATH=str(ROOT), PYTHONUNBUFFERED='1')
+    env = dict(os.environ if env is None else env, PYTHONPATH=str(ROOT), PYTHONUNBUFFERED='1')
     return subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=open(log, 'w'),  # noqa: SIM115
                             stderr=subprocess.STDOUT)
 
 
-def run_with_stalls(tmp_path: Path, steps: int, stalls, after_end: float = 0.0) -> tuple:
+def run_with_stalls(tmp_path: Path, steps: int, stalls, after_end: float = 0.0,
+                    drain_timeout: float = 60.0, env: dict | None = None) -> tuple:
     """
     Run plant + exciter + recorder; freeze the recorder per ``stalls``.
 
     ``stalls`` is a list of (run time, pause) [s] after the first messages are on disk; with
     ``after_end`` the last pause lasts until the plant announced the end of the run and
-    ``after_end`` s more. Returns (plant log, recorder log, bag folder, plant still running at
-    each SIGSTOP).
+    ``after_end`` s more. ``env``: the three processes' environment. Returns (plant log,
+    recorder log, bag folder, plant still running at each SIGSTOP).
     """
     params = tmp_path / 'scenario.yaml'
-    params.write_text(SCENARIO.format(steps=steps, out=tmp_path))
+    params.write_text(SCENARIO.format(steps=steps, out=tmp_path).replace(
+        'drain_timeout: 60.0', f'drain_timeout: {drain_timeout}'))
     procs: dict = {}
     running = []
     try:
         for name, module in (('exciter', 'pentapod_sim.nodes.exciter_node'),
                              ('recorder', 'pentapod_sim.nodes.recorder_node'),
                              ('plant', 'pentapod_sim.nodes.plant_node')):
-            procs[name] = start(module, name, params, tmp_path / f'{name}.log')
+            procs[name] = start(module, name, params, tmp_path / f'{name}.log', env)
         meta = tmp_path / 'bag' / 'metadata.yaml'
         end = time.monotonic() + 120
         while not (meta.exists() and yaml.safe_load(meta.read_text())
@@ -236,6 +226,57 @@ def test_recorder_stalled_past_the_last_message_does_not_close_early(tmp_path):
     assert running == [True, True] and n == steps
     check_bag(bag, steps)
     assert 'none missing' in recorder_log
+
+
+def fast_repair_profile(folder: Path) -> Path:
+    """
+    The package's Fast DDS profile with an 8 MB receive buffer and a 0.1 s writer heartbeat.
+
+    With Fast DDS's 3 s heartbeat a frozen recorder's lost datagrams come back in rounds 3 s
+    apart, so a recorder with a short ``drain_timeout`` would also close between two repair
+    rounds; these settings keep the recorder's own pace the only slow part.
+    """
+    text = (ROOT / 'config' / 'dds' / 'loopback.xml').read_text()
+    text = text.replace('<type>UDPv4</type>',
+                        '<type>UDPv4</type><receiveBufferSize>8388608</receiveBufferSize>')
+    text = text.replace('</profiles>', """  <data_writer profile_name="fast_repair" is_default_profile="true">
+    <times><heartbeatPeriod><sec>0</sec><nanosec>100000000</nanosec></heartbeatPeriod></times>
+  </data_writer>
+</profiles>""")
+    path = folder / 'fast_repair.xml'
+    path.write_text(text)
+    return path
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_a_recorder_behind_the_run_takes_every_step_after_its_drain_timeout(tmp_path):
+    """
+    ``drain_timeout`` counts from the last step taken, not from the end announcement.
+
+    The recorder is frozen for the whole run and continued after the plant announced its end:
+    it then holds 5000 steps of several topics in its readers and takes the announcement
+    first (one message among few). A composed run on a loaded machine did this by itself: the
+    recorder took steps for 35 s after the end and closed at 30 s with the rest missing.
+    Here taking the backlog lasts longer than the 1 s ``drain_timeout``, which the test checks
+    from the bag's receive times.
+    """
+    steps, drain = 5000, 1.0
+    # a profile other than the package's is refused unless opened on purpose: this one is the
+    # package's loopback profile with the two settings above
+    env = dict(os.environ, FASTRTPS_DEFAULT_PROFILES_FILE=str(fast_repair_profile(tmp_path)),
+               PENTAPOD_OPEN_NETWORK='1')
+    plant_log, recorder_log, bag, running = run_with_stalls(
+        tmp_path, steps, [(0.0, 0.0)], after_end=0.2, drain_timeout=drain, env=env)
+    assert running == [True, True] and ran(plant_log)[0] == steps
+    check_bag(bag, steps)
+    assert 'none missing' in recorder_log
+    # the race happened: steps were still taken more than drain_timeout after the announcement
+    announced = _log_time(recorder_log, f'run finished after {steps} steps')
+    with open(next(bag.glob('*.mcap')), 'rb') as stream:
+        last = max(message.publish_time for _, channel, message in
+                   make_reader(stream).iter_messages() if interface.is_step_topic(channel.topic))
+    assert last / 1e9 - announced > drain, (last / 1e9 - announced, recorder_log)
 
 
 def _log_time(log: str, text: str) -> float:

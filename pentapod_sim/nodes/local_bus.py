@@ -224,7 +224,7 @@ def connect(plant, nodes, executor) -> LocalBus | None:
     if not sources or hasattr(executor, 'wait_for_ready_callbacks'):
         return None
     bus = LocalBus()
-    plant.join_bus(bus, names)
+    plant.join_bus(bus, names, [o for s in sources for o in s.outlets()])
     for source in sources:
         source.use_bus(bus)
     topics = {o.topic_name: o.pub.msg_type

@@ -297,6 +297,7 @@ class RecorderParams(NodeParams):
     stop_at_run_end: bool = param(True, 'close the bag and exit once the plant announced the end '
                                   'of the run and every per-step topic holds its last step '
                                   '(false: run until SIGINT/SIGTERM)')
-    drain_timeout: float = param(30.0, 'wall time after the end announcement after which the bag '
-                                 'is closed even if steps are missing (they are reported)', 's',
+    drain_timeout: float = param(30.0, 'wall time after the end announcement without a new step '
+                                 'message after which the bag is closed even if steps are '
+                                 'missing (they are reported)', 's',
                                  bounds=(0.0, 1e6))

@@ -131,10 +131,15 @@ class PlantNode(TestbedNode):
         """Those of ``names`` that are sources of this plant."""
         return [n for n in names if n in self.mixer.sources]
 
-    def join_bus(self, bus: LocalBus, sources: list[str]) -> None:
-        """Take the in-process ``sources``' answers from ``bus``, hand the outputs to it."""
+    def join_bus(self, bus: LocalBus, sources: list[str], source_outlets=()) -> None:
+        """
+        Take the in-process ``sources``' answers from ``bus``, hand the outputs to it.
+
+        ``source_outlets``: those sources' outlets, whose subscribers outside the process the
+        plant waits for before step 0 and after the run, as for its own outputs.
+        """
         self.inputs.take_from(bus, sources)
-        self.outputs.attach(bus)
+        self.outputs.attach(bus, source_outlets)
         self.bus_drain = Drain(self)
         self.poller.in_composition()
 
@@ -167,7 +172,7 @@ class PlantNode(TestbedNode):
 
     def wait_for_acks(self) -> None:
         """Wait until every subscriber acknowledged every output and status (``ack_timeout``)."""
-        wait_for_acks(self, self.outputs.publishers() + self.status.publishers(),
+        wait_for_acks(self, self.outputs.acknowledged_publishers() + self.status.publishers(),
                       self.params.ack_timeout)
 
     # -- the run ---------------------------------------------------------------------------

@@ -62,15 +62,27 @@ class PlantOutputs:
         self.active: list[tuple[Outlet, TopicLayout]] = []    # state topics with a listener
         self.clock_active = False
         self.next_refresh = 0.0
+        # a composition's in-process sources' DDS publishers (force answers, diagnostics):
+        # matched before step 0 and acknowledged at the end like the plant's own
+        self.companions: list = []
 
     def outlets(self) -> list[Outlet]:
         """The per-step outlets with in-process hand-off (/clock, the state topics)."""
         return [self.clock] + [out for out, _ in self.states]
 
-    def attach(self, bus: LocalBus) -> None:
-        """Hand every outlet's messages to the in-process callbacks of ``bus`` (composed)."""
+    def attach(self, bus: LocalBus, companions=()) -> None:
+        """
+        Hand every outlet's messages to the in-process callbacks of ``bus`` (composed).
+
+        ``companions``: the outlets of the sources in the composition. Their DDS publishers
+        write only while a subscriber outside is matched, so a subscriber that is not matched
+        yet at step 0 would never get the first steps: :meth:`wait_for_subscribers` waits for
+        those matches too, and the end of the run for their acknowledgements
+        (:meth:`acknowledged_publishers`).
+        """
         for outlet in self.outlets():
             outlet.attach(bus)
+        self.companions = [outlet.pub for outlet in companions]
 
     def topics(self) -> list[str]:
         """Every topic published each step: /clock, the state topics, the full-rate one."""
@@ -84,6 +96,10 @@ class PlantOutputs:
     def publishers(self) -> list:
         """Every output publisher (subscriber waits, acknowledgements)."""
         return [out.pub for out in self.outlets()] + self.fullrate.publishers()
+
+    def acknowledged_publishers(self) -> list:
+        """The publishers whose messages are acknowledged before the plant's process ends."""
+        return self.publishers() + self.companions
 
     def due(self) -> bool:
         """True when the subscribers should be looked up again (every REFRESH_PERIOD s)."""
@@ -133,6 +149,8 @@ class PlantOutputs:
         """
         Wait until each node of ``wanted`` subscribes to an output topic, all matched.
 
+        Output topics are the plant's and, in a composition, its sources' (``companions``).
+
         Then spin ``settle`` seconds more, so that the node's other subscriptions (to this
         plant and to the sources) are matched too: a recorder started with the run thus
         receives step 0. RunError names a node that did not appear within ``timeout`` s. A
@@ -144,7 +162,7 @@ class PlantOutputs:
 
         def missing() -> list[str]:
             seen, unmatched = set(), []
-            for pub in pubs:
+            for pub in pubs + self.companions:
                 names, matched = subscribers_of(self.node, pub)
                 seen |= names
                 if not matched:
