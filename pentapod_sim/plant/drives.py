@@ -279,6 +279,16 @@ class DriveSet:
         return f'{self.params.source} on struts {list(self.struts)}'
 
 
+def with_drives(plant: PlantModel, drives: 'DriveSet | None') -> 'PlantModel | DrivenPlant':
+    """
+    ``plant`` as a plant node with these feed drives steps it.
+
+    ``drives.on(plant)``, or ``plant`` itself for None (no drives): the one place that choice
+    is made.
+    """
+    return plant if drives is None else drives.on(plant)
+
+
 def zoh(a: np.ndarray, b: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
     """
     Exact zero-order-hold ``(A_d, B_d)`` of ``dx/dt = a x + b u`` over ``dt`` [s].
