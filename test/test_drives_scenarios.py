@@ -225,3 +225,12 @@ def test_design_fixed_row_extra_delay_delays_the_iff_not_the_drives(tmp_path):
     other = dataclasses.replace(params, rotor_mass=2 * params.rotor_mass)
     with pytest.raises(ConfigError, match="not the design model's drives"):
         family.laws({}, ALL, dict(context, drives=other))
+
+
+def test_dynamics_table_refuses_a_scenario_without_viscous_dampers_before_any_model(
+        monkeypatch, tmp_path):
+    def no_model(*args, **kwargs):
+        raise AssertionError('a model was built')
+    monkeypatch.setattr(dynamics, 'load_or_build_model', no_model)
+    with pytest.raises(ConfigError, match="'hac_lac_struts' has no viscous dampers"):
+        dynamics.rows(['P1'], ['strut_damping_12', 'hac_lac_struts'], tmp_path)

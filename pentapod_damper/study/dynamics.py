@@ -121,6 +121,15 @@ def rows(positions: Sequence[str], scenarios: Sequence[str], cache_dir: Path,
     dt = cfg.dt
     band = (float(cfg.band[0]), float(cfg.f_max))
     d = cfg.direction
+    parts = {}
+    for scn in scenarios:           # checked before any model is built
+        every = scenario_laws(read_scenario(scn).sections, dt)
+        laws = [law for law in every if isinstance(law, ViscousDamper)]
+        if not laws:
+            raise ConfigError(f'scenario {scn!r} has no viscous dampers: the dynamics table '
+                              'compares their dynamics')
+        parts[scn] = (scenario_drives(scn), laws,
+                      [law for law in every if not isinstance(law, ViscousDamper)])
     out = []
     for pos in positions:
         plant, _ = load_or_build_model(position=pos, cache_dir=cache_dir)
@@ -129,13 +138,7 @@ def rows(positions: Sequence[str], scenarios: Sequence[str], cache_dir: Path,
         base = exact_peak(plant_pair_frf(plant, f'tcp_displacement_{d}', f'tcp_force_{d}'),
                           *band).value
         for scn in scenarios:
-            drives = scenario_drives(scn)
-            every = scenario_laws(read_scenario(scn).sections, dt)
-            laws = [law for law in every if isinstance(law, ViscousDamper)]
-            if not laws:
-                raise ConfigError(f'scenario {scn!r} has no viscous dampers: the dynamics '
-                                  'table compares their dynamics')
-            others = [law for law in every if not isinstance(law, ViscousDamper)]
+            drives, laws, others = parts[scn]
             shipped = laws if candidate is None else _with(laws, candidate, dt)
             for variant, variant_laws in (('buildable', shipped),
                                           ('ideal', ideal_laws(scn, dt))):
