@@ -78,6 +78,31 @@ def _control_radius(driven, ctrls, dt: float) -> float:
     return float(np.abs(np.linalg.eigvals(control.feedback(sys_p, k, sign=1).A)).max())
 
 
+def _written_out_frf(driven, cascade, freq: np.ndarray) -> np.ndarray:
+    """
+    TCP xx of the continuous loop of ``driven`` and ``cascade``, written out and solved.
+
+    Sensors ``y_s = C_s x + D_s e`` (e the TCP force x; the motors do not feed through),
+    ``u = C_k x_k + D_k y_s`` into the motors, ``x_k' = A_k x_k + B_k y_s``.
+    """
+    a, b, c, d = driven.state_matrices()
+    outs, ins = list(driven.output_names), list(driven.input_names)
+    s_idx = [outs.index(p) for p in cascade.sensor_ports]
+    put = np.zeros((len(ins), len(cascade.actuator_ports)))
+    put[[ins.index(p) for p in cascade.actuator_ports], np.arange(put.shape[1])] = 1
+    assert not np.any(d[s_idx] @ put)
+    i, o = ins.index('tcp_force_x'), outs.index('tcp_displacement_x')
+    c_s, d_s = c[s_idx], d[s_idx, i]
+    kd, kc = put @ cascade.d, put @ cascade.c
+    a_cl = np.block([[a + b @ kd @ c_s, b @ kc], [cascade.b @ c_s, cascade.a]])
+    b_cl = np.concatenate([b[:, i] + b @ kd @ d_s, cascade.b @ d_s])
+    c_cl = np.concatenate([c[o] + d[o] @ kd @ c_s, d[o] @ kc])
+    d_cl = d[o, i] + d[o] @ kd @ d_s
+    eye = np.eye(a_cl.shape[0])
+    return np.array([c_cl @ np.linalg.solve(2j * np.pi * f * eye - a_cl, b_cl) + d_cl
+                     for f in freq])
+
+
 def test_with_drives_is_the_one_choice():
     _, plant = drives_plant(n_modes=10)
     assert with_drives(plant, None) is plant
@@ -159,21 +184,7 @@ def test_sweep_closes_a_drives_scenario_on_the_rotors(tmp_path):
     label = next(iter(loops))
     driven = DrivenPlant(plant, load_drives())
     cascade = FeedDrives(load_drives()).continuous()
-    a, b, c, d = driven.state_matrices()
-    # closed loop by hand: plant inputs u = [u_ext; c xc + d y_s], sensors y_s of the plant
-    outs, ins = list(driven.output_names), list(driven.input_names)
-    s_idx = [outs.index(p) for p in cascade.sensor_ports]
-    a_idx = [ins.index(p) for p in cascade.actuator_ports]
-    put = np.zeros((len(ins), len(a_idx)))
-    put[a_idx, np.arange(len(a_idx))] = 1
-    assert not np.any(d[s_idx][:, a_idx])
-    a_cl = np.block([[a + b @ put @ cascade.d @ c[s_idx], b @ put @ cascade.c],
-                     [cascade.b @ c[s_idx], cascade.a]])
-    i, o = ins.index('tcp_force_x'), outs.index('tcp_displacement_x')
-    b_cl = np.concatenate([b[:, i], np.zeros(cascade.a.shape[0])])
-    c_cl = np.concatenate([c[o], np.zeros(cascade.a.shape[0])])
-    h = np.array([c_cl @ np.linalg.solve(2j * np.pi * f * np.eye(a_cl.shape[0]) - a_cl, b_cl)
-                  + d[o, i] for f in freq])
+    h = _written_out_frf(driven, cascade, freq)
     lo, hi = settings.band
     band = (freq >= lo) & (freq <= hi)
     assert row[f'peak_xx_{label}'] == pytest.approx(np.abs(h[band]).max(), rel=1e-6)
@@ -234,3 +245,47 @@ def test_dynamics_table_refuses_a_scenario_without_viscous_dampers_before_any_mo
     monkeypatch.setattr(dynamics, 'load_or_build_model', no_model)
     with pytest.raises(ConfigError, match="'hac_lac_struts' has no viscous dampers"):
         dynamics.rows(['P1'], ['strut_damping_12', 'hac_lac_struts'], tmp_path)
+
+
+@pytest.mark.parametrize('scenario', ['drives_struts', 'hac_lac_struts'])
+def test_sweep_of_p1_with_the_drives_is_the_loop_written_out(scenario):
+    """
+    The sweep's own P1 pose (3066 DOF, 90 modes) with the drives' scenarios, written out.
+
+    Its xx peak is the FRF of the closed loop solved directly, its dominant-mode ζ a pole of
+    python-control's closed loop. Rotor forces [N] and modal coordinates differ by orders of
+    magnitude: HAC-LAC's eigen-decomposition FRF needs the balanced loop (unbalanced its
+    eigenvectors are too ill-conditioned and the pose failed).
+    """
+    from pentapod_sim.modes.frame_reduction import build_model
+    from pentapod_sim.modes.solver import solve_modes
+    from pentapod_sim.plant.build import plant_from_fe, reduce_plant
+    settings = make_settings([scenario], n_points=400)
+    pose = np.array([0.0, 0.0, 0.85, 0.0, 0.0])             # P1 (config/positions.yaml)
+    row = compute.evaluate(pose, settings)
+    fe = build_model(settings.machine, pose)
+    modes = solve_modes(fe.K, fe.M, f_max=max(settings.mode_f_max,
+                                              settings.reduction.modes_f_max))
+    plant_all, keep = plant_from_fe(fe, settings.reduction, progress=lambda msg: None,
+                                    modes=modes)
+    plant = reduce_plant(plant_all, keep, settings.reduction.static_correction)
+    driven = DrivenPlant(plant, load_drives())
+    (law,) = scenario_laws(read_scenario(scenario).sections, 1 / settings.sample_rate)
+    cascade = law.law.continuous()
+    a, b, c, d = driven.state_matrices()
+    outs, ins = list(driven.output_names), list(driven.input_names)
+    s_idx = [outs.index(p) for p in cascade.sensor_ports]
+    a_idx = [ins.index(p) for p in cascade.actuator_ports]
+    put = np.zeros((len(ins), len(a_idx)))
+    put[a_idx, np.arange(len(a_idx))] = 1
+    assert not np.any(d[s_idx][:, a_idx])
+    sys_p = control.ss(a, b @ put, c[s_idx], np.zeros((len(s_idx), len(a_idx))))
+    k = control.ss(cascade.a, cascade.b, cascade.c, cascade.d)
+    poles = control.feedback(sys_p, k, sign=1).poles()
+    near = poles[np.argmin(np.abs(np.abs(poles) - 2 * np.pi * row['dom_f_xx']))]
+    assert row[f'zeta_xx_{scenario}'] == pytest.approx(-near.real / abs(near), rel=1e-6)
+    freq = np.linspace(settings.freq[0], settings.freq[1], int(settings.freq[2]))
+    lo, hi = settings.band
+    h = _written_out_frf(driven, cascade, freq[(freq >= lo) & (freq <= hi)])
+    assert row[f'peak_xx_{scenario}'] == pytest.approx(np.abs(h).max(), rel=1e-6)
+    assert row[f'zeta_xx_{scenario}'] > 10 * row['zeta_xx_open']      # locked: 0.1 %

@@ -103,7 +103,11 @@ class Loop:
         The continuous loop on ``sub`` with the drives' rotors: cascade and dampers.
 
         A state space (``A``, ``B``, ``C``, ``D`` on the driven plant's ports, the plant's
-        first) of the state ``[x (plant), rotors, cascade]``.
+        first) of the state ``[x (plant), rotors, cascade]`` scaled by ``T`` (``scale``, the
+        diagonal of :func:`scipy.linalg.matrix_balance`: ``A = T^-1 A_loop T``): the rotors'
+        forces [N] and the modal coordinates differ by orders of magnitude, which leaves the
+        unbalanced eigenvectors too ill-conditioned for the eigen-decomposition FRF. The
+        original eigenvectors are ``T v``.
         """
         driven = with_drives(sub, self.drives)
         static = [DiscreteController.static(
@@ -114,7 +118,9 @@ class Loop:
         d = driven.state_matrices()[3]
         gain = controller_blocks(ctrls, driven.input_names, driven.output_names)[0]
         direct = d @ np.linalg.inv(np.eye(len(driven.input_names)) - gain @ d)
-        return SimpleNamespace(A=a, B=b, C=c_y, D=direct)
+        balanced, (scale, _) = sla.matrix_balance(a, permute=False, separate=True)
+        return SimpleNamespace(A=balanced, B=b / scale[:, None], C=c_y * scale[None, :],
+                               D=direct, scale=scale)
 
 
 def ports_needed(loops: list[Loop]) -> tuple[list[str], list[str]]:
@@ -244,7 +250,10 @@ def loop_columns(plant: PlantModel, loops: dict[str, Loop], freq: np.ndarray,
         else:
             sys = damper_feedback(sub, dampers) if dampers else sub.to_statespace()
         lam, vec = sla.eig(sys.A)
-        damping = paired_damping(lam, vec[:2 * sub.n_modes], dom)   # the modal part
+        modal = vec[:2 * sub.n_modes]               # the modal part, in modal coordinates
+        if driven:
+            modal = modal * sys.scale[:2 * sub.n_modes, None]
+        damping = paired_damping(lam, modal, dom)
         pmas = [(pma, port) for pma in (loop.pmas if loop else []) for port in pma.sensor_ports]
         pairs = [(f'tcp_displacement_{d}', f'tcp_force_{d}') for d in DIRECTIONS]
         pairs += [(port, f'tcp_force_{port[-1]}') for _, port in pmas]
