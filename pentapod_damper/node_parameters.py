@@ -121,8 +121,10 @@ class ActiveLawParams(NodeParams):
     drive_iff_gain: float = param(0.0, 'HAC-LAC: IFF gain g of w = -g / (s + omega_i) F from '
                                   'the load cell strut<i>_force into the force command, '
                                   "through the node's low-pass, its delay_steps added to the "
-                                  "drives' own delay; 0 = the feed drives alone", '1/s',
-                                  bounds=(0.0, MAX_GAIN))
+                                  "drives' own delay; 0 = the feed drives alone; settable "
+                                  'while running between values > 0 (the cascade is rebuilt '
+                                  'with it; to or from 0 is refused: it adds or drops the load '
+                                  'cells)', '1/s', bounds=(0.0, MAX_GAIN), read_only=False)
     drive_iff_omega: float = param(0.0, 'HAC-LAC: IFF corner omega_i', 'rad/s',
                                    bounds=(0.0, 1.0e6))
 
@@ -131,7 +133,7 @@ class ActiveLawParams(NodeParams):
         The active laws configured, keyed by the name of their gain parameter.
 
         ``iff_gain``, ``lag_gain``, ``bandpass_gain``, ``ppf_gain``, ``drive_iff_gain`` (the
-        drives' cascade, its IFF gain read-only) -> law, in this order, with
+        drives' cascade, its gain parameter the IFF gain) -> law, in this order, with
         the dynamics ``dyn`` at the sample time ``dt`` [s]. ConfigError (naming ``source``) for
         a combination the laws refuse.
         """

@@ -145,3 +145,62 @@ def test_a_multi_rate_plant_with_drives_is_the_single_rate_loop():
     scale = np.abs(runs[0].y).max(axis=0) + 1e-300
     assert np.abs(runs[0].y).max() > 0
     assert (np.abs(runs[1].y - runs[0].y) / scale).max() < 1e-8
+
+
+def _mass_normalised_norm(x: np.ndarray, n_modes: int, m_r: float, k_a: np.ndarray) -> float:
+    """sqrt(|q, dq|^2 + m_r |x_m|^2 + m_r |v_m|^2 + m_r |F_m / k_a|^2), written out."""
+    n, r = 2 * n_modes, k_a.size
+    modal, x_m, v_m, f_m = x[:n], x[n:n + r], x[n + r:n + 2 * r], x[n + 2 * r:]
+    return float(np.sqrt(modal @ modal + m_r * (x_m @ x_m + v_m @ v_m)
+                         + m_r * np.sum((f_m / k_a) ** 2)))
+
+
+def _step(core, laws, force: float) -> None:
+    y = core.outputs()
+    u = np.zeros(len(core.input_names))
+    u[core.input_index['tcp_force_x']] = force
+    for law in laws:
+        u[[core.input_index[p] for p in law.actuator_ports]] += law.step(
+            y[[core.output_index[p] for p in law.sensor_ports]])
+    core.advance(u)
+
+
+def test_the_divergence_guard_holds_the_rotors_as_tightly_as_the_modes():
+    """
+    Default max_state_norm with drives: normal runs go on, diverging ones stop.
+
+    A 10 kN TCP force step (a heavy cut: the motors hold kN, above the bound in N) runs; a
+    drive delay that makes the loop unstable is stopped at the first step whose
+    mass-normalised state norm exceeds the bound.
+    """
+    from pentapod_sim.errors import RunError
+    from pentapod_sim.plant.drives import link_stiffness
+    from pentapod_sim.sim.stepping import DEFAULT_MAX_STATE_NORM
+    _, plant = drives_plant()
+    params = load_drives()
+    k_a = np.array([link_stiffness(plant, i) for i in range(1, 6)])
+    n = 2 * plant.n_modes
+    core = MultiRatePlant.from_model(DriveSet(params).on(plant), RATE)
+    assert core.max_state_norm == DEFAULT_MAX_STATE_NORM
+    laws = list(damper_laws({'drive_struts': [1, 2, 3, 4, 5], 'sample_rate': RATE}).values())
+    force_peak = 0.0
+    for _ in range(int(0.5 * RATE)):
+        _step(core, laws, 1.0e4)
+        force_peak = max(force_peak, float(np.abs(core.x[n + 10:]).max()))
+        assert core.state_norm() == pytest.approx(
+            _mass_normalised_norm(core.x, plant.n_modes, params.rotor_mass, k_a), rel=1e-12)
+    assert force_peak > 2 * DEFAULT_MAX_STATE_NORM          # kN of motor force, in N
+    assert np.linalg.norm(core.x[:n]) < 1e-2 * DEFAULT_MAX_STATE_NORM
+    # unstable drives (15 samples of delay, test_loop_check_with_drives_...): stopped
+    slow = dataclasses.replace(params, delay_steps=15)
+    core = MultiRatePlant.from_model(DriveSet(slow).on(plant), RATE)
+    laws = list(damper_laws({'drive_struts': [1, 2, 3, 4, 5], 'sample_rate': RATE,
+                             'drive_file': _yaml(slow)}).values())
+    norms = []
+    with pytest.raises(RunError, match='exceeds max_state_norm'):
+        for _ in range(int(2 * RATE)):
+            _step(core, laws, 100.0)
+            norms.append(_mass_normalised_norm(core.x, plant.n_modes, slow.rotor_mass, k_a))
+    stop = _mass_normalised_norm(core.x, plant.n_modes, slow.rotor_mass, k_a)
+    assert stop > DEFAULT_MAX_STATE_NORM and max(norms, default=0.0) <= DEFAULT_MAX_STATE_NORM
+    assert len(norms) > 100              # it grew from rest: not stopped by the motor force in N

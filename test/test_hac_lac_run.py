@@ -2,7 +2,8 @@
 HAC-LAC through ROS: the plant node with the feed drives' rotors and the damper node's cascade.
 
 A lockstep run (composed and as separate processes) equals the offline loop of the same
-discrete plant with drives and the same ``FeedDrives`` controller bit for bit; the run status
+discrete plant with drives and the same ``FeedDrives`` controller bit for bit, and so does a
+multi-rate plant's (``substeps`` 4) against the offline multi-rate loop; the run status
 and the bag say which drives the plant stepped; the start-up truncation check refuses a drive
 delay that makes the loop unstable; a bad drives file is one error line naming it.
 """
@@ -35,13 +36,14 @@ DAMPER = {'drive_struts': [1, 2, 3, 4, 5], 'drive_iff_gain': 150.0, 'drive_iff_o
 
 
 def _scenario(tmp_path: Path, tag: str, drives: str = 'drives.yaml',
-              record: bool = True) -> Path:
+              record: bool = True, **plant_params) -> Path:
     model_file = tmp_path / 'model.npz'
     if not model_file.exists():
         drives_plant()[1].save(model_file)
     plant = {'model_file': str(model_file), 'steps': STEPS, 'sources': ['exciter', 'damper'],
              'drives': drives, 'loop_check': 'refuse',
-             'output_file': str(tmp_path / f'trace_{tag}.npz'), 'startup_timeout': 60.0}
+             'output_file': str(tmp_path / f'trace_{tag}.npz'), 'startup_timeout': 60.0,
+             **plant_params}
     doc = {'/**': {'ros__parameters': {'sample_rate': RATE}},
            'exciter': {'ros__parameters': dict(EXCITER)},
            'damper': {'ros__parameters': dict(DAMPER, drive_file=drives)},
@@ -89,6 +91,30 @@ def test_lockstep_hac_lac_run_is_the_offline_loop(tmp_path):
         assert np.array_equal(trace['u'], offline.u), tag
     motor = offline.input_names.index('strut1_motor_force')
     assert np.abs(offline.u[:, motor]).max() > 0          # the cascade acted
+
+
+def test_a_multi_rate_plant_with_drives_through_ros_is_the_offline_loop(tmp_path):
+    """Substeps 4: the plant node steps the rotors at 20 kHz, exchanges at 5 kHz; bit for bit."""
+    substeps = 4
+    path = _scenario(tmp_path, 'multirate', record=False, substeps=substeps)
+    assert run_scenario(path, {}, 300.0, log_dir=tmp_path / 'logs', composed=True) == 0
+    trace = dict(np.load(tmp_path / 'trace_multirate.npz'))
+    core = MultiRatePlant.from_model(
+        DriveSet(load_drives()).on(PlantModel.load(tmp_path / 'model.npz')), RATE, substeps)
+    assert core.substeps == substeps and core.n_states == 2 * 186 + 15
+    laws = scenario_laws(read_scenario(path).sections, 1 / RATE)
+    force = Excitation(ExcitationSpec(**EXCITER), 1 / RATE).series(STEPS)[:, :1]
+    offline = simulate(core, laws, excitation_matrix(core, ['tcp_force_x'], force, STEPS))
+    assert np.array_equal(trace['y'], offline.y)
+    assert np.array_equal(trace['u'], offline.u)
+    # and not the single-rate plant's bits (the substeps were stepped)
+    single = MultiRatePlant.from_model(
+        DriveSet(load_drives()).on(PlantModel.load(tmp_path / 'model.npz')), RATE)
+    for law in laws:
+        law.reset()
+    one = simulate(single, laws, excitation_matrix(single, ['tcp_force_x'], force, STEPS))
+    assert not np.array_equal(one.y, offline.y)
+    assert np.abs(offline.u[:, offline.input_names.index('strut1_motor_force')]).max() > 0
 
 
 def test_the_loop_check_refuses_an_unstable_drive_delay(tmp_path):

@@ -215,6 +215,51 @@ def test_damper_gains_change_while_running_and_read_only_ones_do_not(ctx):
         node.destroy_node()
 
 
+def test_drive_iff_gain_changes_while_running_and_rebuilds_the_cascade(ctx):
+    """HAC-LAC's IFF gain set like the other gains: the cascade is FeedDrives with the new g."""
+    from pentapod_sim.plant.drives import load_drives
+    from pentapod_sim.sim.drives import FeedDrives
+    from pentapod_sim.sim.law_models import Dynamics
+    rate = 5000.0
+    node = DamperNode(context=ctx, cli_args=[
+        '--ros-args', '-p', 'drive_struts:=[1, 3]', '-p', 'drive_iff_gain:=150.0',
+        '-p', 'drive_iff_omega:=2.3', '-p', 'filter_order:=2', '-p', 'bandwidth_hz:=500.0',
+        '-p', 'delay_steps:=1', '-p', f'sample_rate:={rate}'])
+
+    def want(g):
+        return FeedDrives(load_drives(), (1, 3), g, 2.3, Dynamics(2, 500.0, delay_steps=1)
+                          ).discrete(1 / rate)
+    try:
+        law = node.laws['drive_iff_gain']
+        law.step(np.ones(len(law.sensor_ports)))        # a state that must carry on
+        state = law._state.copy()
+        before = node.model_text()
+        assert node.set_parameters([Parameter('drive_iff_gain', value=300.0)])[0].successful
+        assert node.params.drive_iff_gain == 300.0
+        mine, ref = node.linear_model(), want(300.0)
+        assert mine.sensor_ports == ref.sensor_ports
+        for m in 'abcd':
+            assert np.array_equal(getattr(mine, m), getattr(ref, m)), m
+        assert not np.array_equal(ref.c, want(150.0).c) or not np.array_equal(ref.b, want(150.0).b)
+        assert np.array_equal(law._state, state)
+        assert node.model_text() != before             # what is published for the check
+        # to 0 would drop the load cells the node subscribed: refused, nothing changed
+        result = node.set_parameters([Parameter('drive_iff_gain', value=0.0)])[0]
+        assert not result.successful and 'load cells' in result.reason
+        assert not node.set_parameters([Parameter('drive_iff_gain', value=-1.0)])[0].successful
+        assert node.params.drive_iff_gain == 300.0
+        assert np.array_equal(node.linear_model().d, ref.d)
+    finally:
+        node.destroy_node()
+    alone = DamperNode(context=ctx, cli_args=['--ros-args', '-p', 'drive_struts:=[2]'])
+    try:
+        result = alone.set_parameters([Parameter('drive_iff_gain', value=10.0)])[0]
+        assert not result.successful and 'load cells' in result.reason
+        assert alone.params.drive_iff_gain == 0.0
+    finally:
+        alone.destroy_node()
+
+
 def _params_file(tmp_path, shared: str, own: str) -> str:
     path = tmp_path / 'p.yaml'
     path.write_text(f'/**:\n  ros__parameters:\n    {shared}\n'

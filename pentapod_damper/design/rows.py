@@ -6,17 +6,24 @@ Tuned rows are law families of :mod:`pentapod_sim.sim.law_families` (gains found
 paper's ideal damper), wrapped as families without parameters so that one judge
 (:class:`pentapod_sim.sim.tuning.Judge`) measures every row the same way. One more sample of
 delay on a fixed law delays its efforts (:func:`pentapod_sim.sim.law_models.delay_output`).
+A fixed row of a scenario whose plant steps the feed drives (its ``drives``,
+:func:`pentapod_sim.scenario.laws.scenario_drives`) runs on the machine with the drives, its
+drives' cascade (with its IFF) among its laws.
 
 Units: gains as the laws'; frequencies Hz.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, Callable, Mapping, Sequence
 
 from pentapod_damper.laws import Dynamics, ProofMassActuator, ViscousDamper
+from pentapod_damper.laws.linear import SteppedLaw
 from pentapod_damper.scenario_laws import scenario_laws
+from pentapod_sim.errors import ConfigError
 from pentapod_sim.scenario.files import read_scenario
+from pentapod_sim.scenario.laws import scenario_drives
+from pentapod_sim.sim.drives import FeedDrives
 from pentapod_sim.sim.law_families import Family, family
 from pentapod_sim.sim.law_models import delay_output
 
@@ -47,28 +54,76 @@ class _FixedModels:
     extra: int
 
     def discrete(self, dt: float) -> list[Any]:
-        return [delay_output(law.discrete_model(), self.extra) for law in self.make(dt)]
+        out = []
+        for law in self.make(dt):
+            cascade = getattr(law, 'law', None)
+            if isinstance(cascade, FeedDrives):
+                # the drives are the machine and keep their delay; their IFF gets the extra
+                # sample, as the tuned HAC-LAC family's does
+                if cascade.iff_gain and self.extra:
+                    dyn = cascade.iff_dynamics
+                    cascade = replace(cascade,
+                                      iff_dynamics=dyn.with_delay(dyn.delay_steps + self.extra))
+                out.append(cascade.discrete(dt))
+            else:
+                out.append(delay_output(law.discrete_model(), self.extra))
+        return out
 
     def continuous(self) -> list[Any]:
         return [law.continuous_model() for law in self.make(1.0)]
 
 
 def fixed_family(name: str, sensors: str, actuators: str,
-                 make: Callable[[Sequence[int], float], list[Any]]) -> Family:
-    """A family without parameters that runs ``make(struts, dt)``."""
+                 make: Callable[[Sequence[int], float], list[Any]],
+                 machine: str = 'locked') -> Family:
+    """A family without parameters that runs ``make(struts, dt)`` on ``machine``."""
     def build(values: Mapping[str, float], struts: Sequence[int],
               context: Mapping[str, Any]) -> list[Any]:
         return [_FixedModels(lambda dt: make(struts, dt), int(context.get('extra', 0)))]
-    return Family(name, 'locked', sensors, actuators, (), build)
+    return Family(name, machine, sensors, actuators, (), build)
+
+
+def scenario_family(name: str, scenario: str, sensors: str, actuators: str) -> Family:
+    """
+    A fixed row of a scenario's laws (:func:`_scenario_dampers`), on the machine it runs on.
+
+    With the scenario's ``drives`` the row's machine is ``drives`` (the design model's
+    drives on every strut, :meth:`pentapod_sim.sim.design_models.DesignModel.with_drives`):
+    ConfigError if the scenario's drives are other ones (another file's parameters, or not
+    on all five struts), since the table's machine has one set of drives.
+    """
+    drives = scenario_drives(scenario)
+    make = _scenario_dampers(scenario)
+    if drives is None:
+        return fixed_family(name, sensors, actuators, make)
+
+    def build(values: Mapping[str, float], struts: Sequence[int],
+              context: Mapping[str, Any]) -> list[Any]:
+        mine, theirs = (replace(p, source='') for p in (drives.params, context['drives']))
+        if drives.struts != (1, 2, 3, 4, 5) or mine != theirs:
+            raise ConfigError(f'scenario {scenario!r}: its drives ({drives.describe()}) are '
+                              "not the design model's drives on all five struts "
+                              f"({context['drives'].source})")
+        return [_FixedModels(lambda dt: make(struts, dt), int(context.get('extra', 0)))]
+    return Family(name, 'drives', sensors, actuators, (), build)
 
 
 def _scenario_dampers(scenario: str) -> Callable[[Sequence[int], float], list[Any]]:
-    """The scenario's viscous dampers, on the given struts only (strut ports)."""
+    """
+    The scenario's viscous dampers on the given struts only, and its drives' cascade.
+
+    Dampers on strut ports are kept for the given struts; the feed drives stay on all their
+    struts (they are the machine), their IFF only inside the loops of the given struts.
+    """
     sections = read_scenario(scenario).sections
 
     def make(struts: Sequence[int], dt: float) -> list[Any]:
-        out = []
+        out: list[Any] = []
         for law in scenario_laws(sections, dt):
+            cascade = getattr(law, 'law', None)
+            if isinstance(cascade, FeedDrives):
+                out += _drives_on(cascade, struts, dt)
+                continue
             if not isinstance(law, ViscousDamper):
                 continue
             keep = [k for k, port in enumerate(law.actuator_ports)
@@ -79,6 +134,15 @@ def _scenario_dampers(scenario: str) -> Callable[[Sequence[int], float], list[An
                                          dt))
         return out
     return make
+
+
+def _drives_on(cascade: FeedDrives, struts: Sequence[int], dt: float) -> list[Any]:
+    """A scenario's drives' cascade with its IFF only inside the loops of ``struts``."""
+    inside = tuple(i for i in cascade.struts if i in struts)
+    rest = tuple(i for i in cascade.struts if i not in struts)
+    parts = ([replace(cascade, struts=inside)] if inside else []) + (
+        [replace(cascade, struts=rest, iff_gain=0.0, iff_omega=0.0)] if rest else [])
+    return [SteppedLaw(part, dt) for part in parts]
 
 
 def _ideal_bending(gain: float) -> Callable[[Sequence[int], float], list[Any]]:
@@ -109,8 +173,8 @@ def default_rows() -> tuple[RowSpec, ...]:
         RowSpec('ideal viscous bending (paper)', 'ideal', fixed_family(
             'ideal', bending, moment, _ideal_bending(IDEAL_BENDING_GAIN)), True,
             f'{IDEAL_BENDING_GAIN:g} N m s/rad, continuous, no filter or delay'),
-        RowSpec('velocity feedback (buildable today)', 'fixed', fixed_family(
-            'strut_damping_all', bending, moment, _scenario_dampers('strut_damping_all')),
+        RowSpec('velocity feedback (buildable today)', 'fixed', scenario_family(
+            'strut_damping_all', 'strut_damping_all', bending, moment),
             True, 'scenario strut_damping_all'),
         RowSpec(DRIVES_ROW, 'tuned', family('hac-lac'), True,
                 'config/drives.yaml, IFF gain 0'),
@@ -123,7 +187,7 @@ def default_rows() -> tuple[RowSpec, ...]:
         RowSpec('PMA 5 kg, 5 Hz high-pass', 'fixed', fixed_family(
             'pma', 'mount velocity (x)', 'proof-mass actuator on the platform (x)',
             _pma(5.0, 4000.0, 5.0)), False, "scenario pma_5kg with the study's 5 Hz high-pass"),
-        RowSpec('TCP damper', 'fixed', fixed_family(
-            'tcp_damping', 'TCP velocity (x, y, z)', 'damper from the TCP to ground',
-            _scenario_dampers('tcp_damping')), False, 'scenario tcp_damping'),
+        RowSpec('TCP damper', 'fixed', scenario_family(
+            'tcp_damping', 'tcp_damping', 'TCP velocity (x, y, z)',
+            'damper from the TCP to ground'), False, 'scenario tcp_damping'),
     )

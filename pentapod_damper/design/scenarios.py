@@ -37,10 +37,6 @@ SCENARIOS = {
 }
 #: The drives file of the scenarios with the drives (config/drives.yaml, as the table's).
 DRIVES = 'drives.yaml'
-#: The plant's divergence bound with the drives: their state holds the motors' forces [N]
-#: (about 4 kN at P1 in HAC-LAC's periodic start under a 10 N multisine), above the default
-#: bound of 1e3 meant for modal coordinates.
-DRIVES_STATE_NORM = 1e6
 STRUTS = [1, 2, 3, 4, 5]
 
 
@@ -116,10 +112,7 @@ def scenario_text(record: Record, params: Mapping[str, Any]) -> str:
         '', 'plant:', '  ros__parameters:',
         f'    position: {record["position"]}                   # the position the gains were '
         'tuned at', *([f"    drives: {DRIVES}            # the feed drives' rotors (config/"
-                       'drives.yaml)',
-                       f'    max_state_norm: {_value(DRIVES_STATE_NORM)}       # the state holds '
-                       "the motors' forces [N] (kN in a 10 N multisine run)"]
-                      if 'drive_struts' in params else []),
+                       'drives.yaml)'] if 'drive_struts' in params else []),
         '    timing: lockstep               # lockstep | realtime',
         '    duration: 4.0                  # simulated time [s]',
         '    sources: [exciter, damper_struts]',

@@ -16,6 +16,7 @@ Units: as the ports (N, N m; m, rad, m/s, rad/s); frequencies Hz, gains as state
 """
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Sequence
 
 import numpy as np
@@ -165,8 +166,47 @@ def positive_position_feedback(kind: str, struts: Sequence[int], gain: float | S
                           frequency_hz, damping, dynamics or Dynamics()), dt)
 
 
+class DrivesLaw(SteppedLaw):
+    """
+    The feed drives' cascade stepped; its gain parameter is the IFF gain g [1/s].
+
+    A new g (the damper node's ``drive_iff_gain`` set while running) rebuilds the cascade's
+    discrete state space with it (:meth:`FeedDrives.discrete`, the same dynamics and delay)
+    from the next step on; the controller state is kept (same size for every g > 0: the IFF
+    filter's and the delay line's states carry on). A g that adds or drops the load cells
+    (from or to 0: the drives alone have no IFF channel) is refused: the node's sensors are
+    fixed at its start.
+    """
+
+    law: FeedDrives
+
+    @property
+    def gains(self) -> npt.NDArray[np.float64]:
+        """The IFF gain g [1/s] of every channel."""
+        return np.full(len(self.actuator_ports), float(self.law.iff_gain))
+
+    @gains.setter
+    def gains(self, value: npt.ArrayLike) -> None:
+        self.set_iff_gain(float(np.mean(np.asarray(value, dtype=float))))
+
+    def with_iff_gain(self, gain: float) -> tuple[FeedDrives, DiscreteController]:
+        """The cascade and its discrete model with IFF gain ``gain`` (ConfigError if refused)."""
+        new = replace(self.law, iff_gain=positive('IFF gain g [1/s]', gain, allow_zero=True))
+        if new.sensor_ports != self.law.sensor_ports:
+            now = 'with' if self.law.iff_gain else 'without'
+            raise ConfigError(f'drive_iff_gain {gain!r}: the drives run {now} IFF since the '
+                              'start, and a gain to or from 0 would add or drop the load cells '
+                              "(the node's sensors are fixed): start the node with "
+                              'drive_iff_gain > 0 to change it while running')
+        return new, new.discrete(self.dt)
+
+    def set_iff_gain(self, gain: float) -> None:
+        """Rebuild the cascade with IFF gain ``gain`` from the next step on (state kept)."""
+        self.law, self._model = self.with_iff_gain(gain)
+
+
 def feed_drives(struts: Sequence[int], params: DriveParams, dt: float, iff_gain: float = 0.0,
-                iff_omega: float = 0.0, dynamics: Dynamics | None = None) -> SteppedLaw:
+                iff_omega: float = 0.0, dynamics: Dynamics | None = None) -> DrivesLaw:
     """
     The feed drives' servo cascade of ``struts``, with IFF inside for ``iff_gain`` > 0 (HAC-LAC).
 
@@ -174,7 +214,8 @@ def feed_drives(struts: Sequence[int], params: DriveParams, dt: float, iff_gain:
     [m], ``strut<i>_motor_velocity`` [m/s]) with the drives' own delay, and (HAC-LAC)
     ``-g / (s + omega_i)`` of the load cell ``strut<i>_force`` [N] through ``dynamics`` into
     the force command ``strut<i>_motor_force`` [N]; g [1/s], omega_i [rad/s]. Its scale stays
-    1 (the cascade's gains are the drives'). Needs a plant with the drives' rotors.
+    1 (the cascade's gains are the drives'); its gain parameter is g (:class:`DrivesLaw`).
+    Needs a plant with the drives' rotors.
     """
-    return SteppedLaw(FeedDrives(params, tuple(_struts(struts)), float(iff_gain),
+    return DrivesLaw(FeedDrives(params, tuple(_struts(struts)), float(iff_gain),
                                  float(iff_omega), dynamics or Dynamics()), dt)

@@ -11,7 +11,8 @@ the feed drives' servo cascade with IFF inside, HAC-LAC, on a plant with the dri
 all optionally through the same low-pass and delay (``filter_order``, ``bandwidth_hz``,
 ``filter_damping``, ``delay_steps``; controller states reset with every new plant run). It answers
 every plant step on /pentapod/forces/<source_name> (lockstep contract, docs/nodes.md). The
-gains may be changed at run time (``ros2 param set``); everything else is read-only. The node
+gains may be changed at run time (``ros2 param set``; ``drive_iff_gain`` rebuilds the drives'
+cascade with the new IFF gain, between values > 0); everything else is read-only. The node
 publishes the linear model of its laws on /pentapod/controller_models/<source_name> for the
 plant's truncation check, again after a gain changed.
 """
@@ -20,6 +21,7 @@ from __future__ import annotations
 import numpy as np
 from rcl_interfaces.msg import SetParametersResult
 
+from pentapod_damper.laws.linear import DrivesLaw
 from pentapod_damper.node_parameters import DamperParams
 from pentapod_sim.errors import ConfigError
 from pentapod_sim.nodes.common import run_node
@@ -51,7 +53,20 @@ class DamperNode(LockstepSource):
         self.get_logger().info(f'dampers on {self.actuator_ports}')
 
     def _on_set(self, params) -> SetParametersResult:
-        """Apply new gains (range already checked by rclpy)."""
+        """
+        Apply new gains (range already checked by rclpy).
+
+        The drives' cascade is rebuilt with a new ``drive_iff_gain``
+        (:class:`pentapod_damper.laws.linear.DrivesLaw`); refused (nothing applied) if it
+        would add or drop the load cells.
+        """
+        for p in params:
+            law = self.laws.get(p.name)
+            if isinstance(law, DrivesLaw):
+                try:
+                    law.with_iff_gain(float(p.value))
+                except ConfigError as err:
+                    return SetParametersResult(successful=False, reason=str(err))
         for p in params:
             if p.name in self.laws:
                 law = self.laws[p.name]

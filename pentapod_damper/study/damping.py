@@ -33,6 +33,7 @@ from pentapod_sim.plant.drives import DrivenPlant
 from pentapod_sim.plant.frf_peaks import PoleResidueFrf
 from pentapod_sim.plant.model import PlantModel
 from pentapod_sim.scenario.files import read_scenario
+from pentapod_sim.scenario.laws import scenario_plant
 from pentapod_sim.sim.controllers import controller_blocks, controller_of, DiscreteController
 from pentapod_sim.sim.loop_poles import (
     closed_loop_poles,
@@ -211,14 +212,16 @@ def rows(positions: Sequence[str], scenarios: Sequence[str], cache_dir: Path,
     """
     Rows for every position and scenario at the study's sample rate (config/study.yaml).
 
-    The plants are built once and kept in ``cache_dir``.
+    The plants are built once and kept in ``cache_dir``; each scenario's laws are closed on
+    the plant as its plant node steps it (with the feed drives' rotors of its ``drives``:
+    :func:`pentapod_sim.scenario.laws.scenario_plant`).
     """
     dt = load_study_config().dt
     out = []
     for pos in positions:
         plant, _ = load_or_build_model(position=pos, cache_dir=cache_dir)
         for scn in scenarios:
-            out += scenario_rows(plant, pos, scn, dt, **options)
+            out += scenario_rows(scenario_plant(scn, plant), pos, scn, dt, **options)
     return out
 
 

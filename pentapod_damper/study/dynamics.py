@@ -9,8 +9,12 @@ best value of the gain sweep, with no dynamics: u_k answers y_k through a zero-o
 Each is checked on the plant and on the check model
 (:func:`pentapod_sim.sim.stability.check_loop`), and its exact TCP peak reduction is computed
 (:class:`pentapod_damper.study.analytic.SampledPairFrf`, searched at the resonances) against the
-exact open-loop peak. ``--try order,bandwidth_hz,delay_steps`` replaces the scenario's dynamics
-to compare candidates; ``--markdown`` prints the table of
+exact open-loop peak. A scenario whose plant steps the feed drives (its ``drives``) is
+modelled with their rotors (:func:`pentapod_sim.scenario.laws.scenario_drives`): plant and
+check model with the rotors, the scenario's other laws (the drives' cascade) closed in both
+variants as the file sets them; the reference peak stays the locked machine's open loop (so
+the reduction includes the drives' own). ``--try order,bandwidth_hz,delay_steps`` replaces
+the scenario's dynamics to compare candidates; ``--markdown`` prints the table of
 docs/statespace.md ("Default dynamics per damper type"), which test/test_damper_dynamics.py
 checks against this code.
 
@@ -31,11 +35,14 @@ from pentapod_damper.node_parameters import DamperParams, DynamicsParams
 from pentapod_damper.scenario_laws import scenario_laws
 from pentapod_damper.study.analytic import SampledPairFrf
 from pentapod_damper.study.config import load_study_config
+from pentapod_sim.errors import ConfigError
 from pentapod_sim.plant.build import load_or_build_model
 from pentapod_sim.plant.check_model import check_f_max, load_or_build_check_model
+from pentapod_sim.plant.drives import DriveSet, with_drives
 from pentapod_sim.plant.frf_peaks import exact_peak, maximise_near_poles, plant_pair_frf
 from pentapod_sim.plant.model import PlantModel
 from pentapod_sim.scenario.files import executable_of, read_scenario
+from pentapod_sim.scenario.laws import scenario_drives
 from pentapod_sim.sim.controllers import controller_of
 from pentapod_sim.sim.stability import check_loop
 
@@ -90,12 +97,17 @@ def _with(laws: Sequence[ViscousDamper], dyn: Dynamics, dt: float) -> list[Visco
 
 def evaluate(plant: PlantModel, check: PlantModel, laws: Sequence[Any], dt: float,
              direction: str, band: tuple[float, float],
-             base_peak: float) -> tuple[float, float, str, float]:
-    """Spectral radii (plant, check model), verdict and exact peak reduction of some laws."""
-    loop = check_loop(plant, check, [controller_of(law) for law in laws], dt, 'warn')
+             base_peak: float, drives: DriveSet | None = None) -> tuple[float, float, str, float]:
+    """
+    Spectral radii (plant, check model), verdict and exact peak reduction of some laws.
+
+    ``drives``: the feed drives the plant steps (plant and check model with their rotors).
+    """
+    loop = check_loop(plant, check, [controller_of(law) for law in laws], dt, 'warn',
+                      drives=drives)
     reduction = math.nan
     if loop.plant_radius < 1.0:
-        frf = SampledPairFrf(plant, laws, dt, f'tcp_displacement_{direction}',
+        frf = SampledPairFrf(with_drives(plant, drives), laws, dt, f'tcp_displacement_{direction}',
                              f'tcp_force_{direction}')
         peak = maximise_near_poles(lambda f: abs(frf(f)), frf.poles, *band)
         reduction = base_peak / peak.value
@@ -109,6 +121,15 @@ def rows(positions: Sequence[str], scenarios: Sequence[str], cache_dir: Path,
     dt = cfg.dt
     band = (float(cfg.band[0]), float(cfg.f_max))
     d = cfg.direction
+    parts = {}
+    for scn in scenarios:           # checked before any model is built
+        every = scenario_laws(read_scenario(scn).sections, dt)
+        laws = [law for law in every if isinstance(law, ViscousDamper)]
+        if not laws:
+            raise ConfigError(f'scenario {scn!r} has no viscous dampers: the dynamics table '
+                              'compares their dynamics')
+        parts[scn] = (scenario_drives(scn), laws,
+                      [law for law in every if not isinstance(law, ViscousDamper)])
     out = []
     for pos in positions:
         plant, _ = load_or_build_model(position=pos, cache_dir=cache_dir)
@@ -117,8 +138,7 @@ def rows(positions: Sequence[str], scenarios: Sequence[str], cache_dir: Path,
         base = exact_peak(plant_pair_frf(plant, f'tcp_displacement_{d}', f'tcp_force_{d}'),
                           *band).value
         for scn in scenarios:
-            laws = [law for law in scenario_laws(read_scenario(scn).sections, dt)
-                    if isinstance(law, ViscousDamper)]
+            drives, laws, others = parts[scn]
             shipped = laws if candidate is None else _with(laws, candidate, dt)
             for variant, variant_laws in (('buildable', shipped),
                                           ('ideal', ideal_laws(scn, dt))):
@@ -129,7 +149,8 @@ def rows(positions: Sequence[str], scenarios: Sequence[str], cache_dir: Path,
                     any('moment' in port for law in variant_laws
                         for port in law.actuator_ports),
                     dyn.order, dyn.bandwidth_hz, dyn.delay_steps,
-                    *evaluate(plant, check, variant_laws, dt, d, band, base)))
+                    *evaluate(plant, check, variant_laws + others, dt, d, band, base,
+                              drives)))
     return out
 
 

@@ -51,7 +51,7 @@ from pentapod_sim.plant.check_model import (
     load_or_build_check_model,
 )
 from pentapod_sim.plant.config import load_reduction_config
-from pentapod_sim.plant.drives import DriveSet
+from pentapod_sim.plant.drives import DriveSet, with_drives
 from pentapod_sim.plant.frf_peaks import exact_peak, plant_pair_frf
 from pentapod_sim.scenario.files import read_scenario
 from pentapod_sim.scenario.laws import scenario_drives
@@ -167,7 +167,7 @@ def scenario_analytic(model: PositionModel, scenario: str, cfg: StudyConfig,
     laws = scenario_laws(parsed.sections, dt)
     dampers = viscous_equivalent(laws)
     drives = scenario_drives(parsed)
-    plant = model.plant if drives is None else drives.on(model.plant)
+    plant = with_drives(model.plant, drives)
     loop = checked_loop(model, [controller_of(law) for law in laws], dt, cfg.check_policy,
                         f'scenario {scenario} at {model.position}', drives)
     if loop.plant_radius >= 1.0:       # whatever the policy: the run itself would diverge

@@ -121,7 +121,7 @@ def first_modes(fe: FEModel, f_max: float, modes: ModalResult | None = None) -> 
 def loops_of(settings: SweepSettings) -> dict[str, Loop]:
     """Column label -> damped loop of every scenario and gain factor."""
     dt = sample_time(settings.sample_rate)
-    return {label: Loop(settings.sections[name], dt, factor)
+    return {label: Loop(settings.sections[name], dt, factor, settings.drives.get(name))
             for label, name, factor in settings.labels()}
 
 

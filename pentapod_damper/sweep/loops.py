@@ -9,10 +9,18 @@ mode by the modal assurance criterion in modal coordinates (mass-normalised mode
 the mass-weighted MAC of the FE shapes). The sampled lockstep loop's spectral radius
 (:func:`pentapod_sim.sim.stability.plant_radius`) says whether the testbed could run it.
 
+A scenario whose plant steps the feed drives (its ``drives``) is closed on the plant with the
+drives' rotors (:class:`pentapod_sim.plant.drives.DrivenPlant`) and its drives' cascade (the
+machine: not scaled by a gain factor); its continuous loop is then the cascade's continuous
+model with the viscous dampers (:func:`pentapod_sim.sim.loop_poles.continuous_loop_system`),
+its poles paired with the open-loop modes by the modal part of their eigenvectors. The open
+loop stays the locked machine (the FE model's drive links).
+
 Units: compliance m/N, frequencies Hz, damping ratios -, stroke m, force N.
 """
 from __future__ import annotations
 
+from types import SimpleNamespace
 from typing import Any
 
 import control
@@ -28,10 +36,14 @@ from pentapod_damper.study.analytic import (
     peak_and_rms,
     pma_requirements,
 )
+from pentapod_sim.errors import ConfigError
+from pentapod_sim.plant.drives import DriveSet, with_drives
 from pentapod_sim.plant.frf import damper_feedback
 from pentapod_sim.plant.model import PlantModel
 from pentapod_sim.plant.ports import collocated_output
-from pentapod_sim.sim.controllers import controller_of, DiscreteController
+from pentapod_sim.sim.controllers import controller_blocks, controller_of, DiscreteController
+from pentapod_sim.sim.drives import FeedDrives
+from pentapod_sim.sim.loop_poles import continuous_loop_system
 from pentapod_sim.sim.stability import plant_radius
 
 #: TCP directions; the compliance of direction d is displacement d / force d.
@@ -51,21 +63,64 @@ class Loop:
     pmas : list of ProofMassActuator
         The scenario's PMAs (their gain g scaled by ``factor``).
     controllers : list of DiscreteController
-        Linear models of the laws for the sampled-loop check.
+        Linear models of the laws for the sampled-loop check (the drives' cascade too).
+    drives : DriveSet or None
+        The feed drives the scenario's plant steps (its ``drives``).
+    cascade : list of FeedDrives
+        The scenario's drives' cascades (their continuous models close the continuous loop).
     """
 
     def __init__(self, sections: dict[str, dict[str, Any]], dt: float,
-                 factor: float = 1.0) -> None:
-        laws = scenario_laws(sections, dt)
+                 factor: float = 1.0, drives: DriveSet | None = None) -> None:
+        every = scenario_laws(sections, dt)
+        self.drives = drives
+        self.cascade = [law.law for law in every
+                        if isinstance(getattr(law, 'law', None), FeedDrives)]
+        if self.cascade and drives is None:
+            raise ConfigError("a damper node runs the feed drives' cascade (drive_struts) but "
+                              "the scenario's plant has no drives (its parameter drives)")
+        laws = [law for law in every if not isinstance(getattr(law, 'law', None), FeedDrives)]
         self.factor = float(factor)
         self.dampers = {p: g * factor for p, g in continuous_dampers(laws).items()}
         self.pmas = [law for law in laws if isinstance(law, ProofMassActuator)]
-        self.controllers = []
+        self.controllers = [cascade.discrete(dt) for cascade in self.cascade]
         for law in laws:        # u = factor * (c xc + d y): the law's effort scaled
             ctrl = controller_of(law)
             self.controllers.append(DiscreteController(
                 ctrl.sensor_ports, ctrl.actuator_ports, ctrl.a, ctrl.b, ctrl.c * factor,
                 ctrl.d * factor))
+
+    def drive_ports(self) -> tuple[list[str], list[str]]:
+        """The plant ports the drives' rotors need (inputs, outputs); none without drives."""
+        if self.drives is None:
+            return [], []
+        struts = self.drives.struts
+        return ([f'strut{i}_drive_force' for i in struts],
+                [f'strut{i}_{kind}' for i in struts for kind in ('drive_displacement', 'force')])
+
+    def continuous_system(self, sub: PlantModel) -> Any:
+        """
+        The continuous loop on ``sub`` with the drives' rotors: cascade and dampers.
+
+        A state space (``A``, ``B``, ``C``, ``D`` on the driven plant's ports, the plant's
+        first) of the state ``[x (plant), rotors, cascade]`` scaled by ``T`` (``scale``, the
+        diagonal of :func:`scipy.linalg.matrix_balance`: ``A = T^-1 A_loop T``): the rotors'
+        forces [N] and the modal coordinates differ by orders of magnitude, which leaves the
+        unbalanced eigenvectors too ill-conditioned for the eigen-decomposition FRF. The
+        original eigenvectors are ``T v``.
+        """
+        driven = with_drives(sub, self.drives)
+        static = [DiscreteController.static(
+            [collocated_output(p, 'velocity')], [p], np.array([[-g]]))
+            for p, g in self.dampers.items()]
+        ctrls = [cascade.continuous() for cascade in self.cascade] + static
+        a, b, c_y = continuous_loop_system(driven, ctrls)
+        d = driven.state_matrices()[3]
+        gain = controller_blocks(ctrls, driven.input_names, driven.output_names)[0]
+        direct = d @ np.linalg.inv(np.eye(len(driven.input_names)) - gain @ d)
+        balanced, (scale, _) = sla.matrix_balance(a, permute=False, separate=True)
+        return SimpleNamespace(A=balanced, B=b / scale[:, None], C=c_y * scale[None, :],
+                               D=direct, scale=scale)
 
 
 def ports_needed(loops: list[Loop]) -> tuple[list[str], list[str]]:
@@ -76,9 +131,14 @@ def ports_needed(loops: list[Loop]) -> tuple[list[str], list[str]]:
         for port in loop.dampers:
             inputs.append(port)
             outputs.append(collocated_output(port, 'velocity'))
+        motors = {p for cascade in loop.cascade
+                  for p in cascade.sensor_ports + cascade.actuator_ports if 'motor' in p}
         for ctrl in loop.controllers:
-            inputs += ctrl.actuator_ports
-            outputs += ctrl.sensor_ports
+            inputs += [p for p in ctrl.actuator_ports if p not in motors]
+            outputs += [p for p in ctrl.sensor_ports if p not in motors]
+        drive_in, drive_out = loop.drive_ports()
+        inputs += drive_in
+        outputs += drive_out
     return list(dict.fromkeys(inputs)), list(dict.fromkeys(outputs))
 
 
@@ -129,15 +189,20 @@ def paired_damping(lam: np.ndarray, vec: np.ndarray,
 
 def pair_frfs(sys: control.StateSpace, lam: np.ndarray, vec: np.ndarray,
               pairs: list[tuple[str, str]], freq: np.ndarray, plant: PlantModel,
-              dampers: dict[str, float]) -> list[npt.NDArray[np.complex128]]:
+              dampers: dict[str, float], fallback: bool = True
+              ) -> list[npt.NDArray[np.complex128]]:
     """
     FRFs ``output / input`` of a state space from its eigen-decomposition, pair by pair.
 
     Only the pairs asked for are evaluated (``C v (jw - lambda)^-1 v^-1 B + D``, O(n F) each);
     a (nearly) defective closed loop falls back to the study's
-    :func:`pentapod_damper.study.analytic.continuous_frf`.
+    :func:`pentapod_damper.study.analytic.continuous_frf` (with ``fallback``; else ConfigError:
+    a loop with the drives has no such fallback).
     """
     if np.linalg.cond(vec) > COND_MAX:
+        if not fallback:
+            raise ConfigError('the continuous loop with the drives is (nearly) defective: no '
+                              'FRF from its eigenvectors')
         return [continuous_frf(plant, dampers, freq, o, i) for o, i in pairs]
     rows = [plant.output_names.index(o) for o, _ in pairs]
     cols = [plant.input_names.index(i) for _, i in pairs]
@@ -179,13 +244,20 @@ def loop_columns(plant: PlantModel, loops: dict[str, Loop], freq: np.ndarray,
     row: dict[str, Any] = {}
     for label, loop in [('open', None)] + list(loops.items()):
         dampers = loop.dampers if loop else {}
-        sys = damper_feedback(sub, dampers) if dampers else sub.to_statespace()
+        driven = loop is not None and loop.drives is not None
+        if loop is not None and loop.drives is not None:
+            sys = loop.continuous_system(sub)
+        else:
+            sys = damper_feedback(sub, dampers) if dampers else sub.to_statespace()
         lam, vec = sla.eig(sys.A)
-        damping = paired_damping(lam, vec, dom)
+        modal = vec[:2 * sub.n_modes]               # the modal part, in modal coordinates
+        if driven:
+            modal = modal * sys.scale[:2 * sub.n_modes, None]
+        damping = paired_damping(lam, modal, dom)
         pmas = [(pma, port) for pma in (loop.pmas if loop else []) for port in pma.sensor_ports]
         pairs = [(f'tcp_displacement_{d}', f'tcp_force_{d}') for d in DIRECTIONS]
         pairs += [(port, f'tcp_force_{port[-1]}') for _, port in pmas]
-        frfs = pair_frfs(sys, lam, vec, pairs, freq, sub, dampers)
+        frfs = pair_frfs(sys, lam, vec, pairs, freq, sub, dampers, fallback=not driven)
         for d, h in zip(DIRECTIONS, frfs):
             row[f'peak_{d}{d}_{label}'], row[f'rms_{d}{d}_{label}'] = peak_and_rms(h, freq, lo, hi)
             row[f'zeta_{d}{d}_{label}'] = damping[d][0]
@@ -194,7 +266,8 @@ def loop_columns(plant: PlantModel, loops: dict[str, Loop], freq: np.ndarray,
                 row[f'dom_f_{d}{d}'] = float(sub.frequencies_hz[dom[d]])
         if loop is None:
             continue
-        row[f'rho_{label}'] = plant_radius(sub, loop.controllers, dt)[0]
+        row[f'rho_{label}'] = plant_radius(with_drives(sub, loop.drives), loop.controllers,
+                                           dt)[0]
         for (pma, port), v in zip(pmas, frfs[len(DIRECTIONS):]):
             stroke, force = pma_requirements(v, freq, pma.mass, pma.gain * loop.factor,
                                              pma_force)

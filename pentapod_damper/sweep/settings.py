@@ -8,7 +8,7 @@ stored result.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 import hashlib
 import json
 from pathlib import Path
@@ -20,6 +20,7 @@ from pentapod_sim.errors import ConfigError
 from pentapod_sim.fe.machine_data import load_machine, machine_path
 from pentapod_sim.plant.config import load_reduction_config
 from pentapod_sim.scenario.files import read_scenario
+from pentapod_sim.scenario.laws import scenario_drives
 
 #: The open loop: the scenario without added damping (its rows carry the suffix ``open``).
 OPEN_LOOP = 'baseline'
@@ -56,6 +57,9 @@ class SweepSettings:
         :class:`MachineParams` and :class:`ReductionConfig` as loaded.
     sections : dict
         Scenario name -> its ``read_scenario(name).sections``.
+    drives : dict
+        Scenario name -> the feed drives its plant steps
+        (:func:`pentapod_sim.scenario.laws.scenario_drives`; None: the locked machine).
     digest : str
         SHA-256 (hex) over everything above and the package version.
     """
@@ -70,6 +74,7 @@ class SweepSettings:
     machine: Any
     reduction: Any
     sections: dict[str, dict[str, dict[str, Any]]]
+    drives: dict[str, Any] = field(default_factory=dict)
     digest: str = ''
 
     def labels(self) -> list[tuple[str, str, float]]:
@@ -132,11 +137,14 @@ def make_settings(scenarios: Sequence[str] | None = None,
         raise ConfigError(f'gain factors must be > 0, got {list(gain_factors)}')
     if not mode_f_max > 0:
         raise ConfigError(f'mode_f_max must be > 0 Hz, got {mode_f_max!r}')
-    sections, texts = {}, []
+    sections, drives, texts = {}, {}, []
     for name in names:
         scenario = read_scenario(name)
         sections[name] = scenario.sections
+        drives[name] = found = scenario_drives(scenario)
         texts.append(_file_bytes(scenario.path))
+        if found is not None:          # the drives file's values count too
+            texts.append(_file_bytes(Path(found.params.source)))
     machine = load_machine(machine_file)
     reduction = load_reduction_config(reduction_file)
     freq = (float(study.freq_grid[0]), float(study.freq_grid[1]),
@@ -145,7 +153,7 @@ def make_settings(scenarios: Sequence[str] | None = None,
         raise ConfigError(f'the FRF grid needs >= 2 points, got {freq[2]}')
     settings = SweepSettings(names, factors, freq, (float(study.band[0]), float(study.f_max)),
                              float(study.sample_rate), float(study.pma_force_amplitude),
-                             float(mode_f_max), machine, reduction, sections)
+                             float(mode_f_max), machine, reduction, sections, drives)
     digest = hashlib.sha256(json.dumps({
         'version': __version__, 'scenarios': names, 'factors': factors, 'freq': freq,
         'band': settings.band, 'sample_rate': settings.sample_rate,

@@ -47,7 +47,7 @@ from pentapod_sim.plant.check_model import (
     CheckStopped,
     load_or_build_check_model,
 )
-from pentapod_sim.plant.drives import DrivenPlant, DriveSet
+from pentapod_sim.plant.drives import DrivenPlant, DriveSet, with_drives
 from pentapod_sim.plant.model import PlantModel
 from pentapod_sim.sim.controllers import DiscreteController
 from pentapod_sim.sim.stability import apply_policy, check_loop, LoopCheck, UnstableLoopError
@@ -185,7 +185,7 @@ class TruncationCheck:
         self.models, self.plant, self.dt, self.policy = models, plant, dt, policy
         self.drives = drives
         #: the ports the sources' models may use: the plant's, with the motors'
-        self.ports: PlantModel | DrivenPlant = plant if drives is None else drives.on(plant)
+        self.ports: PlantModel | DrivenPlant = with_drives(plant, drives)
         self.sample_rate, self.f_min, self.cache_dir, self.log = sample_rate, f_min, cache_dir, log
         self.checked: dict[str, str | None] = {}     # the model texts the last check used
         self._check: tuple[PlantModel | None, str] | None = None    # (check model, name)

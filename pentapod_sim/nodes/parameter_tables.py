@@ -77,9 +77,11 @@ class PlantParams(Sampled):
                                     'plant and every other process that works each step have a '
                                     'CPU each (0: never poll)', 's', bounds=(0.0, 1.0))
     max_state_norm: float = param(DEFAULT_MAX_STATE_NORM, 'instability bound on the norm of the '
-                                  'state ||x|| (the modal coordinates; with drives also the '
-                                  "rotors' position [m], velocity [m/s] and motor force [N]); "
-                                  'larger or NaN stops the run',
+                                  'state ||x|| in mass-normalised coordinates (the modal '
+                                  'coordinates [sqrt(kg) m, sqrt(kg) m/s]; with drives the '
+                                  "rotors' position and velocity times sqrt(m_r) and their "
+                                  'motor force times sqrt(m_r) / k_a, so the same bound holds '
+                                  'them as tightly); larger or NaN stops the run',
                                   bounds=(1e-12, 1e150))
     report_period: float = param(2.0, 'realtime: log timing every this wall time', 's',
                                  bounds=(0.1, 3600.0))

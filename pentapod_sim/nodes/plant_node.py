@@ -38,7 +38,7 @@ from pentapod_sim.nodes.run_status import RunStatusPublisher
 from pentapod_sim.nodes.testbed_node import TestbedNode
 from pentapod_sim.nodes.writers import WriterCheck
 from pentapod_sim.plant.build import load_or_build_model
-from pentapod_sim.plant.drives import drive_set, DriveSet
+from pentapod_sim.plant.drives import drive_set, DriveSet, with_drives
 from pentapod_sim.sim.multirate import MultiRatePlant
 from pentapod_sim.sim.periodic_state import load_initial_state
 from pentapod_sim.sim.realtime import RealTime
@@ -59,8 +59,7 @@ class PlantNode(TestbedNode):
         self.model, origin = load_or_build_model(p.model_file, p.position, p.model_cache_dir)
         self.drives = self._drives()
         self.core = MultiRatePlant.from_model(
-            self.model if self.drives is None else self.drives.on(self.model), p.sample_rate,
-            p.substeps, p.max_state_norm)
+            with_drives(self.model, self.drives), p.sample_rate, p.substeps, p.max_state_norm)
         self.get_logger().info(
             f'plant model {origin}: {self.model.n_modes} modes, {len(self.core.input_names)} '
             f'inputs, {len(self.core.output_names)} outputs, dt = {self.core.dt:.6g} s, '

@@ -209,6 +209,22 @@ class DrivenPlant:
         c_all[n_out + r:, vm] = np.eye(r)
         return a_all, b_all, c_all, d_all
 
+    def state_scale(self) -> np.ndarray:
+        """
+        Weights that make every state a mass-normalised coordinate, for the divergence guard.
+
+        The plant's modal coordinates are mass-normalised (sqrt(kg) m, sqrt(kg) m/s): weight 1.
+        A rotor's position and velocity weigh ``sqrt(m_r)`` (its own mass-normalised
+        coordinates, so its kinetic energy counts as a mode's), its motor force
+        ``sqrt(m_r) / k_a``: the rotor displacement that force holds against its link. So one
+        ``max_state_norm`` bounds the rotors as tightly as the modes (without the weights a
+        motor force of kN alone, held statically under a machining force, exceeds the default
+        bound of 1e3).
+        """
+        n, r = 2 * self.plant.n_modes, len(self.struts)
+        root = np.sqrt(self.params.rotor_mass)
+        return np.concatenate([np.ones(n), np.full(2 * r, root), root / self.link_stiffness])
+
     def discrete_matrices(self, dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray,
                                                     np.ndarray]:
         """Exact zero-order-hold discretisation at ``dt`` [s] (cached per dt)."""
@@ -277,6 +293,16 @@ class DriveSet:
     def describe(self) -> str:
         """``<file> on struts [...]`` (the run status' ``drives``)."""
         return f'{self.params.source} on struts {list(self.struts)}'
+
+
+def with_drives(plant: PlantModel, drives: 'DriveSet | None') -> 'PlantModel | DrivenPlant':
+    """
+    ``plant`` as a plant node with these feed drives steps it.
+
+    ``drives.on(plant)``, or ``plant`` itself for None (no drives): the one place that choice
+    is made.
+    """
+    return plant if drives is None else drives.on(plant)
 
 
 def zoh(a: np.ndarray, b: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:

@@ -16,7 +16,7 @@ from typing import Any
 
 from pentapod_sim.errors import ConfigError
 from pentapod_sim.parameters import sample_time
-from pentapod_sim.plant.drives import drive_set, DriveSet
+from pentapod_sim.plant.drives import drive_set, DriveSet, with_drives
 from pentapod_sim.plant.model import PlantModel
 from pentapod_sim.registry import SOURCE
 from pentapod_sim.scenario.files import read_scenario, Scenario
@@ -40,8 +40,7 @@ def scenario_plant(scenario: str | Path | Scenario, plant: PlantModel) -> Any:
     With the plant parameter ``drives`` set: :class:`pentapod_sim.plant.drives.DrivenPlant`
     of ``plant`` and those drives (:func:`scenario_drives`); otherwise ``plant`` itself.
     """
-    drives = scenario_drives(scenario)
-    return plant if drives is None else drives.on(plant)
+    return with_drives(plant, scenario_drives(scenario))
 
 
 def scenario_loop_laws(scenario: str | Path | Scenario, dt: float | None = None) -> list[Any]:

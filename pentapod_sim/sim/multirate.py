@@ -136,14 +136,15 @@ class MultiRatePlant(DiscretePlant):
     """
 
     def __init__(self, fine: control.StateSpace, substeps: int = 1,
-                 max_state_norm: float = DEFAULT_MAX_STATE_NORM):
+                 max_state_norm: float = DEFAULT_MAX_STATE_NORM,
+                 state_scale: npt.ArrayLike | None = None):
         substeps = check_substeps(substeps)
-        fine_plant = DiscretePlant(fine, max_state_norm)     # checks dt and the norm bound
+        fine_plant = DiscretePlant(fine, max_state_norm, state_scale)   # checks dt, the bound
         a_x, b_x, self._out_x, self._out_u = exchange_matrices(
             fine_plant.a, fine_plant.b, fine_plant.c, fine_plant.d, substeps)
         exchange = control.ss(a_x, b_x, fine_plant.c, fine_plant.d, fine_plant.dt * substeps,
                               inputs=fine_plant.input_names, outputs=fine_plant.output_names)
-        super().__init__(exchange, max_state_norm)
+        super().__init__(exchange, max_state_norm, state_scale)
         self.substeps = substeps
         self.fine_dt = fine_plant.dt
 
@@ -157,12 +158,15 @@ class MultiRatePlant(DiscretePlant):
         :class:`pentapod_sim.plant.drives.DrivenPlant`.
 
         ``sample_rate`` [Hz] is the exchange rate; the plant integrates at
-        ``sample_rate * substeps``.
+        ``sample_rate * substeps``. The divergence guard weighs the states by the model's
+        ``state_scale()`` if it has one (the drives' rotors as mass-normalised coordinates).
         """
         substeps = check_substeps(substeps)
         if not np.isfinite(sample_rate) or sample_rate <= 0:
             raise ConfigError(f'sample_rate must be > 0 Hz, got {sample_rate!r}')
-        return cls(model.discretize(sample_time(sample_rate * substeps)), substeps, max_state_norm)
+        scale = getattr(model, 'state_scale', None)
+        return cls(model.discretize(sample_time(sample_rate * substeps)), substeps, max_state_norm,
+                   None if scale is None else scale())
 
     def fine_outputs(self, u: npt.NDArray[np.float64], y: npt.NDArray[np.float64],
                      out: npt.NDArray[np.float64] | None = None) -> npt.NDArray[np.float64]:

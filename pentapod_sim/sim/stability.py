@@ -42,7 +42,7 @@ from pentapod_sim.plant.check_model import (
     DEFAULT_CHECK_F_MIN,
     load_or_build_check_model,
 )
-from pentapod_sim.plant.drives import DrivenPlant, DriveSet
+from pentapod_sim.plant.drives import DrivenPlant, DriveSet, with_drives
 from pentapod_sim.plant.model import PlantModel
 from pentapod_sim.sim.controllers import (  # noqa: F401 (re-exported)
     controller_of,
@@ -260,15 +260,14 @@ def check_loop(plant: PlantModel, check_plant: PlantModel | None,
     """
     if not np.isfinite(dt) or dt <= 0:
         raise ConfigError(f'sample time dt must be > 0 s, got {dt!r}')
-    rho_p, f_p = plant_radius(plant if drives is None else drives.on(plant), controllers, dt,
-                              progress)
+    rho_p, f_p = plant_radius(with_drives(plant, drives), controllers, dt, progress)
     if check_plant is None:
         result = LoopCheck(label, float(dt), rho_p, float('nan'), f_p, float('nan'),
                            plant.n_modes, 0, float('nan'))
         return apply_policy(result, policy)
     check_plant = check_plant.select(plant.input_names, plant.output_names)
-    rho_c, f_c = plant_radius(check_plant if drives is None else drives.on(check_plant),
-                              controllers, dt, progress)
+    rho_c, f_c = plant_radius(with_drives(check_plant, drives), controllers, dt,
+                              progress)
     f_max = float(check_plant.meta.get('check_f_max_hz', check_plant.frequencies_hz.max(
         initial=0.0)))
     result = LoopCheck(label, float(dt), rho_p, rho_c, f_p, f_c, plant.n_modes,

@@ -48,7 +48,13 @@ class DiscretePlant:
     sys : control.StateSpace
         Discrete system (``sys.dt > 0``) with ``input_labels`` / ``output_labels`` = port names.
     max_state_norm : float, optional
-        Bound on ``||x||_2``; exceeding it (or a non-finite state) raises :class:`RunError`.
+        Bound on ``||w x||_2``; exceeding it (or a non-finite state) raises :class:`RunError`.
+    state_scale : (n,) array_like, optional
+        Weights ``w`` of the states in that norm (default 1: the modal coordinates as they
+        are). A plant with the feed drives' rotors gives their states weights that make them
+        mass-normalised coordinates like the modes'
+        (:meth:`pentapod_sim.plant.drives.DrivenPlant.state_scale`), so one bound means the
+        same for every kind of state.
 
     Attributes
     ----------
@@ -64,7 +70,8 @@ class DiscretePlant:
         True if A_d has the modal 2x2-block layout and is stepped blockwise.
     """
 
-    def __init__(self, sys: control.StateSpace, max_state_norm: float = DEFAULT_MAX_STATE_NORM):
+    def __init__(self, sys: control.StateSpace, max_state_norm: float = DEFAULT_MAX_STATE_NORM,
+                 state_scale: npt.ArrayLike | None = None):
         if not sys.isdtime(strict=True) or not np.isfinite(float(sys.dt)) or sys.dt <= 0:
             raise ConfigError(f'plant system must be discrete with dt > 0 s, got dt={sys.dt!r}')
         if not 0 < max_state_norm <= 1e150:     # its square must stay a finite float
@@ -82,6 +89,13 @@ class DiscretePlant:
         self.has_feedthrough = bool(np.any(self.d))
         self.max_state_norm = float(max_state_norm)
         self._max_sq = self.max_state_norm ** 2
+        self.state_scale: npt.NDArray[np.float64] | None = None
+        if state_scale is not None:
+            scale = np.asarray(state_scale, dtype=float)
+            if scale.shape != (self.a.shape[0],) or not np.all(np.isfinite(scale) & (scale > 0)):
+                raise ConfigError(f'state_scale must hold {self.a.shape[0]} finite weights > 0')
+            if not np.all(scale == 1.0):
+                self.state_scale = scale
         blocks = modal_blocks(self.a)
         self.modal = blocks is not None
         n, m = self.n_states, self.n_states // 2
@@ -167,11 +181,18 @@ class DiscretePlant:
             x[:] = new
         self.u_prev = u
         self.k += 1
-        if not np.dot(x, x) <= self._max_sq:  # also catches NaN
-            norm = float(np.sqrt(x @ x))
+        w = x if self.state_scale is None else x * self.state_scale
+        if not np.dot(w, w) <= self._max_sq:  # also catches NaN
+            norm = float(np.sqrt(w @ w))
+            weighted = '' if self.state_scale is None else ' (weighted: state_scale)'
             raise RunError(f'plant unstable at step {self.k} (t = {self.time:.6g} s): state '
-                           f'norm {norm:.3g} exceeds max_state_norm {self.max_state_norm:.3g}; '
-                           'a feedback gain is probably too high')
+                           f'norm{weighted} {norm:.3g} exceeds max_state_norm '
+                           f'{self.max_state_norm:.3g}; a feedback gain is probably too high')
+
+    def state_norm(self) -> float:
+        """The norm the divergence guard bounds, ``||w x_k||_2``."""
+        w = self._x if self.state_scale is None else self._x * self.state_scale
+        return float(np.sqrt(w @ w))
 
 
 def modal_blocks(a: npt.NDArray[np.float64]) -> npt.NDArray[np.float64] | None:
