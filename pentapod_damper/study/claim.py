@@ -88,6 +88,14 @@ def _law_names(rows: dict[str, dict[str, str]]) -> str:
         f'{r["law"]} at {p}' for p, r in rows.items())
 
 
+def _named(rows: dict[str, dict[str, str]]) -> str:
+    """The law's name; for a law in the drives' loops, what its struts 1+2 loop keeps."""
+    drives = any(r['drives'] == 'True' for r in rows.values())
+    return _law_names(rows) + (" (the feed drives' loops of all five struts in both loops, "
+                               'only the law inside them cut to struts 1 and 2)' if drives
+                               else '')
+
+
 def _holds(rows: dict[str, dict[str, str]], positions: list[str]) -> str:
     """Where the paper's claim holds for one law, by peak and by RMS."""
     return ', '.join(
@@ -112,20 +120,24 @@ def claim_sentences(results: Path, positions: list[str]) -> list[str]:
         'With the strut laws of the damper table ([docs/dampers.md](docs/dampers.md), its '
         "gains tuned at each position) closed on the study's plant, struts 1 and 2 alone give "
         f'{_shares(best, positions)} of the all-strut improvement by peak / RMS with the best '
-        f'strut-only law, {_law_names(best)}, and {_shares(build, positions)} with the law to '
-        f'build, {_law_names(build)}: the paper\'s "at least {PAPER_SHARE:.0%}" holds for the '
+        f'strut-only law, {_named(best)}, and {_shares(build, positions)} with the law to '
+        f'build, {_named(build)}: the paper\'s "at least {PAPER_SHARE:.0%}" holds for the '
         f'first {_holds(best, positions)}, for the law to build {_holds(build, positions)}.']
-    rests = []
-    for pos in positions:
-        rows = [best[pos], build[pos]]
-        drives = [r['law'] for r in rows if r['drives'] == 'True']
-        rests.append(
-            f'at {pos} on the study\'s plant ({rows[0]["plant_modes"]} modes up to '
-            f'{float(rows[0]["plant_f_max_hz"]):.0f} Hz, the static correction of the others'
-            + (f"; with the feed drives' rotors for {', '.join(dict.fromkeys(drives))}"
-               if drives else '')
-            + f'), the laws sampled at {float(rows[0]["sample_rate_hz"]):g} Hz with '
-            f'{rows[0]["delay_steps"]} sample(s) of computational delay and their own filters')
-    text.append('Per position this rests ' + '; '.join(rests) + ', the reductions against '
-                "the machine with locked drives, the stability margins the table's.")
+    rows = {pos: [best[pos], build[pos]] for pos in positions}
+    drives = list(dict.fromkeys(r['law'] for pos in positions for r in rows[pos]
+                                if r['drives'] == 'True'))
+    plants = ', '.join(f'{pos}: {rows[pos][0]["plant_modes"]} modes up to '
+                       f'{float(rows[pos][0]["plant_f_max_hz"]):.0f} Hz' for pos in positions)
+    sampling = {pos: f'{float(r["sample_rate_hz"]):g} Hz with {r["delay_steps"]} sample(s) of '
+                     'computational delay' for pos in positions for r in rows[pos]}
+    rates = (f'{next(iter(sampling.values()))} at every position'
+             if len(set(sampling.values())) == 1
+             else ', '.join(f'{v} at {p}' for p, v in sampling.items()))
+    text.append(
+        f"These shares rest on the study's plant of each position ({plants}: those "
+        'config/reduction.yaml keeps, with the static correction of the others'
+        + (f" and, for {', '.join(drives)}, the feed drives' rotors" if drives else '')
+        + "; the table's own plant adds the struts' axial modes on their links), the laws "
+        f'sampled at {rates} with their own filters, and reductions against the machine with '
+        "locked drives; the stability margins are the table's.")
     return text
