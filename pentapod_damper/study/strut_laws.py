@@ -7,8 +7,10 @@ it takes each law as the design's scenario writer shipped it (``config/scenarios
 of :data:`pentapod_damper.design.scenarios.SCENARIOS`, the gains of the table's row at the
 position the file names, P1) and closes it on the study's plant of every position, at the
 scenario's own sample rate and computational delay, once on all five struts and once on
-struts 1 and 2 only. From the sampled loop's pole-residue FRF
-(:class:`pentapod_sim.sim.loop_frf.SampledLoop`): the exact TCP peak (searched at the
+struts 1 and 2 only; at a position other than the file's, also with the gains of the table's
+row there (the file's damper node with those gains, as the design's scenario writer makes it),
+so the table's own rows are measured at every position. From the sampled loop's pole-residue
+FRF (:class:`pentapod_sim.sim.loop_frf.SampledLoop`): the exact TCP peak (searched at the
 resonances) and the band RMS of |H|, their reductions against the plant without laws sampled
 alike, and the share of the all-strut improvement that struts 1+2 give
 (:func:`~pentapod_damper.study.analytic.improvement_share`) by peak and by RMS.
@@ -215,7 +217,8 @@ def strut_laws_table(cfg: StudyConfig, positions: Mapping[str, StrutLaws]) -> Ta
     """The rows of every position as the study's table :data:`TABLE`."""
     rows = [row for laws in positions.values() for row in laws.rows]
     text = ("The strut laws of the damper table (docs/dampers.md, \"Which damper to build\") as "
-            'their scenario files ship them (gains tuned at the position gains_tuned_at), closed '
+            'their scenario files ship them and, at the other positions, with the gains of the '
+            "table's row there (gains_from: scenario or table; gains_tuned_at), closed "
             "on the study's plant of each position at the scenario's sample rate and delay, "
             'on all five struts and on struts 1 and 2 only (the drives of the other struts '
             "kept for a law inside the drives' loops). Exact peaks and band RMS "
