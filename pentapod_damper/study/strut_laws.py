@@ -58,8 +58,13 @@ STRUT_LISTS = {'iff_struts': (), 'lag_struts': ('lag_stiffness',),
 REST_NODE = 'damper_rest_drives'
 
 
-def DESIGN_TABLE() -> Path:       # noqa: N802 (a constant of the checkout, found when asked)
-    """The committed damper table, docs/results/dampers.csv (python -m pentapod_damper.design)."""
+def design_table_path() -> Path:
+    """
+    The committed damper table, docs/results/dampers.csv (``python -m pentapod_damper.design``).
+
+    In the package's share folder: a source checkout has it; an installed package has no
+    docs/, and the stage then closes the laws as their scenario files ship them only.
+    """
     return share_dir() / 'docs' / 'results' / 'dampers.csv'
 
 
@@ -182,7 +187,7 @@ def law_row(cfg: StudyConfig, model: PositionModel, law: str,
 
 def design_records(path: Path | None = None) -> list[Record]:
     """The damper table's records (docs/results/dampers.csv of the checkout; none if absent)."""
-    path = DESIGN_TABLE() if path is None else path
+    path = design_table_path() if path is None else path
     return read_csv(path) if path.is_file() else []
 
 
