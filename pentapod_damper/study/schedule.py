@@ -4,7 +4,8 @@ The study as a graph of its stages, run by dask's threaded scheduler.
 :func:`study_graph` lists the stages in the order a reader follows the study: per position
 its model; per position and scenario the analytic FRFs and loop poles, a random-excitation
 testbed run and, for the damping scenarios, a multisine damping run; the PMA step runs and
-requirements; per position the bending damper comparison; the figures. Each stage is a
+requirements; per position the bending damper comparison and the damper table's strut laws
+(:mod:`pentapod_damper.study.strut_laws`); the figures. Each stage is a
 ``dask.delayed`` call of a function of :mod:`pentapod_damper.study.stages` on the records of
 the stages it needs. :func:`compute` runs the graph on ``jobs`` threads (dask's local
 scheduler), starting among the ready stages the one that leads to the longest chain of work
@@ -39,7 +40,7 @@ from dask.base import compute as dask_compute
 from dask.callbacks import Callback
 from dask.delayed import Delayed, delayed
 
-from pentapod_damper.study import figures, machining, stages
+from pentapod_damper.study import figures, machining, stages, strut_laws
 from pentapod_damper.study.config import StudyConfig
 from pentapod_damper.study.pipeline import scenario_pma
 from pentapod_damper.study.records import Figures, FloatArray, Pair, StudyResults
@@ -50,12 +51,14 @@ MODELS, ANALYTIC, BENDING, PMA = ('models', 'analytic FRFs, checks and poles',
                                   'bending dampers', 'PMA requirements')
 FRF_RUNS, DAMPING_RUNS, FIGURES = 'FRF and step runs', 'damping runs', 'figures'
 LOBES, CUTTING_RUNS = 'stability lobes', 'cutting runs'
+STRUT_LAWS = "the damper table's strut laws"
 #: Rough time of one task of each stage [s] (the study's timeline.csv on an idle two-core
 #: machine). Only their proportions matter: they rank the ready stages by the longest
 #: chain of work each leads to (:class:`Progress`), so that the long damping runs and bending
 #: comparisons start early instead of leaving one thread alone at the end.
 STAGE_COST = {MODELS: 2.0, ANALYTIC: 3.0, BENDING: 21.0, PMA: 2.5, FRF_RUNS: 2.5,
-              DAMPING_RUNS: 22.0, FIGURES: 4.0, LOBES: 0.5, CUTTING_RUNS: 10.0}
+              DAMPING_RUNS: 22.0, FIGURES: 4.0, LOBES: 0.5, CUTTING_RUNS: 10.0,
+              STRUT_LAWS: 5.0}
 
 
 class Interrupted(Exception):
@@ -170,6 +173,10 @@ def study_graph(cfg: StudyConfig, out_dir: Path, freq: FloatArray, runs: bool = 
         g.lobes[pos, scn] = add(LOBES, f'{pos} {scn}', machining.scenario_lobes, cfg,
                                 g.models[pos], g.analytic[pos, scn])
     g.tables.append(add(LOBES, 'table', machining.lobes_table, cfg, g.lobes))
+    if fe_model is None:        # the table's laws: the own machine's strut ports and table
+        laws = {pos: add(STRUT_LAWS, pos, stages.damper_table_laws, cfg, g.models[pos])
+                for pos in cfg.positions}
+        g.tables.append(add(STRUT_LAWS, 'table', strut_laws.strut_laws_table, cfg, laws))
     for pos, scn in [(p, s) for p, s in pairs if s in cfg.cutting_runs] if runs else []:
         g.cutting[pos, scn] = run(CUTTING_RUNS, f'{pos} {scn}', machining.cutting_check, cfg,
                                   out_dir, g.models[pos], g.analytic[pos, scn],

@@ -11,7 +11,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from pentapod_damper.study import bending, damping, measured_damping, pipeline
+from pentapod_damper.study import bending, damping, measured_damping, pipeline, strut_laws
 from pentapod_damper.study.config import StudyConfig
 from pentapod_damper.study.figures import FIGURE_LOCK
 from pentapod_damper.study.measured_damping import Identified, IdentifiedMode
@@ -26,6 +26,7 @@ from pentapod_damper.study.records import (
     StepRun,
 )
 from pentapod_damper.study.runs import damping_excitation, run_on_testbed, RunResult
+from pentapod_damper.study.strut_laws import StrutLaws
 
 
 def build_model(cfg: StudyConfig, out_dir: Path, position: str,
@@ -133,3 +134,14 @@ def pma_requirements(cfg: StudyConfig, freq: FloatArray, model: PositionModel,
     stroke, force = pipeline.pma_curves(model, analytic, cfg, freq)
     return PmaRequirements(analytic.name, stroke, force,
                            *pipeline.pma_designs(model, analytic, cfg))
+
+
+def damper_table_laws(cfg: StudyConfig, model: PositionModel) -> StrutLaws:
+    """
+    The damper table's strut laws on the position's plant: reductions, struts 1+2 shares.
+
+    Each law of docs/dampers.md's table as its scenario file ships it and, where the file was
+    tuned at another position, with the gains of the table's row at this position
+    (:func:`pentapod_damper.study.strut_laws.position_laws`; sampled-loop FRFs, no tuning).
+    """
+    return strut_laws.position_laws(cfg, model, strut_laws.design_records())
