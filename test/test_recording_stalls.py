@@ -239,10 +239,10 @@ def fast_repair_profile(folder: Path) -> Path:
     text = (ROOT / 'config' / 'dds' / 'loopback.xml').read_text()
     text = text.replace('<type>UDPv4</type>',
                         '<type>UDPv4</type><receiveBufferSize>8388608</receiveBufferSize>')
-    text = text.replace('</profiles>', """  <data_writer profile_name="fast_repair" is_default_profile="true">
-    <times><heartbeatPeriod><sec>0</sec><nanosec>100000000</nanosec></heartbeatPeriod></times>
-  </data_writer>
-</profiles>""")
+    writer = ('<data_writer profile_name="fast_repair" is_default_profile="true"><times>'
+              '<heartbeatPeriod><sec>0</sec><nanosec>100000000</nanosec></heartbeatPeriod>'
+              '</times></data_writer>')
+    text = text.replace('</profiles>', writer + '</profiles>')
     path = folder / 'fast_repair.xml'
     path.write_text(text)
     return path

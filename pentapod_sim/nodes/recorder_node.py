@@ -7,12 +7,13 @@ the bag. A message's log time is its header stamp (sim time) when its type start
 std_msgs/Header or a builtin Time (Clock), else the receive time of the node clock. With
 ``stop_at_run_end`` the recorder closes the bag once the plant announced the end of the run
 (:data:`pentapod_sim.interface.RUN_STATUS`) and every per-step topic holds the last step, or
-after the announcement once no step message came for ``drain_timeout`` s; it logs unique vs expected steps per topic and stores
-them in the bag (:mod:`pentapod_sim.recording.run_end`, docs/recording.md); missing steps, a
-conflicting copy of a step or a second writer on a recorded topic
-(:mod:`pentapod_sim.nodes.writers`) fail the recording: exit code 3 after the bag is closed.
-SIGINT/SIGTERM close the bag completely; after a SIGKILL it is readable up to the last flush.
-Where the plant started (status ``initial_state``) goes into the metadata. It publishes nothing.
+after the announcement once no step message came for ``drain_timeout`` s; it logs unique vs
+expected steps per topic and stores them in the bag (:mod:`pentapod_sim.recording.run_end`,
+docs/recording.md); missing steps, a conflicting copy of a step or a second writer on a recorded
+topic (:mod:`pentapod_sim.nodes.writers`) fail the recording: exit code 3 after the bag is
+closed. SIGINT/SIGTERM close the bag completely; after a SIGKILL it is readable up to the last
+flush. Where the plant started (status ``initial_state``) goes into the metadata. It publishes
+nothing.
 
 In a composed run the recorder takes the plant's and the in-process sources' per-step topics
 from the composition's bus as message objects (:meth:`RecorderNode.take_from_bus`,
@@ -266,8 +267,8 @@ class RecorderNode(TestbedNode):
         Also once every topic still short of it has no publisher left (nothing more can come:
         after a stop signal a source may end without answering the last step), and once no
         step message came for ``drain_timeout`` s of wall time after the end announcement;
-        never without ``stop_at_run_end``. Each latched topic with a publisher must hold its message too,
-        or :data:`LATCHED_WAIT` s have passed since the end announcement.
+        never without ``stop_at_run_end``. Each latched topic with a publisher must hold its
+        message too, or :data:`LATCHED_WAIT` s have passed since the end announcement.
         """
         if not self.params.stop_at_run_end or self.end is None:
             return False
