@@ -308,7 +308,7 @@ def test_the_frame_alone_converges_from_above_with_the_mesh():
     The frame on its feet with the bed (no struts): its six lowest modes at 0.2 and 0.15 m.
 
     Measured (docs/model.md, "Mesh convergence of the plate frame"): every mode falls
-    monotonically from 0.3 to 0.07 m, at about h^2 (x sway 28.2 -> 27.6 Hz, at most 3.3 %
+    monotonically from 0.3 to 0.07 m, at about h^2 (x sway 28.4 -> 27.8 Hz, at most 3.4 %
     from 0.2 to 0.15 m). A locking shell (full integration of the transverse shear) is stiffer
     on coarse meshes and loses it faster (more than 5 %); a mode that is not there on one mesh
     (a coupling that changes with the mesh, a spurious mode) breaks the pairing.
