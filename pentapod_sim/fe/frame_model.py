@@ -43,9 +43,9 @@ from pentapod_sim.fe.machine_data import MachineParams
 from pentapod_sim.fe.rigid import node_dofs, rigid_elimination
 from pentapod_sim.fe.shell import assemble, shell_element_matrices
 
-__all__ = ['cache_dir', 'couple_frame', 'frame_fe', 'FrameFE', 'FrameNotReducedError',
-           'interface_dofs', 'load_reduced', 'load_reduced_frame', 'ReducedFrame', 'save_reduced',
-           'unreduced_frame']
+__all__ = ['cache_dir', 'couple_frame', 'frame_fe', 'frame_on_feet', 'FrameFE',
+           'FrameNotReducedError', 'interface_dofs', 'load_reduced', 'load_reduced_frame',
+           'ReducedFrame', 'save_reduced', 'unreduced_frame']
 
 LOG = logging.getLogger(__name__)
 Array = npt.NDArray[np.float64]
@@ -139,6 +139,38 @@ def frame_fe(machine: MachineParams, element_size: float | None = None,
                 if parts}
     M = sp.csr_matrix(t_t @ sum(m_parts) @ t_mat)
     return FrameFE(groups_r, M, names, {n: fm.points[n] for n in names}, masses, n_nodes)
+
+
+def frame_on_feet(machine: MachineParams, element_size: float | None = None
+                  ) -> tuple[sp.csr_matrix, sp.csr_matrix, sp.csr_matrix, FrameFE]:
+    """
+    The frame alone: on its feet springs, with the bed's mass and inertia, nothing else.
+
+    No struts, joints or platform: the cheap model in which the shell frame's own convergence
+    with the mesh is seen (bench/frame_alone.py, test/test_shell_frame.py). The feet are
+    ``shell_frame.foot_stiffness`` (x, y, z; the feet's rotations are free), the bed's mass
+    and inertia ``frame.bed_mass``, ``frame.bed_inertia`` sit on interface point 'bed'.
+
+    Returns
+    -------
+    K, M : (n, n) csr_matrix
+        Stiffness with the feet [N/m, ...] and mass with the bed [kg, ...].
+    K_feet : (n, n) csr_matrix
+        The feet's share of K (for strain-energy shares).
+    fe : FrameFE
+        The assembled frame.
+    """
+    assert machine.shell_frame is not None
+    fe = frame_fe(machine, element_size)
+    n = fe.n_dof
+    feet = np.concatenate([interface_dofs(fe, f'foot{i + 1}')[:3] for i in range(N_STRUTS)])
+    k_feet = sp.csr_matrix((np.tile(np.asarray(machine.shell_frame.foot_stiffness, float),
+                                    N_STRUTS), (feet, feet)), shape=(n, n))
+    fr = machine.frame
+    bed = interface_dofs(fe, 'bed')
+    m_bed = sp.csr_matrix((np.array([fr.bed_mass] * 3 + list(fr.bed_inertia), float),
+                           (bed, bed)), shape=(n, n))
+    return sp.csr_matrix(fe.K + k_feet), sp.csr_matrix(fe.M + m_bed), k_feet, fe
 
 
 @dataclass(frozen=True)
