@@ -86,6 +86,12 @@ def identify_run(bag: Path, direction: str, band: Sequence[float]) -> Identified
 
     The lines must be closer than the closest pair of modes to be told apart: at P2 the two
     lowest modes lie 0.14 Hz apart (config/study.yaml: ``damping.period`` 8 s, 0.125 Hz).
+    Two modes whose half-power bands overlap (P2's feed drives: 0.16 Hz apart, 1.2 and 0.5 Hz
+    wide) are told apart by the pole selection, which follows the stability diagram's orders
+    with at most one pole of an order per mode (:func:`pentapod_sim.analysis.ema.poles.
+    select_poles`). One output, the TCP along ``direction``: the TCP's three outputs resolve
+    the same poles, but with their poles the LSFD synthesis of this output, whose peak is
+    compared, missed the loop's by up to 2.6 dB (docs/recording.md, step 3).
 
     Raises
     ------

@@ -265,8 +265,9 @@ _Row = tuple[float, float, int, complex]
 
 
 def _stable_rows(entry: OrderPoles) -> list[_Row]:
+    classes = entry.classes if entry.classes is not None else np.full(len(entry.poles), 'o')
     return [(f, z, entry.order, p) for f, z, p, c in
-            zip(entry.freq, entry.damping, entry.poles, entry.classes) if c == 's']
+            zip(entry.freq, entry.damping, entry.poles, classes) if c == 's']
 
 
 def _follow_orders(orders: Sequence[OrderPoles], tol: Tolerances) -> list[list[_Row]]:
