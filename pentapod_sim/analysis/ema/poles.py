@@ -29,11 +29,13 @@ distance normalised by ``tol_freq`` and ``tol_damping``), and a pole left unmatc
 mode. A mode whose ``s`` poles come from at least ``min_stable`` different orders, and from at
 least ``min_stable_fraction`` times as many orders as the best-supported mode, is physical
 (spurious poles of an over-fitted noise model stay stable over a few orders only). Its pole
-is the member closest to the mode's median frequency and damping (distance normalised by the
-tolerances). Two poles of one order are never one mode: two modes closer than ``tol_freq``
-whose half-power bands overlap are resolved at the higher orders as two poles, while the
-lower orders fit one pole between them, and chaining all poles by frequency (``one_per_order``
-False, the selection before 2026-12) merged both into one cluster whose median lay between
+is the member closest to the median frequency and damping (distance normalised by the
+tolerances) of its members from the upper half of its orders: a pole that the lower orders
+fit next to other modes' drifts there, and converges at the higher orders. Two poles of one
+order are never one mode: two modes closer than ``tol_freq`` whose half-power bands overlap
+are resolved at the higher orders as two poles, while the lower orders fit one pole between
+them, and chaining all poles by frequency (``one_per_order`` False, the selection before
+2026-12; median over all its members) merged both into one cluster whose median lay between
 them (P2's feed drives: 26.67 Hz at 2.3 % and 26.83 Hz at 0.9 % identified as one pole,
 26.73 Hz at 0.96 %).
 """
@@ -251,6 +253,9 @@ def select_poles(orders: Sequence[OrderPoles], tol: Tolerances = Tolerances()) -
     for cluster, count in zip(clusters, support):
         if count < needed:
             continue
+        if tol.one_per_order:  # the converged part: the upper half of the mode's orders
+            low = np.median([row[2] for row in cluster])
+            cluster = [row for row in cluster if row[2] >= low]
         f_med = np.median([row[0] for row in cluster])
         z_med = np.median([row[1] for row in cluster])
         dist = [((row[0] - f_med) / (tol.tol_freq * f_med)) ** 2
