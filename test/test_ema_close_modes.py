@@ -17,7 +17,7 @@ import scipy.linalg
 
 from pentapod_damper.study.measured_damping import MAX_ORDER
 from pentapod_sim.analysis.ema.identify import identify_modes
-from pentapod_sim.analysis.ema.poles import Tolerances
+from pentapod_sim.analysis.ema.poles import OrderPoles, select_poles, Tolerances
 
 DT = 1.0 / 5000.0                # the recorded runs' step [s]
 PERIOD = 16.0                    # multisine period [s]: 0.0625 Hz lines
@@ -93,3 +93,44 @@ def test_chained_selection_on_the_driving_point_merges_the_pair():
     """The selection before (all stable poles chained by frequency) finds one pole for both."""
     err_f, err_z = pair_errors([0], one_per_order=False)
     assert np.max(np.abs(err_z)) > ZETA_TOL, (err_f, err_z)   # measured: -17 % and +113 %
+
+
+def _diagram(rows_per_order):
+    """Labelled orders (every pole 's') from {order: [(f [Hz], zeta), ...]}."""
+    out = []
+    for order, rows in sorted(rows_per_order.items()):
+        f = np.array([r[0] for r in rows], dtype=float)
+        z = np.array([r[1] for r in rows], dtype=float)
+        poles = 2 * np.pi * f * (-z + 1j * np.sqrt(1 - z ** 2))
+        out.append(OrderPoles(order, poles, f, z, np.ones((len(f), 1)),
+                              np.full(len(f), 's')))
+    return out
+
+
+def test_a_followed_mode_takes_its_pole_from_the_converged_orders():
+    """
+    Orders 1-35 fit a drifting pole (95.9 .. 95.7 Hz, zeta 0.0105), orders 36-60 the mode.
+
+    The median over all 60 orders lies in the drift; over the upper half of the orders (31-60)
+    it is the converged pole, which is selected exactly.
+    """
+    rows = {n: [(95.694 + 0.006 * (36 - n), 0.0105)] for n in range(1, 36)}
+    rows.update({n: [(95.694, 0.01204)] for n in range(36, 61)})
+    poles = select_poles(_diagram(rows), Tolerances())
+    assert len(poles) == 1
+    f, zeta = abs(poles[0]) / (2 * np.pi), -poles[0].real / abs(poles[0])
+    assert f == pytest.approx(95.694, rel=1e-12) and zeta == pytest.approx(0.01204, rel=1e-12)
+
+
+def test_two_poles_of_one_order_are_two_modes():
+    """
+    Two modes 0.6 % apart (within tol_freq of a pole between them at the lower orders).
+
+    Orders 1-40 hold one pole at 26.75 Hz, orders 41-80 the two modes; chained by frequency
+    they are one cluster, followed over the orders two modes, each its own pole.
+    """
+    rows = {n: [(26.75, 0.009)] for n in range(1, 41)}
+    rows.update({n: [(26.672, 0.0228), (26.833, 0.0092)] for n in range(41, 81)})
+    followed = np.sort_complex(select_poles(_diagram(rows), Tolerances()))
+    np.testing.assert_allclose(np.abs(followed) / (2 * np.pi), [26.672, 26.833], rtol=1e-12)
+    assert len(select_poles(_diagram(rows), Tolerances(one_per_order=False))) == 1
