@@ -91,7 +91,7 @@ def identify_run(bag: Path, direction: str, band: Sequence[float]) -> Identified
     with at most one pole of an order per mode (:func:`pentapod_sim.analysis.ema.poles.
     select_poles`). One output, the TCP along ``direction``: the TCP's three outputs resolve
     the same poles, but with their poles the LSFD synthesis of this output, whose peak is
-    compared, missed the loop's by up to 2.6 dB (docs/recording.md, step 3).
+    compared, missed the loop's by up to 1.5 dB (docs/recording.md, step 3).
 
     Raises
     ------
