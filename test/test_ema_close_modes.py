@@ -8,14 +8,16 @@ the 2-200 Hz band, excited on the lines of the recorded runs' 16 s multisine; it
 sampled system's C (zI - A)^-1 B at the lines (what synchronous averaging of its periodic
 steady state gives) and its poles are the continuous modal poles chosen here (a zero-order hold
 maps them exactly: ln z / dt). Identification with the study's settings
-(:func:`pentapod_damper.study.measured_damping.identify_run`: orders 1-120, every stable
-cluster counts). Required: frequencies within 1 %, damping ratios within 5 %.
+(:func:`pentapod_damper.study.measured_damping.identify_run`: orders 1-120,
+``measured_damping.TOLERANCES``). Required: frequencies within 1 %, damping ratios within 5 %.
 """
+import dataclasses
+
 import numpy as np
 import pytest
 import scipy.linalg
 
-from pentapod_damper.study.measured_damping import MAX_ORDER
+from pentapod_damper.study.measured_damping import MAX_ORDER, TOLERANCES
 from pentapod_sim.analysis.ema.identify import identify_modes
 from pentapod_sim.analysis.ema.poles import OrderPoles, select_poles, Tolerances
 
@@ -29,6 +31,8 @@ SHAPES = np.array([[0.6, 1.0, 0.8, 0.9, 0.5, 1.2, 0.7, 0.9, 0.6, 1.1, 1.0],
                    [0.3, 0.9, -1.0, -0.6, 0.8, 0.4, -0.9, 0.5, -0.7, 0.3, 0.5],
                    [-0.5, -0.6, -0.8, 0.7, -0.4, 0.9, 0.6, -0.8, 0.5, -0.6, 0.4]])
 F_TOL, ZETA_TOL = 0.01, 0.05
+#: the selection before: every stable pole chained by frequency, median over all members
+CHAINED = dataclasses.replace(TOLERANCES, one_per_order=False, upper_orders=False)
 
 
 def true_poles():
@@ -59,12 +63,12 @@ def sampled_frfs():
     return lines, h
 
 
-def pair_errors(outputs, one_per_order):
+def pair_errors(outputs, tol):
     """Relative errors in f and zeta of the identified poles nearest the close pair."""
     lines, h = sampled_frfs()
     model = identify_modes(lines, h[outputs], band=(2.0, 200.0), sigma=None,
                            orders=range(1, MAX_ORDER + 1),
-                           tol=Tolerances(min_stable_fraction=0.0, one_per_order=one_per_order))
+                           tol=tol)
     poles = true_poles()
     err_f, err_z = [], []
     for r in CLOSE:
@@ -85,13 +89,13 @@ def test_the_pair_overlaps_by_bandwidth_not_by_line_spacing():
 @pytest.mark.parametrize('outputs', [[0, 1, 2], [0]], ids=['three outputs', 'driving point'])
 def test_close_pair_is_identified_as_two_poles(outputs):
     """Poles followed over the orders (one per order and mode): both within the tolerances."""
-    err_f, err_z = pair_errors(outputs, one_per_order=True)
+    err_f, err_z = pair_errors(outputs, TOLERANCES)
     assert np.all(np.abs(err_f) < F_TOL) and np.all(np.abs(err_z) < ZETA_TOL), (err_f, err_z)
 
 
 def test_chained_selection_on_the_driving_point_merges_the_pair():
     """The selection before (all stable poles chained by frequency) finds one pole for both."""
-    err_f, err_z = pair_errors([0], one_per_order=False)
+    err_f, err_z = pair_errors([0], CHAINED)
     assert np.max(np.abs(err_z)) > ZETA_TOL, (err_f, err_z)   # measured: -17 % and +113 %
 
 
@@ -111,12 +115,13 @@ def test_a_followed_mode_takes_its_pole_from_the_converged_orders():
     """
     Orders 1-35 fit a drifting pole (95.9 .. 95.7 Hz, zeta 0.0105), orders 36-60 the mode.
 
-    The median over all 60 orders lies in the drift; over the upper half of the orders (31-60)
-    it is the converged pole, which is selected exactly.
+    The median over all 60 orders lies in the drift; over the upper half of the orders (31-60,
+    ``upper_orders``: the study's noise-free records) it is the converged pole, selected
+    exactly.
     """
     rows = {n: [(95.694 + 0.006 * (36 - n), 0.0105)] for n in range(1, 36)}
     rows.update({n: [(95.694, 0.01204)] for n in range(36, 61)})
-    poles = select_poles(_diagram(rows), Tolerances())
+    poles = select_poles(_diagram(rows), Tolerances(upper_orders=True))
     assert len(poles) == 1
     f, zeta = abs(poles[0]) / (2 * np.pi), -poles[0].real / abs(poles[0])
     assert f == pytest.approx(95.694, rel=1e-12) and zeta == pytest.approx(0.01204, rel=1e-12)

@@ -30,8 +30,12 @@ mode. A mode whose ``s`` poles come from at least ``min_stable`` different order
 least ``min_stable_fraction`` times as many orders as the best-supported mode, is physical
 (spurious poles of an over-fitted noise model stay stable over a few orders only). Its pole
 is the member closest to the median frequency and damping (distance normalised by the
-tolerances) of its members from the upper half of its orders: a pole that the lower orders
-fit next to other modes' drifts there, and converges at the higher orders. Two poles of one
+tolerances) of its members; with ``upper_orders``, of its members from the upper half of its
+orders: on a noise-free record a pole that the lower orders fit next to other modes' drifts
+there and converges at the higher orders (the study's recorded runs), while with noise the
+higher orders fit the noise too and the median over all orders is steadier (2 % noise on
+the calibration test's FRFs: 6 % damping error on one mode from the upper half, within 5 %
+from all orders). Two poles of one
 order are never one mode: two modes closer than ``tol_freq`` whose half-power bands overlap
 are resolved at the higher orders as two poles, while the lower orders fit one pole between
 them, and chaining all poles by frequency (``one_per_order`` False, the selection before
@@ -61,6 +65,7 @@ class Tolerances:
     min_stable: int = 8
     min_stable_fraction: float = 0.3
     one_per_order: bool = True
+    upper_orders: bool = False
 
 
 @dataclasses.dataclass
@@ -229,8 +234,9 @@ def select_poles(orders: Sequence[OrderPoles], tol: Tolerances = Tolerances()) -
         With ``classes`` set by :func:`stability_diagram`.
     tol : Tolerances
         ``tol_freq`` (a mode's width), ``tol_damping``, ``min_stable``,
-        ``min_stable_fraction`` and ``one_per_order`` (follow the orders, at most one pole of
-        an order per mode; False: chain all poles by frequency) are used.
+        ``min_stable_fraction``, ``one_per_order`` (follow the orders, at most one pole of
+        an order per mode; False: chain all poles by frequency) and ``upper_orders`` (a
+        followed mode's pole from the upper half of its orders) are used.
 
     Returns
     -------
@@ -253,7 +259,7 @@ def select_poles(orders: Sequence[OrderPoles], tol: Tolerances = Tolerances()) -
     for cluster, count in zip(clusters, support):
         if count < needed:
             continue
-        if tol.one_per_order:  # the converged part: the upper half of the mode's orders
+        if tol.one_per_order and tol.upper_orders:  # the upper half of the mode's orders
             low = np.median([row[2] for row in cluster])
             cluster = [row for row in cluster if row[2] >= low]
         f_med = np.median([row[0] for row in cluster])
