@@ -65,10 +65,9 @@ def test_recorded_runs_match_the_sampled_loop_poles():
         build = best_strut_law([r for r in records if r['position'] == position],
                                low_band=True)
         assert build is not None
-        # the drives alone at P2 are not in the file: two loop poles 0.16 Hz apart near
-        # 26.7 Hz come out as one identified pole (docs/dampers.md, "Still to do")
-        drives = (('IFF + position loop (HAC-LAC)', 'feed drives alone (position loops)')
-                  if position == 'P1' else ('IFF + position loop (HAC-LAC)',))
+        # the drives alone at P2 too: two loop poles 0.16 Hz apart near 26.7 Hz, identified
+        # as two since the pole selection follows the orders (docs/dampers.md)
+        drives = ('IFF + position loop (HAC-LAC)', 'feed drives alone (position loops)')
         for law in (build['law'], 'IFF', *drives):
             mine = [r for r in runs if (r['position'], r['law']) == (position, law)]
             assert len(mine) == 3, (position, law)
