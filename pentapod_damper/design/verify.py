@@ -6,7 +6,9 @@ design_models.load_design_model`'s ``check_subset_hz``: the check modes below a 
 with the static correction of the others); the laws the verdict names (the best strut-only
 law, and the best one without the feed drives' loops) are then checked on every mode of the
 full check model, with the law's delay and with one more sample. A law that fails there loses
-its place and the next best is checked. ROS-free.
+its place and the next best is checked. :func:`shipped_judge` judges a scenario file written
+from the table (absolute gains of the position it was tuned at) at another position with the
+tuner's constraints (docs/dampers.md, "The shipped scenario files at P2"). ROS-free.
 """
 from __future__ import annotations
 
@@ -16,8 +18,9 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from pentapod_damper.design.report import best_strut_law, records
+from pentapod_damper.design.report import best_strut_law, Record, records
 from pentapod_damper.design.rows import default_rows
+from pentapod_damper.design.scenarios import gains_of
 from pentapod_damper.design.table import (
     DamperTable,
     magnitude,
@@ -26,7 +29,9 @@ from pentapod_damper.design.table import (
     with_lowband,
 )
 from pentapod_sim.sim.design_models import DesignModel
-from pentapod_sim.sim.tuning import Evaluation, Judge
+from pentapod_sim.sim.law_families import StrutStiffness
+from pentapod_sim.sim.law_models import Dynamics
+from pentapod_sim.sim.tuning import Evaluation, Judge, TuneSettings
 
 LOG = logging.getLogger(__name__)
 
@@ -104,3 +109,29 @@ def remeasure(table: DamperTable, model: DesignModel, laws: Sequence[str],
                               share12_peak=new.share12_peak, share12_rms=new.share12_rms,
                               stroke_rms_per_n=value, stroke_unit=unit)
     return with_lowband(replace(table, rows=tuple(rows), magnitudes=magnitudes))
+
+
+def shipped_judge(record: Record, model: DesignModel, tuned: StrutStiffness
+                  ) -> tuple[Judge, dict[str, float]]:
+    """
+    The tuner's judge, on ``model``'s position, of a scenario file written from ``record``.
+
+    A scenario file holds absolute gains (:func:`pentapod_damper.design.scenarios.node_params`:
+    the lag and PPF stiffnesses are the tuned fractions of the reference stiffnesses of the
+    position the record was tuned at, ``tuned``; PPF's frequency is the fraction of that
+    position's peak frequency), so at another position it runs the record's values against
+    ``tuned``'s references, not against ``model``'s: the judge gets ``tuned`` and the record's
+    target frequency, and its limits are the table's (sample rate, delay and band of the
+    record, the tuner's default static and force limits). Returns the judge and the record's
+    values; ``judge.evaluate(values)`` gives the verdict under ``model``'s constraints (its
+    corners, one more sample of delay), ``judge.check(values)`` the check-model radii.
+    """
+    spec = {s.name: s for s in default_rows()}[record['law']]
+    low, high = (float(f) for f in record['band_hz'].split('-'))
+    settings = TuneSettings(sample_rate=float(record['sample_rate_hz']),
+                            direction=record['direction'], band=(low, high),
+                            dynamics=Dynamics(delay_steps=int(record['delay_steps'])),
+                            refine_iterations=0)
+    judge = Judge(replace(model, stiffness=tuned, driven={}), spec.family, settings,
+                  target_hz=float(record['baseline_peak_hz']))
+    return judge, gains_of(record)

@@ -9,7 +9,9 @@ position the file names, P1) and closes it on the study's plant of every positio
 scenario's own sample rate and computational delay, once on all five struts and once on
 struts 1 and 2 only; at a position other than the file's, also with the gains of the table's
 row there (the file's damper node with those gains, as the design's scenario writer makes it),
-so the table's own rows are measured at every position. From the sampled loop's pole-residue
+so the table's own rows are measured at every position (the shipped files, P1's absolute
+gains, meet every limit of the tuner at P2 too: docs/dampers.md, "The shipped scenario files at
+P2", :func:`pentapod_damper.design.verify.shipped_judge`). From the sampled loop's pole-residue
 FRF (:class:`pentapod_sim.sim.loop_frf.SampledLoop`): the exact TCP peak (searched at the
 resonances) and the band RMS of |H|, their reductions against the plant without laws sampled
 alike, and the share of the all-strut improvement that struts 1+2 give
