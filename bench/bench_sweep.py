@@ -205,7 +205,7 @@ def run(quick: bool, n_side: int | None = None) -> list[dict]:
             timings[label] = dict(report.timings, workers=report.workers)
             if label == 'serial loop':
                 cpu = float(np.median(table.column('cpu_seconds').to_numpy()))
-                one_row = {k: v for k, v in table.to_pylist()[0].items()}
+                one_row = table.to_pylist()[0]
     agree = all(_same(rows_of['serial loop'], rows_of[k]) for k, _, _ in RUNS[1:])
     base, base_s = figures['serial loop']
     rows = []

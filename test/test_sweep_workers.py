@@ -22,9 +22,9 @@ OWN_FORBIDDEN = ('pentapod_damper.sweep.sweep_plot', 'pentapod_damper.sweep.stor
                  'pentapod_damper.sweep.runner', 'pentapod_damper.nodes', 'pentapod_sim.nodes')
 
 #: Run in a fresh interpreter: every import statement naming a forbidden package is recorded
-#: with the file that wrote it (exec'd code counts as the file that ran it), unless it is matplotlib imported from python-control or from
-#: matplotlib itself (with its mpl_toolkits); then the forbidden modules that ended up loaded
-#: by any route.
+#: with the file that wrote it (exec'd code counts as the file that ran it), unless it is
+#: matplotlib imported from python-control or from matplotlib itself (with its mpl_toolkits);
+#: then the forbidden modules that ended up loaded by any route.
 SCRIPT = """
 import builtins, json, os, sys
 sys.path.insert(0, {root!r})
