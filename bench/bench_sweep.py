@@ -10,8 +10,9 @@ so the start-up counts. Poses per minute and the ratio to the serial loop are th
 rows of all runs must agree (note). Each note gives the load average (1 min) at the start and
 at the end of that run (the machine has 2 cores; the workers of the run itself add up to 2)
 and compute/wall: the poses' summed compute time (``seconds`` column) over the run's wall time
-(2 is the most two workers can give). Peak memory per task: VmHWM of a fresh process after
-one pose, against the same process after its imports.
+(2 is the most two workers can give), and the CPU time of the bench's own process in the
+run (client, scheduler and nannies of a LocalCluster live there). Peak memory per task:
+VmHWM of a fresh process after one pose, against the same process after its imports.
 
 Where a pose's time goes (rows "sweep, per pose: ..."): the imports of a fresh (spawned)
 worker process, then the stages of ``pentapod_damper.sweep.compute.evaluate`` timed one by one
@@ -186,15 +187,16 @@ def run(quick: bool, n_side: int | None = None) -> list[dict]:
     poses = _poses(quick) if n_side is None else grid(
         f'-0.15:0.15:{n_side}', f'-0.15:0.15:{n_side}', '0.85')
     n = len(poses)
-    figures, rows_of, compute_s, timings, loads = {}, {}, {}, {}, {}
+    figures, rows_of, compute_s, timings, loads, client_cpu = {}, {}, {}, {}, {}, {}
     with tempfile.TemporaryDirectory() as tmp:
         for label, kwargs, method in RUNS:
             out = Path(tmp) / label.replace(' ', '_').replace(',', '')
             load0 = os.getloadavg()[0]
-            t0 = time.perf_counter()
+            t0, cpu0 = time.perf_counter(), time.process_time()
             with _start_method(method):
                 report = run_sweep(poses, settings, out, progress=False, **kwargs)
             seconds = time.perf_counter() - t0
+            client_cpu[label] = time.process_time() - cpu0
             loads[label] = (load0, os.getloadavg()[0])
             if report.counts.get('ok') != n:
                 raise RuntimeError(f'{label}: {report.counts} of {n} poses; {report.errors}')
@@ -217,7 +219,9 @@ def run(quick: bool, n_side: int | None = None) -> list[dict]:
                      'note': f'{n} poses in {seconds:.1f} s (serial {base_s:.1f} s, median CPU '
                              f'{cpu:.2f} s per pose), workers {method}ed, LocalCluster start '
                              f'included; compute/wall {compute_s[label] / seconds:.2f} (serial '
-                             f'{compute_s["serial loop"] / base_s:.2f}); rows '
+                             f'{compute_s["serial loop"] / base_s:.2f}); CPU of this '
+                             f'process (client, scheduler, nannies) {client_cpu[label]:.1f} s; '
+                             f'rows '
                              f'{"equal" if agree else "DIFFER"}; load {loads[label][0]:.1f} at '
                              f'the start, {loads[label][1]:.1f} at the end ({os.cpu_count()} '
                              f'cores)'})
