@@ -11,8 +11,13 @@ rows of all runs must agree (note). Each note gives the load average (1 min) at 
 at the end of that run (the machine has 2 cores; the workers of the run itself add up to 2)
 and compute/wall: the poses' summed compute time (``seconds`` column) over the run's wall time
 (2 is the most two workers can give), and the CPU time of the bench's own process in the
-run (client, scheduler and nannies of a LocalCluster live there). Peak memory per task:
-VmHWM of a fresh process after one pose, against the same process after its imports.
+run (client, scheduler and nannies of a LocalCluster live there). The load average lags by a
+minute, so each note also gives what the run shared the cores with: the poses' compute time
+against the serial loop's (1.00x: no contention) and the cores other processes used during
+the run (the machine's busy CPU time from /proc/stat beyond this process's and the poses' CPU
+time, over the run's wall time; the workers' imports and Dask overhead count as other). Peak memory
+per task: VmHWM of a fresh process after one pose, against the same process after its
+imports.
 
 Where a pose's time goes (rows "sweep, per pose: ..."): the imports of a fresh (spawned)
 worker process, then the stages of ``pentapod_damper.sweep.compute.evaluate`` timed one by one
@@ -59,6 +64,18 @@ before = peak_rss_mb()
 row = compute_pose([0.1, -0.1, 0.85, 0.0, 0.0], 'bench', settings)
 print(json.dumps({{'before': before, 'after': peak_rss_mb(), 'status': row['status']}}))
 """
+
+
+def _busy_seconds() -> float:
+    """CPU seconds all processes of the machine have used since boot (/proc/stat; NaN off
+    Linux): user, nice, system, irq, softirq and steal time of every core."""
+    try:
+        with open('/proc/stat', encoding='ascii') as stream:
+            fields = stream.readline().split()[1:]
+    except OSError:
+        return float('nan')
+    user, nice, system, _idle, _iowait, irq, softirq, steal = map(int, fields[:8])
+    return (user + nice + system + irq + softirq + steal) / os.sysconf('SC_CLK_TCK')
 
 
 @contextlib.contextmanager
@@ -187,16 +204,18 @@ def run(quick: bool, n_side: int | None = None) -> list[dict]:
     poses = _poses(quick) if n_side is None else grid(
         f'-0.15:0.15:{n_side}', f'-0.15:0.15:{n_side}', '0.85')
     n = len(poses)
-    figures, rows_of, compute_s, timings, loads, client_cpu = {}, {}, {}, {}, {}, {}
+    figures, rows_of, compute_s, timings, loads = {}, {}, {}, {}, {}
+    client_cpu, busy, others = {}, {}, {}
     with tempfile.TemporaryDirectory() as tmp:
         for label, kwargs, method in RUNS:
             out = Path(tmp) / label.replace(' ', '_').replace(',', '')
             load0 = os.getloadavg()[0]
-            t0, cpu0 = time.perf_counter(), time.process_time()
+            t0, cpu0, busy0 = time.perf_counter(), time.process_time(), _busy_seconds()
             with _start_method(method):
                 report = run_sweep(poses, settings, out, progress=False, **kwargs)
             seconds = time.perf_counter() - t0
             client_cpu[label] = time.process_time() - cpu0
+            busy[label] = _busy_seconds() - busy0
             loads[label] = (load0, os.getloadavg()[0])
             if report.counts.get('ok') != n:
                 raise RuntimeError(f'{label}: {report.counts} of {n} poses; {report.errors}')
@@ -204,6 +223,9 @@ def run(quick: bool, n_side: int | None = None) -> list[dict]:
             rows_of[label] = _rows(out, settings)
             table = ResultStore(out, columns(settings), settings.digest).load()
             compute_s[label] = float(table.column('seconds').to_numpy().sum())
+            pose_cpu = float(table.column('cpu_seconds').to_numpy().sum())
+            # cores used by other processes: the machine's busy time beyond this run's own
+            others[label] = max(busy[label] - client_cpu[label] - pose_cpu, 0.0) / seconds
             timings[label] = dict(report.timings, workers=report.workers)
             if label == 'serial loop':
                 cpu = float(np.median(table.column('cpu_seconds').to_numpy()))
@@ -222,7 +244,10 @@ def run(quick: bool, n_side: int | None = None) -> list[dict]:
                              f'{compute_s["serial loop"] / base_s:.2f}); CPU of this '
                              f'process (client, scheduler, nannies) {client_cpu[label]:.1f} s; '
                              f'rows '
-                             f'{"equal" if agree else "DIFFER"}; load {loads[label][0]:.1f} at '
+                             f'{"equal" if agree else "DIFFER"}; poses took '
+                             f'{compute_s[label] / compute_s["serial loop"]:.2f}x their serial '
+                             f'time; other processes used {others[label]:.2f} cores (serial run '
+                             f'{others["serial loop"]:.2f}); load {loads[label][0]:.1f} at '
                              f'the start, {loads[label][1]:.1f} at the end ({os.cpu_count()} '
                              f'cores)'})
     load = loads['serial loop'][0]
