@@ -9,11 +9,21 @@ spawn); ``scheduler`` connects to an existing cluster instead (dask-jobqueue, Ku
 rows as one Parquet file, so only the tasks in flight are lost when a sweep is stopped. A task
 that raises (a worker killed, an import error on a remote worker) gives ``failed`` rows with
 the error; the other tasks go on.
+
+On Linux the local workers are forked from the client process (``fork`` start method), so they
+start with the client's imports (numpy, scipy, python-control, the FE and plant code: about
+1.3 s per fresh worker process on an idle core, 11 s measured under load) instead of importing
+them again; this needs the client's BLAS to be single-threaded already
+(``OPENBLAS_NUM_THREADS=OMP_NUM_THREADS=1`` in the environment when this module was imported,
+as tools/env.sh sets them), otherwise the workers are spawned fresh as before. Each phase of a
+Dask run is timed in :attr:`SweepReport.timings`.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 import logging
+import multiprocessing
+import os
 from pathlib import Path
 import sys
 import time
@@ -25,11 +35,16 @@ from pentapod_damper.sweep.compute import columns, compute_batch, FAILED
 from pentapod_damper.sweep.poses import AXES, pose_key
 from pentapod_damper.sweep.settings import SweepSettings
 from pentapod_damper.sweep.store import ResultStore
+from pentapod_damper.sweep.warm import import_seconds
 
 #: Environment of the local workers: one BLAS/OpenMP thread per worker process.
 WORKER_ENV = {'OPENBLAS_NUM_THREADS': 1, 'OMP_NUM_THREADS': 1, 'MKL_NUM_THREADS': 1}
 #: Number of local worker processes by default.
 DEFAULT_WORKERS = 2
+#: Whether the BLAS of this process was single-threaded when it was loaded (the environment
+#: when this module, which imports numpy, was imported): only then may workers be forked.
+BLAS_SINGLE_THREADED = all(os.environ.get(k) == '1'
+                           for k in ('OPENBLAS_NUM_THREADS', 'OMP_NUM_THREADS'))
 
 
 @dataclass
@@ -45,6 +60,10 @@ class SweepReport:
     seconds: float = 0.0
     workers: int = 0
     interrupted: bool = False
+    #: Dask run only: seconds of each phase in the client ('cluster start', 'worker imports',
+    #: 'scatter', 'tasks' (first submit to last result), 'store', 'progress', 'close') and
+    #: 'start method' (fork or spawn; None with ``scheduler``).
+    timings: dict[str, Any] = field(default_factory=dict)
 
     @property
     def poses_per_minute(self) -> float:
@@ -78,13 +97,30 @@ def _progress(total: int, enabled: bool) -> Any:
                 smoothing=0.1)
 
 
-def local_cluster(n_workers: int) -> Any:
-    """A LocalCluster of ``n_workers`` single-threaded processes with single-threaded BLAS."""
+def start_method() -> str:
+    """
+    How local workers are started: ``fork`` (they inherit this process's imports) on Linux
+    when this process's BLAS is single-threaded (:data:`BLAS_SINGLE_THREADED`), else
+    ``spawn`` (a fresh interpreter that imports everything again).
+    """
+    if BLAS_SINGLE_THREADED and 'fork' in multiprocessing.get_all_start_methods():
+        return 'fork'
+    return 'spawn'
+
+
+def local_cluster(n_workers: int, method: str | None = None) -> Any:
+    """
+    A LocalCluster of ``n_workers`` single-threaded processes with single-threaded BLAS.
+
+    ``method``: ``fork``, ``forkserver`` or ``spawn`` (default :func:`start_method`).
+    """
     import dask
     from distributed import LocalCluster
     environ = dict(dask.config.get('distributed.nanny.pre-spawn-environ', {}), **WORKER_ENV)
     logging.getLogger('distributed').setLevel(logging.ERROR)    # no start/stop chatter
-    with dask.config.set({'distributed.nanny.pre-spawn-environ': environ}):
+    with dask.config.set({'distributed.nanny.pre-spawn-environ': environ,
+                          'distributed.worker.multiprocessing-method':
+                              method or start_method()}):
         return LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True,
                             dashboard_address=':0', silence_logs=logging.ERROR)
 
@@ -136,18 +172,25 @@ def run_sweep(poses: np.ndarray, settings: SweepSettings, out_dir: str | Path, *
     t0 = time.perf_counter()
 
     def finish(rows: list[Row]) -> None:
+        t_store = time.perf_counter()
         store.write(rows)
+        t_bar = time.perf_counter()
         report.computed += len(rows)
         for row in rows:
             report.counts[row['status']] = report.counts.get(row['status'], 0) + 1
             if row['status'] == FAILED:
                 report.errors.append(([row[a] for a in AXES], row['error']))
         bar.update(len(rows))
+        timings['store'] = timings.get('store', 0.0) + t_bar - t_store
+        timings['progress'] = timings.get('progress', 0.0) + time.perf_counter() - t_bar
         if on_rows is not None:
             on_rows(rows)
 
     tasks = list(_batches(poses[todo], [keys[i] for i in todo], batch))
+    timings = report.timings
+    t_bar = time.perf_counter()
     bar = _progress(len(todo), progress)
+    timings['progress'] = time.perf_counter() - t_bar
     try:
         if serial or not tasks:
             report.workers = 1 if tasks else 0
@@ -167,6 +210,9 @@ def _run_dask(tasks: list[tuple[list[list[float]], list[str]]], settings: SweepS
               scheduler: str | None, n_workers: int, compute: Compute,
               finish: Callable[[list[Row]], None], report: SweepReport) -> None:
     from distributed import as_completed, Client
+    timings = report.timings
+    t0 = time.perf_counter()
+    timings['start method'] = None if scheduler else start_method()
     cluster = None if scheduler else local_cluster(n_workers)
     if scheduler and scheduler.endswith('.json'):     # dask scheduler --scheduler-file
         client = Client(scheduler_file=scheduler)
@@ -175,7 +221,18 @@ def _run_dask(tasks: list[tuple[list[list[float]], list[str]]], settings: SweepS
     futures: dict[Any, tuple[list[list[float]], list[str]]] = {}
     try:
         report.workers = len(client.scheduler_info()['workers'])
+        t1 = time.perf_counter()
+        # the workers import the pose code now, all at once (about 0 s for forked workers);
+        # a worker that cannot (no package) fails its tasks instead, one by one
+        try:
+            timings['worker imports'] = max(client.run(import_seconds).values(), default=0.0)
+        except Exception:  # noqa: BLE001 -- reported by the tasks as failed rows
+            timings['worker imports'] = float('nan')
+        t2 = time.perf_counter()
         shared = client.scatter(settings, broadcast=True)
+        t3 = time.perf_counter()
+        timings.update({'cluster start': t1 - t0, 'worker imports wall': t2 - t1,
+                        'scatter': t3 - t2})
         futures = {client.submit(compute, chunk, chunk_keys, shared, pure=False):
                    (chunk, chunk_keys) for chunk, chunk_keys in tasks}
         for future in as_completed(futures):
@@ -186,9 +243,12 @@ def _run_dask(tasks: list[tuple[list[list[float]], list[str]]], settings: SweepS
                 rows = failed_rows(chunk, chunk_keys, err)
             finish(rows)
             future.release()
+        timings['tasks'] = time.perf_counter() - t3
     finally:
+        t4 = time.perf_counter()
         if futures:
             client.cancel(list(futures))
         client.close()
         if cluster is not None:
             cluster.close()
+        timings['close'] = time.perf_counter() - t4
