@@ -47,9 +47,9 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))   # run from a checkout
+from pentapod_damper.sweep import runner  # noqa: E402
 from pentapod_damper.sweep.compute import BOOKKEEPING, columns  # noqa: E402
 from pentapod_damper.sweep.poses import grid  # noqa: E402
-from pentapod_damper.sweep import runner  # noqa: E402
 from pentapod_damper.sweep.runner import local_cluster, run_sweep  # noqa: E402
 from pentapod_damper.sweep.settings import make_settings  # noqa: E402
 from pentapod_damper.sweep.store import ResultStore  # noqa: E402
@@ -67,8 +67,11 @@ print(json.dumps({{'before': before, 'after': peak_rss_mb(), 'status': row['stat
 
 
 def _busy_seconds() -> float:
-    """CPU seconds all processes of the machine have used since boot (/proc/stat; NaN off
-    Linux): user, nice, system, irq, softirq and steal time of every core."""
+    """
+    CPU seconds all processes of the machine have used since boot (/proc/stat; NaN off Linux).
+
+    User, nice, system, irq, softirq and steal time of every core.
+    """
     try:
         with open('/proc/stat', encoding='ascii') as stream:
             fields = stream.readline().split()[1:]
@@ -250,7 +253,6 @@ def run(quick: bool, n_side: int | None = None) -> list[dict]:
                              f'{others["serial loop"]:.2f}); load {loads[label][0]:.1f} at '
                              f'the start, {loads[label][1]:.1f} at the end ({os.cpu_count()} '
                              f'cores)'})
-    load = loads['serial loop'][0]
     stages = _stages(poses, settings)
     total = sum(stages.values())
     for stage, seconds in stages.items():
@@ -267,7 +269,7 @@ def run(quick: bool, n_side: int | None = None) -> list[dict]:
         for name in PHASES:
             rows.append({'name': f'sweep, 2 workers ({method}): {name}', 'value': phase[name],
                          'unit': 's', 'baseline': None, 'baseline_value': None, 'ratio': None,
-                         'note': f'{100 * phase[name] / wall:.0f} % of the run\'s {wall:.1f} s '
+                         'note': f"{100 * phase[name] / wall:.0f} % of the run's {wall:.1f} s "
                                  f'for {n} poses (compute {compute_s[label]:.1f} s over '
                                  f'{phase["workers"]} workers); load {loads[label][0]:.1f}'})
     trip, size = _round_trip(one_row)

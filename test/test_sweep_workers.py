@@ -63,7 +63,7 @@ def test_worker_entry_point_imports_no_ros_plotting_or_client_code():
 
 
 def test_local_workers_are_forked_only_with_single_threaded_blas(monkeypatch):
-    """fork on Linux with OPENBLAS/OMP_NUM_THREADS=1 at import, else spawn."""
+    """Fork on Linux with OPENBLAS/OMP_NUM_THREADS=1 at import, else spawn."""
     monkeypatch.setattr(runner, 'BLAS_SINGLE_THREADED', True)
     assert runner.start_method() == ('fork' if sys.platform.startswith('linux') else 'spawn')
     monkeypatch.setattr(runner, 'BLAS_SINGLE_THREADED', False)
@@ -71,8 +71,11 @@ def test_local_workers_are_forked_only_with_single_threaded_blas(monkeypatch):
 
 
 def test_forked_workers_do_not_import_again_and_every_phase_is_timed(tmp_path):
-    """A 2-worker run from this (tools/env.sh) process forks; its workers find the pose code
-    loaded (a fresh import takes over 0.5 s), and the report times each phase."""
+    """
+    A 2-worker run from this (tools/env.sh) process forks, and each phase is timed.
+
+    Its workers find the pose code loaded (a fresh import takes over 0.5 s).
+    """
     settings = make_settings(['strut_damping_12'], [1.0], n_points=200)
     poses = np.array([[0.0, 0.0, 0.85, 0.0, 0.0], [0.05, 0.0, 0.85, 0.0, 0.0]])
     report = runner.run_sweep(poses, settings, tmp_path, n_workers=2, progress=False,

@@ -99,9 +99,11 @@ def _progress(total: int, enabled: bool) -> Any:
 
 def start_method() -> str:
     """
-    How local workers are started: ``fork`` (they inherit this process's imports) on Linux
-    when this process's BLAS is single-threaded (:data:`BLAS_SINGLE_THREADED`), else
-    ``spawn`` (a fresh interpreter that imports everything again).
+    How local workers are started: ``fork`` or ``spawn``.
+
+    ``fork`` (they inherit this process's imports) on Linux when this process's BLAS is
+    single-threaded (:data:`BLAS_SINGLE_THREADED`), else ``spawn`` (a fresh interpreter that
+    imports everything again).
     """
     if BLAS_SINGLE_THREADED and 'fork' in multiprocessing.get_all_start_methods():
         return 'fork'
