@@ -9,7 +9,8 @@ from pentapod_damper.laws import strut_bending_damper, tcp_damper
 from pentapod_sim.errors import ConfigError, PortError, RunError
 from pentapod_sim.plant.model import PlantModel
 from pentapod_sim.sim.closed_loop import excitation_matrix, simulate
-from pentapod_sim.sim.stepping import DiscretePlant, ForceMixer, ForceSource, modal_blocks
+from pentapod_sim.sim.modal_blocks import modal_blocks
+from pentapod_sim.sim.stepping import DiscretePlant, ForceMixer, ForceSource
 
 TCP = ['tcp_force_x', 'tcp_force_y', 'tcp_force_z']
 

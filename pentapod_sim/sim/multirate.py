@@ -35,7 +35,8 @@ import numpy.typing as npt
 
 from pentapod_sim.errors import ConfigError
 from pentapod_sim.parameters import sample_time
-from pentapod_sim.sim.stepping import DEFAULT_MAX_STATE_NORM, DiscretePlant, modal_blocks
+from pentapod_sim.sim.modal_blocks import modal_blocks
+from pentapod_sim.sim.stepping import DEFAULT_MAX_STATE_NORM, DiscretePlant
 
 if TYPE_CHECKING:
     from pentapod_sim.plant.drives import DrivenPlant

@@ -24,6 +24,7 @@ import numpy as np
 import numpy.typing as npt
 
 from pentapod_sim.errors import ConfigError, PortError, RunError
+from pentapod_sim.sim.modal_blocks import modal_blocks
 
 LOG = logging.getLogger(__name__)
 
@@ -193,32 +194,6 @@ class DiscretePlant:
         """The norm the divergence guard bounds, ``||w x_k||_2``."""
         w = self._x if self.state_scale is None else self._x * self.state_scale
         return float(np.sqrt(w @ w))
-
-
-def modal_blocks(a: npt.NDArray[np.float64]) -> npt.NDArray[np.float64] | None:
-    """
-    The 2x2 blocks of a modal A_d, or None if A_d is not of that layout.
-
-    Parameters
-    ----------
-    a : (2m, 2m) ndarray
-        State matrix with states ``[q_1..q_m, dq_1..dq_m]``.
-
-    Returns
-    -------
-    (2, 2, m) ndarray or None
-        ``P[i, j]`` = diagonal of block (i, j) of A_d, if A_d has no other non-zero entry.
-    """
-    n = a.shape[0]
-    if n == 0 or n % 2:
-        return None
-    m = n // 2
-    idx = np.arange(m)
-    rows, cols = np.array([[idx, idx], [idx + m, idx + m]]), np.array([[idx, idx + m]] * 2)
-    blocks = a[rows, cols]
-    rebuilt = np.zeros_like(a)
-    rebuilt[rows, cols] = blocks
-    return blocks if np.array_equal(rebuilt, a) else None
 
 
 @dataclass
