@@ -18,7 +18,7 @@ from dataclasses import dataclass, replace
 from typing import Any, Callable, Mapping, Sequence
 
 from pentapod_damper.laws import Dynamics, ProofMassActuator, ViscousDamper
-from pentapod_damper.laws.linear import SteppedLaw
+from pentapod_damper.laws.linear import DrivesLaw
 from pentapod_damper.scenario_laws import scenario_laws
 from pentapod_sim.errors import ConfigError
 from pentapod_sim.scenario.files import read_scenario
@@ -56,10 +56,10 @@ class _FixedModels:
     def discrete(self, dt: float) -> list[Any]:
         out = []
         for law in self.make(dt):
-            cascade = getattr(law, 'law', None)
-            if isinstance(cascade, FeedDrives):
+            if isinstance(law, DrivesLaw):
                 # the drives are the machine and keep their delay; their IFF gets the extra
                 # sample, as the tuned HAC-LAC family's does
+                cascade = law.law
                 if cascade.iff_gain and self.extra:
                     dyn = cascade.iff_dynamics
                     cascade = replace(cascade,
@@ -120,9 +120,8 @@ def _scenario_dampers(scenario: str) -> Callable[[Sequence[int], float], list[An
     def make(struts: Sequence[int], dt: float) -> list[Any]:
         out: list[Any] = []
         for law in scenario_laws(sections, dt):
-            cascade = getattr(law, 'law', None)
-            if isinstance(cascade, FeedDrives):
-                out += _drives_on(cascade, struts, dt)
+            if isinstance(law, DrivesLaw):
+                out += _drives_on(law.law, struts, dt)
                 continue
             if not isinstance(law, ViscousDamper):
                 continue
@@ -142,7 +141,7 @@ def _drives_on(cascade: FeedDrives, struts: Sequence[int], dt: float) -> list[An
     rest = tuple(i for i in cascade.struts if i not in struts)
     parts = ([replace(cascade, struts=inside)] if inside else []) + (
         [replace(cascade, struts=rest, iff_gain=0.0, iff_omega=0.0)] if rest else [])
-    return [SteppedLaw(part, dt) for part in parts]
+    return [DrivesLaw(part, dt) for part in parts]
 
 
 def _ideal_bending(gain: float) -> Callable[[Sequence[int], float], list[Any]]:

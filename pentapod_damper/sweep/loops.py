@@ -29,6 +29,7 @@ import numpy.typing as npt
 import scipy.linalg as sla
 
 from pentapod_damper.laws import ProofMassActuator
+from pentapod_damper.laws.linear import DrivesLaw
 from pentapod_damper.scenario_laws import continuous_dampers, scenario_laws
 from pentapod_damper.study.analytic import (
     continuous_frf,
@@ -42,7 +43,6 @@ from pentapod_sim.plant.frf import damper_feedback
 from pentapod_sim.plant.model import PlantModel
 from pentapod_sim.plant.ports import collocated_output
 from pentapod_sim.sim.controllers import controller_blocks, controller_of, DiscreteController
-from pentapod_sim.sim.drives import FeedDrives
 from pentapod_sim.sim.loop_poles import continuous_loop_system
 from pentapod_sim.sim.stability import plant_radius
 
@@ -74,12 +74,11 @@ class Loop:
                  factor: float = 1.0, drives: DriveSet | None = None) -> None:
         every = scenario_laws(sections, dt)
         self.drives = drives
-        self.cascade = [law.law for law in every
-                        if isinstance(getattr(law, 'law', None), FeedDrives)]
+        self.cascade = [law.law for law in every if isinstance(law, DrivesLaw)]
         if self.cascade and drives is None:
             raise ConfigError("a damper node runs the feed drives' cascade (drive_struts) but "
                               "the scenario's plant has no drives (its parameter drives)")
-        laws = [law for law in every if not isinstance(getattr(law, 'law', None), FeedDrives)]
+        laws = [law for law in every if not isinstance(law, DrivesLaw)]
         self.factor = float(factor)
         self.dampers = {p: g * factor for p, g in continuous_dampers(laws).items()}
         self.pmas = [law for law in laws if isinstance(law, ProofMassActuator)]
@@ -245,7 +244,7 @@ def loop_columns(plant: PlantModel, loops: dict[str, Loop], freq: np.ndarray,
     for label, loop in [('open', None)] + list(loops.items()):
         dampers = loop.dampers if loop else {}
         driven = loop is not None and loop.drives is not None
-        if loop is not None and loop.drives is not None:
+        if loop is not None and loop.drives is not None:     # (driven; narrows for mypy)
             sys = loop.continuous_system(sub)
         else:
             sys = damper_feedback(sub, dampers) if dampers else sub.to_statespace()
