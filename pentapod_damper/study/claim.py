@@ -11,11 +11,11 @@ sentences from those two CSV files: the shares by peak and RMS, where the paper'
 """
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 from pentapod_damper.design.report import best_strut_law
 from pentapod_damper.study.report import read_csv
+from pentapod_damper.study.strut_laws import percent
 from pentapod_damper.study.strut_laws import TABLE as STRUT_LAWS
 
 #: the paper's claim: struts 1 and 2 give at least this share of the all-strut improvement
@@ -73,13 +73,9 @@ def verdict_laws(results: Path, positions: list[str]
 
 
 def _shares(rows: dict[str, dict[str, str]], positions: list[str]) -> str:
-    return ' and '.join(f'{_pct(rows[p]["struts12_share_peak"])} / '
-                        f'{_pct(rows[p]["struts12_share_rms"])} ({p})' for p in positions)
-
-
-def _pct(text: str) -> str:
-    value = float(text)
-    return f'{value:.0%}' if math.isfinite(value) else '-'
+    return ' and '.join(f'{percent(float(rows[p]["struts12_share_peak"]))} / '
+                        f'{percent(float(rows[p]["struts12_share_rms"]))} ({p})'
+                        for p in positions)
 
 
 def _law_names(rows: dict[str, dict[str, str]]) -> str:

@@ -80,13 +80,14 @@ class StrutLaws:
     def describe(self) -> str:
         own = [r for r in self.rows if r['gains_tuned_at'] == self.position]
         laws = '; '.join(f'{r["law"]} {r["peak_reduction"]:.2f}x, struts 1+2 '
-                         f'{_pct(r["struts12_share_peak"])} / {_pct(r["struts12_share_rms"])}'
-                         for r in own)
+                         f'{percent(r["struts12_share_peak"])} / '
+                         f'{percent(r["struts12_share_rms"])}' for r in own)
         return (f"{self.position}: the damper table's strut laws on the study's plant "
                 f'({len(self.rows)} rows: all struts and struts 1+2), gains tuned here: {laws}')
 
 
-def _pct(value: float) -> str:
+def percent(value: float) -> str:
+    """A share as a whole percentage ('-' for NaN: no improvement to share)."""
     return f'{value:.0%}' if math.isfinite(value) else '-'
 
 
