@@ -9,15 +9,22 @@ files before the process exits with :func:`exit_code` (128 + signal number, the 
 convention: 130 for SIGINT, 143 for SIGTERM, 129 for SIGHUP).
 
 A second signal of the same kind while stopping changes nothing; stopping never waits without a
-time limit, so a process cannot hang on a signal.
+time limit, so a process cannot hang on a signal. Work abandoned on a stop (seconds of LAPACK in
+a thread, :func:`unless_requested`) is waited for at the end (:func:`finish`) for at most
+:data:`ABANDONED_WAIT`; a process whose work is still running then exits without Python's
+finalisation, which would tear down the libraries under that thread (a composed run stopped
+during its truncation check ended "killed by SIGSEGV").
 """
 from __future__ import annotations
 
 import ctypes
+import logging
 import os
 from pathlib import Path
 import signal
+import sys
 import threading
+import time
 from types import FrameType
 from typing import Any, Callable, TypeVar
 
@@ -27,7 +34,12 @@ T = TypeVar('T')
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 _PR_SET_PDEATHSIG = 1
 
+#: Wall time [s] the end of a process waits for work abandoned on a stop (:func:`finish`).
+ABANDONED_WAIT = 0.5
+
 _received: list[int] = []
+#: threads of :func:`unless_requested` given up on a stop, perhaps still running
+_abandoned: list[threading.Thread] = []
 
 
 def _handler(signum: int, frame: FrameType | None) -> None:
@@ -93,14 +105,15 @@ def die_with_parent() -> None:
         os.kill(os.getpid(), signal.SIGTERM)
 
 
-def unless_requested(work: Callable[[], T], poll: float = 0.05) -> T | None:
+def unless_requested(work: Callable[[], T], poll: float = 0.05, name: str = 'work') -> T | None:
     """
     ``work()``, or None as soon as a stop is requested while it runs.
 
     For seconds of numerics that release the GIL (LAPACK): ``work`` runs in a daemon thread
     and this (main) thread waits in slices of ``poll`` s, so the stop is noticed within one
     slice. An abandoned ``work`` goes on until it ends or the process exits; it must not touch
-    what the caller goes on to use. An exception of ``work`` is raised here.
+    what the caller goes on to use (:func:`finish` waits for it at the end; ``name`` names it
+    there). An exception of ``work`` is raised here.
     """
     if requested():
         return None
@@ -111,15 +124,48 @@ def unless_requested(work: Callable[[], T], poll: float = 0.05) -> T | None:
             out['value'] = work()
         except BaseException as err:      # handed to the caller
             out['error'] = err
-    worker = threading.Thread(target=run, name='unless_requested', daemon=True)
+    worker = threading.Thread(target=run, name=name, daemon=True)
     worker.start()
     while worker.is_alive():
         worker.join(poll)
         if requested():
+            _abandoned.append(worker)
             return None
     if 'error' in out:
         raise out['error']
     return out['value']
+
+
+def abandoned_work() -> list[str]:
+    """Names of the threads :func:`unless_requested` gave up on that are still running."""
+    return [t.name for t in _abandoned if t.is_alive()]
+
+
+def finish(code: int, wait: float = ABANDONED_WAIT) -> int:
+    """
+    ``code``, once the work abandoned on a stop has ended; or exit with ``code`` at once.
+
+    The end of a process's main, after its nodes, files and ROS context are closed. Work given
+    up by :func:`unless_requested` is waited for at most ``wait`` s. If some is still running,
+    the process exits now with ``code`` (standard streams and logging flushed) instead of
+    returning: Python's finalisation, and the libraries' exit handlers after it, would run
+    while that thread is inside LAPACK, and the process died of SIGSEGV.
+    """
+    end = time.monotonic() + wait
+    for thread in list(_abandoned):
+        thread.join(max(0.0, end - time.monotonic()))
+    if not abandoned_work():
+        _abandoned.clear()
+        return code
+    print(f'exiting with {", ".join(abandoned_work())} still running (given up on the stop)',
+          file=sys.stderr)
+    logging.shutdown()
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):       # closed or gone: nothing left to flush
+            pass
+    os._exit(code)
 
 
 def started_by_ros2_run(pid: int | None = None) -> bool:

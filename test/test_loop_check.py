@@ -188,3 +188,36 @@ def test_unless_requested_gives_the_result_or_the_error_of_the_work():
     shutdown.request(signal.SIGTERM)
     assert shutdown.unless_requested(lambda: ran.append(1)) is None
     assert ran == []            # a stop already requested: the work does not start
+
+
+_FINISH = """
+import sys, threading, time
+from pentapod_sim import shutdown
+release = threading.Event()
+shutdown.install()
+def work():
+    release.wait({hold})
+    return 1
+threading.Timer(0.2, shutdown.request).start()
+assert shutdown.unless_requested(work, name='long work') is None
+print('given up', flush=True)
+code = shutdown.finish(7, wait=0.5)
+print('returned', code, flush=True)
+sys.exit(code + 1)
+"""
+
+
+@pytest.mark.parametrize('hold, code, said', [(0.3, 8, 'returned 7'),
+                                              (60.0, 7, 'exiting with long work still')])
+def test_a_process_ends_with_its_code_whether_or_not_given_up_work_still_runs(hold, code, said):
+    """Work ending within the wait: finish returns; still running: the process exits at once."""
+    import subprocess
+    import sys
+    import time
+    start = time.monotonic()
+    proc = subprocess.run([sys.executable, '-c', _FINISH.format(hold=hold)],
+                          capture_output=True, text=True, timeout=30)
+    out = proc.stdout + proc.stderr
+    assert proc.returncode == code, out
+    assert 'given up' in out and said in out, out
+    assert time.monotonic() - start < 20.0      # not the 60 s of the work

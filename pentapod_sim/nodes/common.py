@@ -168,7 +168,9 @@ def run_node(factory: Callable[..., object], argv=None, run: Callable | None = N
     number after a clean stop on SIGINT, SIGTERM or SIGHUP (:mod:`pentapod_sim.shutdown`),
     unless the node's ``stopped_after_run_end()`` says (and logs) that the plant's run had
     ended before the signal: a source stopped after the run it served is a clean end, 0
-    (:class:`pentapod_sim.nodes.run_status.PlantRunWatch`).
+    (:class:`pentapod_sim.nodes.run_status.PlantRunWatch`). A process stopped while work it
+    gave up on still runs (a truncation check's LAPACK) exits with that code here instead of
+    returning (:func:`pentapod_sim.shutdown.finish`).
     """
     args = list(sys.argv if argv is None else argv)
     try:
@@ -221,8 +223,8 @@ def run_node(factory: Callable[..., object], argv=None, run: Callable | None = N
         rclpy.try_shutdown()
         shutdown.ignore_from_now()      # stopped: a late second signal must not kill it
     if served:
-        return 0
+        return shutdown.finish(0)
     if code == 0 and shutdown.requested():
         print(f'stopped by {shutdown.signal_name()}', file=sys.stderr)
         code = shutdown.exit_code()
-    return code
+    return shutdown.finish(code)     # or exits now, if work given up on the stop still runs

@@ -246,7 +246,8 @@ class TruncationCheck:
         try:    # seconds of LAPACK for a check model: a stop signal must not wait for them
             result = shutdown.unless_requested(lambda: check_loop(
                 self.plant, check, list(models.values()), self.dt, 'warn', label,
-                lambda msg: shutdown.requested() or self.log.info(msg), self.drives))
+                lambda msg: shutdown.requested() or self.log.info(msg), self.drives),
+                name='truncation check')
         finally:
             quiet.disabled = was
         if result is None:
