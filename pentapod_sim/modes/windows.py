@@ -52,6 +52,9 @@ BLOCK_SIZE = 16
 #: Largest basis of :func:`block_lanczos`, in multiples of the modes asked for (at least
 #: ``k + 6 BLOCK_SIZE`` vectors); then it restarts from its best Ritz vectors.
 BLOCK_MAX_DIM = 5.0
+#: ... and at most this many bytes of basis vectors (2 GB: 330 vectors at 763k DOF; a window
+#: process also holds its factorisation, and two of them run side by side).
+BLOCK_MAX_BYTES = 2 * 1024 ** 3
 #: Restarts of :func:`block_lanczos` after which a window that has not converged is a
 #: ModalError (the slicing's Sturm counts catch modes missed otherwise).
 BLOCK_RESTARTS = 50
@@ -178,13 +181,18 @@ def block_lanczos(K: sp.spmatrix, M: sp.spmatrix, factor: ShiftedFactor, k: int,
     ``k`` Ritz values largest in ``|nu|`` all have residuals
     ``<= BLOCK_TOL_FACTOR tol |nu|``. When the basis
     is full (``max_dim`` vectors, default :data:`BLOCK_MAX_DIM` ``k``, at least
-    ``k + 6 block``; at most n) it restarts from the Ritz vectors nearest ``sigma`` (about
+    ``k + 6 block``, but not above :data:`BLOCK_MAX_BYTES` unless that leaves less than
+    ``k + 3 block``; at most n) it restarts from the Ritz vectors nearest ``sigma`` (about
     half the free room kept) and ``V_next``: ``T`` is then their Ritz values with the
     coupling ``B Y_last`` (thick restart). ``checkpoint`` is called before every block solve.
     Raises ModalError naming the window after ``restarts`` restarts without convergence.
     """
     n, sigma = K.shape[0], factor.sigma
-    bound = max_dim if max_dim is not None else max(int(BLOCK_MAX_DIM * k), k + 6 * block)
+    if max_dim is None:
+        bound = max(int(BLOCK_MAX_DIM * k), k + 6 * block)
+        bound = max(min(bound, BLOCK_MAX_BYTES // (8 * n)), k + 3 * block)
+    else:
+        bound = max_dim
     b = max(1, min(block, min(bound, n) // 3))
     bound = min(bound, n) // b * b         # whole blocks
     keep_n = min(max(k, (bound + k) // 2 - b), bound - 2 * b)   # Ritz vectors kept
@@ -245,7 +253,8 @@ def block_lanczos(K: sp.spmatrix, M: sp.spmatrix, factor: ShiftedFactor, k: int,
                              f'{tol:g} after {cycle} restarts of a basis of {bound} vectors')
         cycle += 1
         p = min(keep_n, m)
-        Q[:, :p] = Q[:, :m] @ Y[:, :p]
+        for lo in range(0, n, 65536):       # in row chunks: no second basis in memory
+            Q[lo:lo + 65536, :p] = Q[lo:lo + 65536, :m] @ Y[:, :p]
         T[:] = 0.0
         T[:p, :p] = np.diag(nu[:p])
         T[p:p + b, :p] = coupling[:, :p]
