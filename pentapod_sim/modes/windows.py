@@ -16,8 +16,8 @@ The problem is ``K phi = lambda M phi``; the factorisation of ``K - sigma M``
   primme`` builds it against a system BLAS and LAPACK, e.g. Debian's libopenblas-dev).
 * ``'block'``: block shift-invert Lanczos (:func:`block_lanczos`): the Krylov space of
   ``S = (K - sigma M)^-1 M`` grown :data:`BLOCK_SIZE` vectors at a time, so the factorisation
-  is applied to a block of right-hand sides in one call (at 104k DOF with PARDISO 8 x cheaper
-  per vector than one at a time, docs/model.md); full M-orthogonalisation against the whole
+  is applied to a block of right-hand sides in one call (at 104k DOF with PARDISO 6-8 x cheaper
+  per vector than one at a time, docs/modes.md); full M-orthogonalisation against the whole
   basis (twice), Rayleigh-Ritz in the M inner product, converged when every one of the ``k``
   Ritz pairs nearest ``sigma`` meets ARPACK's criterion ``||S x - nu x||_M <= tol |nu|``
   tightened by :data:`BLOCK_TOL_FACTOR`;
@@ -176,8 +176,9 @@ def block_lanczos(K: sp.spmatrix, M: sp.spmatrix, factor: ShiftedFactor, k: int,
 
     ``S = (K - sigma M)^-1 M`` is self-adjoint in the M inner product; its eigenvalues are
     ``nu = 1 / (lambda - sigma)``. The basis ``Q`` (M-orthonormal, blocks of ``block``
-    vectors, a seeded random start) grows by ``S V`` of its newest block, M-orthogonalised
-    twice against all of ``Q`` (classical Gram-Schmidt in blocks); the coefficients give
+    vectors, started from ``S`` applied to a seeded random block) grows by ``S V`` of its
+    newest block, M-orthogonalised twice by classical Gram-Schmidt in blocks (against the
+    blocks the recurrence couples it to, then against all of ``Q``); the coefficients give
     ``T = Q^T M S Q`` and ``S Q = Q T + V_next B E^T``, so the residual of a Ritz pair
     ``(nu, Q y)`` is ``||B y_last||`` without touching the long vectors. Converged when the
     ``k`` Ritz values largest in ``|nu|`` all have residuals
@@ -204,7 +205,8 @@ def block_lanczos(K: sp.spmatrix, M: sp.spmatrix, factor: ShiftedFactor, k: int,
         checkpoint()
     # S applied to the random block, as ARPACK does in shift-invert mode: a start outside S's
     # range carries the pencil's highest modes into the Ritz vectors, where K amplifies them
-    # (a closed-form chain's residuals were 1e-6 with a random start, 1e-9 with this one)
+    # (with ARPACK's test, a closed-form chain's residuals were 1.1e-6 with a random start and
+    # 1.4e-7 with this one)
     start = np.asarray(factor.lu.solve(np.asfortranarray(M @ start)), dtype=np.float64)
     V, MV, _ = _m_orthonormal(start, M @ start, rng, None, M)
     Q = np.empty((n, bound), order='F')     # pages are touched only as the basis grows
