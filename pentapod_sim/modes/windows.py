@@ -182,7 +182,8 @@ def block_lanczos(K: sp.spmatrix, M: sp.spmatrix, factor: ShiftedFactor, k: int,
     ``T = Q^T M S Q`` and ``S Q = Q T + V_next B E^T``, so the residual of a Ritz pair
     ``(nu, Q y)`` is ``||B y_last||`` without touching the long vectors. Converged when the
     ``k`` Ritz values largest in ``|nu|`` all have residuals
-    ``<= BLOCK_TOL_FACTOR tol |nu|``. When the basis
+    ``<= BLOCK_TOL_FACTOR tol |nu|`` (no rounding floor: a floor of ``1000 eps max |nu|``
+    bound in the frame's windows: their residuals rose from 6e-10 to 9e-8). When the basis
     is full (``max_dim`` vectors, default :data:`BLOCK_MAX_DIM` ``k``, at least
     ``k + 6 block``, but not above :data:`BLOCK_MAX_BYTES` unless that leaves less than
     ``k + 3 block``; at most n) it restarts from the Ritz vectors nearest ``sigma`` (about
