@@ -14,6 +14,7 @@ model build included) is its own. Usage::
     python bench/bench_modes.py [--quick]
     python bench/bench_modes.py --case ours --element-size 0.002 --n-modes 500   # one case
     python bench/bench_modes.py --case primme --element-size 0.002               # PRIMME
+    python bench/bench_modes.py --case block --element-size 0.002                # block Lanczos
 """
 from __future__ import annotations
 
@@ -37,7 +38,7 @@ BASELINE = 'eigsh(K, k, M, sigma=0)'
 #: PRIMME's time limit per case, relative to ARPACK's wall time on the same model.
 PRIMME_TIME_LIMIT = 3.0
 #: Window solver of each case kind (``plain`` is the baseline without slicing).
-METHOD = {'ours': None, 'arpack': 'arpack', 'primme': 'primme'}
+METHOD = {'ours': None, 'arpack': 'arpack', 'primme': 'primme', 'block': 'block'}
 
 
 def _one_case(kind: str, element_size: float | None, n_modes: int,

@@ -195,9 +195,11 @@ def solve_modes(K: sp.spmatrix, M: sp.spmatrix, *, n_modes: int | None = None,
         Called after each slice as ``progress(found, wanted, message)``.
     tol_check : float
         Relative residual / M-orthogonality error above which a warning is issued.
-    method : {'arpack', 'primme'}
+    method : {'arpack', 'primme', 'block'}
         Eigensolver per window (:data:`pentapod_sim.modes.windows.METHODS`): shift-invert
-        Lanczos (ARPACK through scipy) or block Davidson (PRIMME, an optional package).
+        Lanczos (ARPACK through scipy), block Davidson (PRIMME, an optional package) or
+        block shift-invert Lanczos (blocks of solves in one call; the plate frame's
+        reduction uses it).
     workers : int, optional
         Processes solving windows side by side (1: all in this process). Default: one per
         core for problems of at least 100,000 DOF, else 1
