@@ -124,22 +124,27 @@ def test_a_huge_sample_rate_is_refused_before_any_work(tmp_path):
     assert not list((tmp_path / 'models').glob('check_*'))
 
 
+def _sigint_after(run, *lines: str) -> tuple[int, float, str]:
+    """SIGINT to a runner once its output showed ``lines`` (in order): exit code, s, output."""
+    try:
+        for line in lines:
+            run.wait_for(line, timeout=180)
+        sent = time.monotonic()
+        run.proc.send_signal(signal.SIGINT)
+        code = run.proc.wait(timeout=30)
+        return code, time.monotonic() - sent, run.text()
+    finally:
+        run.kill_all()
+
+
 @pytest.mark.ros
 @pytest.mark.slow
 def test_sigint_during_the_check_model_build_stops_the_plant_at_once(tmp_path):
     """5 kHz: the 10 kHz check model (seconds to build) reports progress; SIGINT ends it."""
     from test_stopping import Runner
     run = Runner(real_scenario(tmp_path, 5000.0), tmp_path, '--timeout', '300')
-    try:
-        run.wait_for('building the check model of P2', timeout=180)
-        run.wait_for('modes below 10000 Hz solved', timeout=60)        # progress
-        sent = time.monotonic()
-        run.proc.send_signal(signal.SIGINT)
-        code = run.proc.wait(timeout=30)
-        took = time.monotonic() - sent
-    finally:
-        run.kill_all()
-    out = run.text()
+    code, took, out = _sigint_after(run, 'building the check model of P2',
+                                    'modes below 10000 Hz solved')      # progress
     assert code == 130, out
     assert took < 3.0, (took, out)              # the runner's SIGKILL would come after 5 s
     assert 'stopped by SIGINT' in out and 'killed' not in out, out
@@ -163,15 +168,7 @@ def test_sigint_during_the_loops_eigenvalues_ends_a_composed_run_cleanly(tmp_pat
     scenario = real_scenario(tmp_path, 5000.0)
     for attempt in range(3):
         run = Runner(scenario, tmp_path, '--composed', '--timeout', '300')
-        try:
-            run.wait_for('eigenvalues of the sampled loop', timeout=180)
-            sent = time.monotonic()
-            run.proc.send_signal(signal.SIGINT)
-            code = run.proc.wait(timeout=30)
-            took = time.monotonic() - sent
-        finally:
-            run.kill_all()
-        out = run.text()
+        code, took, out = _sigint_after(run, 'eigenvalues of the sampled loop')
         assert code == 130, (attempt, out)
         assert 'killed' not in out and 'SIGSEGV' not in out, (attempt, out)
         assert 'exiting with truncation check still running' in out, (attempt, out)  # the race

@@ -171,9 +171,15 @@ def test_a_window_process_does_not_outlive_its_caller(tmp_path):
 
 
 def test_ctrl_c_stops_the_modes_command_and_its_window_processes():
-    """SIGINT to the process group, as a terminal's Ctrl-C: one line, exit 130, nothing left."""
+    """
+    SIGINT to the process group, as a terminal's Ctrl-C: one line, exit 130, nothing left.
+
+    The job (1000 modes, windows of 20: minutes) cannot end before the signal even when this
+    test is starved of CPU after its second window: with 300 modes (28 s alone) a loaded
+    suite once saw the command finish first and exit 0.
+    """
     cmd = [sys.executable, '-m', 'pentapod_sim.cli.modes', '--position', 'P1',
-           '--element-size', '0.004', '--n-modes', '300', '--modes-per-window', '20',
+           '--element-size', '0.004', '--n-modes', '1000', '--modes-per-window', '20',
            '--no-neuber', '--workers', '2', '--out', '/nonexistent/never-written']
     caller = subprocess.Popen(cmd, cwd=ROOT, stderr=subprocess.PIPE, text=True,
                               start_new_session=True)
