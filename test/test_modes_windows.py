@@ -12,6 +12,7 @@ from numpy.testing import assert_allclose
 import pytest
 from test_modes_solver import chain_frequencies, fixed_free_chain
 
+from fixtures.processes import sigint_as_in_a_terminal
 from pentapod_sim.errors import ModalError
 from pentapod_sim.modes import slicing, window_pool
 from pentapod_sim.modes.solver import solve_modes
@@ -182,7 +183,7 @@ def test_ctrl_c_stops_the_modes_command_and_its_window_processes():
            '--element-size', '0.004', '--n-modes', '1000', '--modes-per-window', '20',
            '--no-neuber', '--workers', '2', '--out', '/nonexistent/never-written']
     caller = subprocess.Popen(cmd, cwd=ROOT, stderr=subprocess.PIPE, text=True,
-                              start_new_session=True)
+                              start_new_session=True, preexec_fn=sigint_as_in_a_terminal)
     try:
         err = ''
         while 'window 2:' not in err:   # the window processes are at work

@@ -9,6 +9,7 @@ import time
 import numpy as np
 import pytest
 
+from fixtures.processes import sigint_as_in_a_terminal
 from pentapod_damper.scenario_laws import continuous_dampers, scenario_laws
 from pentapod_damper.study.analytic import continuous_frf, improvement_share, peak_and_rms
 from pentapod_damper.sweep import compute as compute_module
@@ -120,11 +121,8 @@ def test_interrupted_sweep_resumes_without_recomputing(settings, serial, tmp_pat
            *['--pose=' + ','.join(map(str, q)) for q in poses_deg], '--scenarios',
            ','.join(SCENARIOS), '--n-points', str(N_POINTS), '--out', str(tmp_path),
            '--workers', '2', '--no-plots', '--no-progress']
-    # a suite started as a background job of a non-interactive shell runs with SIGINT ignored,
-    # and a child inherits that; a user's Ctrl-C reaches a sweep with the default handling
     proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                            text=True,
-                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+                            text=True, preexec_fn=sigint_as_in_a_terminal)
     results = tmp_path / 'results'
     deadline = time.monotonic() + 240
     while not list(results.glob('*.parquet')) and proc.poll() is None:   # first task done
