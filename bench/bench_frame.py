@@ -50,14 +50,23 @@ from pentapod_sim.modes.windows import BLOCK_SIZE, mass_normalise, window_eigs  
 WINDOW_MESH = 0.2
 
 
-def shell_machine(quick: bool):
-    """config/machine.yaml on the plate frame (coarse if ``quick``)."""
+def shell_machine(quick: bool, element_size: float | None = None):
+    """config/machine.yaml on the plate frame (coarse if ``quick``; else ``element_size`` [m])."""
     m = load_machine()
     sh = m.shell_frame
     if quick:
         sh = dataclasses.replace(sh, element_size=0.3, f_interest=300.0)
+    elif element_size is not None:
+        sh = dataclasses.replace(sh, element_size=element_size)
     return dataclasses.replace(m, frame=dataclasses.replace(m.frame, model='shells'),
                                shell_frame=sh)
+
+
+def _interior(machine):
+    """``K_ii``, ``M_ii`` of the frame's FE model: every DOF but the interface's (last)."""
+    fe = frame_fe(machine)
+    inner = np.arange(fe.n_dof - 6 * len(fe.interface))
+    return fe.K[inner][:, inner].tocsr(), fe.M[inner][:, inner].tocsr()
 
 
 def _timed(func, *args, **kwargs):
@@ -111,9 +120,7 @@ def accuracy_row() -> dict:
 
 def factorisation_row(machine) -> dict | None:
     """PARDISO against SuperLU on ``K_ii - sigma M_ii`` of the frame (None without PARDISO)."""
-    fe = frame_fe(machine)
-    inner = np.arange(fe.n_dof - 6 * len(fe.interface))
-    K, M = fe.K[inner][:, inner].tocsr(), fe.M[inner][:, inner].tocsr()
+    K, M = _interior(machine)
     if choose_backend(K.shape[0]) != 'pardiso':
         return None
     sigma = (2 * np.pi * machine.shell_frame.f_interest) ** 2     # inside the spectrum
@@ -142,13 +149,7 @@ def factorisation_row(machine) -> dict | None:
 
 def window_row() -> dict:
     """One window of the frame's fixed-interface modes: block Lanczos against ARPACK."""
-    machine = load_machine()
-    sh = dataclasses.replace(machine.shell_frame, element_size=WINDOW_MESH)
-    machine = dataclasses.replace(machine, shell_frame=sh,
-                                  frame=dataclasses.replace(machine.frame, model='shells'))
-    fe = frame_fe(machine)
-    inner = np.arange(fe.n_dof - 6 * len(fe.interface))
-    K, M = fe.K[inner][:, inner].tocsr(), fe.M[inner][:, inner].tocsr()
+    K, M = _interior(shell_machine(quick=False, element_size=WINDOW_MESH))
     factor = factor_at(K, M, (2 * np.pi * 500.0) ** 2)
     k = int(WINDOW_PAD * MODES_PER_WINDOW)
     out = {}
