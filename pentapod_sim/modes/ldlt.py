@@ -9,8 +9,15 @@ type -2, Bunch-Kaufman pivoting in supernodes) also reports the inertia of the f
 needs. It comes with the ``pypardiso`` package (MKL's wheels; x86-64 only); where it is not
 installed the solver stays with SuperLU (:func:`pentapod_sim.modes.sturm.factorize_shifted`).
 
-Only the public interface of ``pypardiso.PyPardisoSolver`` is used (``set_iparm``,
-``factorize``, ``solve``, ``get_iparm``, ``free_memory``). Parameters set (1-based iparm, as
+The pencil ``K - sigma M`` has the same pattern at every shift, so PARDISO's analysis
+(METIS ordering and symbolic factorisation, phase 11) is done once per pattern and process:
+a released factorisation leaves its handle, numerical factor freed and analysis kept, for the
+next matrix of that pattern, which then needs only phase 22. At 763,350 DOF (the paper-scale
+frame's interior) the analysis took 6.3 s and the numerical factorisation 9.3 s
+(``bench/bench_frame.py``, row ``factorisation``). pypardiso's ``factorize`` always runs both
+phases; phase 22 alone goes through its ``set_phase`` and ``_call_pardiso`` (the one call that
+is not its public interface). Otherwise ``set_iparm``, ``factorize``, ``solve``,
+``get_iparm`` and ``free_memory`` are used. Parameters set (1-based iparm, as
 MKL's documentation): 1 = 1 (own settings), 2 = 2 (METIS ordering), 8 = 0 (iterative
 refinement only after perturbed pivots), 10 = 8 (pivot perturbation 1e-8), 11 = 13 = 0 (no
 scaling or matching: the pencils here are well scaled), 18 = -1 (report the factors'
@@ -24,12 +31,38 @@ solves of one vector are memory-bound and gain little from them.
 """
 from __future__ import annotations
 
+import hashlib
+import os
+from typing import Any
+
 import numpy as np
 import numpy.typing as npt
 import scipy.sparse as sp
 
 Array = npt.NDArray[np.float64]
 _SETTINGS = {1: 1, 2: 2, 8: 0, 10: 8, 11: 0, 13: 0, 18: -1, 21: 1}
+
+#: The analysed handle left by the last released factorisation: (pattern key, handle). One
+#: only, of this process (a forked process gets a copy of it, which the key's pid excludes).
+_spare: tuple[tuple[Any, ...], Any] | None = None
+
+
+def _pattern_key(upper: sp.csr_matrix) -> tuple[Any, ...]:
+    """What identifies a sparsity pattern (and the process that analysed it)."""
+    return (os.getpid(), upper.shape, hashlib.sha1(upper.indptr).hexdigest(),
+            hashlib.sha1(upper.indices).hexdigest())
+
+
+def _take_spare(key: tuple[Any, ...]) -> Any:
+    """The spare handle if it was analysed for ``key``, else None (a stale one is freed)."""
+    global _spare
+    spare, _spare = _spare, None
+    if spare is None:
+        return None
+    if spare[0] == key:
+        return spare[1]
+    spare[1].free_memory(everything=True)
+    return None
 
 
 def available() -> bool:
@@ -66,11 +99,21 @@ class PardisoLDLT:
         self._upper = sp.triu(A, format='csr').astype(np.float64)
         self._upper.sort_indices()
         self.shape = self._upper.shape
-        self._solver = pypardiso.PyPardisoSolver(mtype=-2)
-        for index, value in _SETTINGS.items():
-            self._solver.set_iparm(index, value)
-        # pypardiso keeps a copy of the matrix to recognise it in solve(); ours never changes
-        self._solver.factorize(self._upper)
+        self._key = _pattern_key(self._upper)
+        self._solver = _take_spare(self._key)
+        #: the analysis (ordering, symbolic factorisation) was reused from an earlier matrix
+        self.reused_analysis = self._solver is not None
+        if self._solver is None:
+            self._solver = pypardiso.PyPardisoSolver(mtype=-2)
+            for index, value in _SETTINGS.items():
+                self._solver.set_iparm(index, value)
+            # pypardiso keeps a copy of the matrix to recognise it in solve(); ours never
+            # changes
+            self._solver.factorize(self._upper)
+        else:                                   # numerical factorisation only
+            self._solver.set_phase(22)
+            self._solver._call_pardiso(self._upper, np.zeros((self.shape[0], 1)))
+            self._solver.factorized_A = self._upper   # solve() compares against it
         self.n_positive = int(self._solver.get_iparm(22))
         self.n_negative = int(self._solver.get_iparm(23))
         self.perturbed = int(self._solver.get_iparm(14))
@@ -78,6 +121,8 @@ class PardisoLDLT:
 
     def solve(self, b: npt.ArrayLike) -> Array:
         """``A^-1 b`` for a vector (n,) or a block of vectors (n, k)."""
+        if self._solver is None:
+            raise RuntimeError('this factorisation was freed')
         rhs = np.asarray(b, dtype=np.float64)
         if rhs.ndim == 2:
             # pypardiso passes the block column by column (Fortran order)
@@ -89,8 +134,15 @@ class PardisoLDLT:
         return self.n_negative
 
     def free(self) -> None:
-        """Release MKL's memory of this factorisation."""
-        self._solver.free_memory(everything=False)
+        """Release MKL's memory of this factorisation; its analysis stays for the next one."""
+        global _spare
+        solver, self._solver = getattr(self, '_solver', None), None
+        if solver is None:
+            return                              # freed already
+        solver.free_memory(everything=False)    # the numerical factor; the analysis stays
+        if _spare is not None:
+            _spare[1].free_memory(everything=True)
+        _spare = (self._key, solver)
 
     def __del__(self) -> None:
         try:

@@ -95,6 +95,8 @@ class _Solver:
 
     def __call__(self, sigma: float, k: int) -> Window:
         reused = self._last is not None and self._last.sigma == sigma
+        if not reused:
+            self._last = None   # released first: its PARDISO analysis serves the next shift
         factor = self._last if reused else factor_at(self.K, self.M, sigma, self.backend)
         assert factor is not None
         self._last = factor
