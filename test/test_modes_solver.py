@@ -86,6 +86,69 @@ class TestSharedFactorisation:
         assert res.sturm_count == res.n_modes == 100
         assert res.stats['factorisations'] <= res.stats['windows'] + 2 + res.stats['retries']
 
+    def test_a_window_that_does_not_reach_down_gets_a_window_in_its_gap(self, monkeypatch):
+        # every shift extrapolated three times too far: each window's lowest mode lies above
+        # the cut it should continue from; the gap's modes come from a window solved there
+        n = 3000
+        K, M = fixed_free_chain(n)
+        exact = chain_frequencies(n)
+        real = slicing._next_shift
+        asked = []
+
+        def too_far(lam, a, target):
+            return a + 3.0 * (real(lam, a, target) - a)
+
+        def recorded(self, sigma, k):
+            asked.append(k)
+            return solve(self, sigma, k)
+
+        solve = window_pool._Solver.__call__
+        monkeypatch.setattr(slicing, '_next_shift', too_far)
+        monkeypatch.setattr(window_pool._Solver, '__call__', recorded)
+        res = solve_modes(K, M, n_modes=150, modes_per_window=25, workers=1)
+        assert res.stats['gap_windows'] >= 2 and res.stats['retries'] == 0
+        assert_allclose(res.frequencies, exact[:150], rtol=1e-9)
+        assert_allclose(res.shapes.T @ (M @ res.shapes), np.eye(150), atol=1e-8)
+        # a gap window asks for the modes the Sturm count says are missing, not for 1.5 times
+        # a whole window's
+        assert min(asked) < slicing.WINDOW_PAD * 25
+
+    def test_the_last_window_asks_for_the_modes_left_below_f_max(self, monkeypatch):
+        n = 3000
+        K, M = fixed_free_chain(n)
+        exact = chain_frequencies(n)
+        asked = []
+        solve = window_pool._Solver.__call__
+
+        def recorded(self, sigma, k):
+            asked.append(k)
+            return solve(self, sigma, k)
+
+        monkeypatch.setattr(window_pool._Solver, '__call__', recorded)
+        f_max = 0.5 * (exact[59] + exact[60])         # 60 modes: 41 in the first window
+        res = solve_modes(K, M, f_max=f_max, modes_per_window=40, workers=1)
+        assert res.sturm_count == res.n_modes == 60
+        assert_allclose(res.frequencies, exact[:60], rtol=1e-9)
+        solving = [k for k in asked if k]
+        # one window after the first, for the 20 or so left (with the margin), not a whole
+        # window's 52
+        assert len(solving) == 2 and solving[1] < 0.75 * slicing.WINDOW_PAD * 40
+        # the last window takes all that is left when that is up to 1.25 windows
+        asked.clear()
+        f_max = 0.5 * (exact[99] + exact[100])        # 100 modes: about 39 left
+        res = solve_modes(K, M, f_max=f_max, modes_per_window=60, workers=1)
+        assert res.sturm_count == res.n_modes == 100
+        assert_allclose(res.frequencies, exact[:100], rtol=1e-9)
+        assert len([k for k in asked if k]) == 2
+        # more than that left: shared by equal windows
+        asked.clear()
+        f_max = 0.5 * (exact[159] + exact[160])       # 160 modes: about 119 left
+        res = solve_modes(K, M, f_max=f_max, modes_per_window=40, workers=1)
+        assert res.sturm_count == res.n_modes == 160
+        assert_allclose(res.frequencies, exact[:160], rtol=1e-9)
+        later = [k for k in asked if k][1:]       # each sized to a share, none a whole 52
+        assert len(later) >= 3 and max(later) < slicing.WINDOW_PAD * 40
+
     def test_shift_on_an_eigenvalue_still_gives_every_mode_once(self, monkeypatch):
         # every window shift put on an eigenvalue (closed form, exact to rounding): K - s M is
         # singular to rounding and its inertia may count that eigenvalue on either side

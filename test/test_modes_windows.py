@@ -54,13 +54,14 @@ def test_windows_side_by_side_give_the_closed_form_modes(monkeypatch, tmp_path):
     assert_allclose(res.frequencies, exact[:100], rtol=1e-9)
 
 
-@pytest.mark.parametrize(('stretch', 'what'), [(0.2, 'windows_unused'), (3.0, 'retries')])
+@pytest.mark.parametrize(('stretch', 'what'), [(0.2, 'windows_unused'), (3.0, 'gap_windows')])
 def test_windows_solved_ahead_at_bad_shifts_cost_time_not_modes(monkeypatch, stretch, what):
     """
     The shift of a window solved ahead is a guess; make it bad.
 
     Too close to the window before (0.2: it ends up below the cut it should continue from and
-    must be dropped) or too far (3.0: a gap of uncounted modes, so it must be solved again).
+    must be dropped) or too far (3.0: a gap of uncounted modes below it, so a window must be
+    solved in the gap).
     """
     real = slicing._edge_above
 

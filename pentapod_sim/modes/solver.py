@@ -249,7 +249,7 @@ def solve_modes(K: sp.spmatrix, M: sp.spmatrix, *, n_modes: int | None = None,
         residual = np.concatenate(sl.residual)[:n_modes]
         lam, phi, blocks = _assemble_blocks(sl.lam, sl.phi, n_modes)
         stats = {'method': f'{METHODS[method]}, spectrum slicing', 'windows': sl.windows,
-                 'retries': sl.retries, 'windows_unused': sl.unused,
+                 'retries': sl.retries, 'gap_windows': sl.gaps, 'windows_unused': sl.unused,
                  'window_processes': workers, 'factorisations': len(sl.factors),
                  'factorisation': backend,
                  'factorisation_time_s': float(sum(sl.factors)),
