@@ -317,3 +317,15 @@ def test_the_frame_alone_converges_from_above_with_the_mesh():
     change = coarse / fine - 1.0
     assert np.all(change > 0.0), change          # the element converges from above
     assert np.all(change < 0.05), change
+
+
+def test_the_symmetric_projection_equals_the_whole_product():
+    from pentapod_sim.modes import frame_reduction
+    rng = np.random.default_rng(4)
+    A = sp.random(500, 500, density=0.02, random_state=4, format='csr')
+    A = (A + A.T).tocsr()
+    for m in (frame_reduction.PROJECT_BLOCK - 1, 2 * frame_reduction.PROJECT_BLOCK + 37):
+        B = rng.standard_normal((500, m))
+        P = frame_reduction._symmetric_projection(A, B)
+        np.testing.assert_allclose(P, B.T @ (A.toarray() @ B), rtol=0, atol=1e-10)
+        assert np.array_equal(P, P.T)

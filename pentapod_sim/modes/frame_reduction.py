@@ -46,8 +46,14 @@ Array = npt.NDArray[np.float64]
 #: Interface DOFs solved at once for the constraint modes (bounds the dense right-hand side).
 RHS_BLOCK = 66
 #: Modes per spectrum slice: a shell frame's factorisation costs far more than a beam model's
-#: (2D fill), so fewer, larger windows than the solver's default of 30.
-MODES_PER_WINDOW = 80
+#: (2D fill), so fewer, larger windows than the solver's default of 30. At 763k DOF a window
+#: of 104 modes (80 of them delivered) took 113 s (factorisation and normalisation included)
+#: and one of 300 took 218 s: 1.4 against 0.95 s per delivered mode (docs/modes.md).
+MODES_PER_WINDOW = 230
+#: Window processes of the reduction: one, the windows in this process one after the other.
+#: Their solves and Gram-Schmidt passes are bound by memory bandwidth (one core reads 15 GB/s
+#: here, two together 19 GB/s), and a paper-scale window holds 6-8 GB.
+FRAME_WORKERS = 1
 #: Window eigensolver of the fixed-interface modes: block shift-invert Lanczos; the same 652
 #: modes as ARPACK's at 0.12 m (frequencies to 1e-13) in 97 s instead of 250 s
 #: (docs/modes.md, 'Block Lanczos per window').
@@ -55,6 +61,9 @@ FRAME_METHOD = 'block'
 #: Residual pseudo-modes whose M-norm is below this fraction of the largest are dependent
 #: on the others (or on the kept modes) and dropped.
 RESIDUAL_RANK_TOL = 1e-10
+#: Basis columns per block of the projections T^T A T (bounds ``A @ basis`` to this many
+#: columns: 0.8 GB at 763k DOF).
+PROJECT_BLOCK = 128
 
 
 def _block_solve(lu: Factorisation, rhs: Array) -> Array:
@@ -83,6 +92,22 @@ def _residual_modes(k_ii: sp.spmatrix, m_ii: sp.spmatrix, static: Array, load: A
     return resid @ (base @ vec), lam
 
 
+def _symmetric_projection(A: sp.spmatrix, basis: Array) -> Array:
+    """
+    ``basis^T A basis`` of a symmetric ``A``, exactly symmetric.
+
+    Only the blocks on and above the diagonal are multiplied (:data:`PROJECT_BLOCK` columns
+    at a time), half the dense products of the whole: at the paper-scale frame (763k DOF,
+    about 900 columns) each of those is about 1.2e12 flops.
+    """
+    m = basis.shape[1]
+    out = np.zeros((m, m))
+    for lo in range(0, m, PROJECT_BLOCK):
+        hi = min(lo + PROJECT_BLOCK, m)
+        out[:hi, lo:hi] = basis[:, :hi].T @ (A @ basis[:, lo:hi])
+    return np.triu(out) + np.triu(out, 1).T
+
+
 def reduce_frame(fe: FrameFE, f_cut: float, progress: Callable[[str], None] | None = None,
                  workers: int | None = None, residual: bool = True,
                  method: str = FRAME_METHOD) -> ReducedFrame:
@@ -98,7 +123,7 @@ def reduce_frame(fe: FrameFE, f_cut: float, progress: Callable[[str], None] | No
     progress : callable, optional
         Receives one message per stage and per spectrum slice.
     workers : int, optional
-        Window processes of the modal solver (default: its own choice).
+        Window processes of the modal solver (default :data:`FRAME_WORKERS`).
     residual : bool
         Add the residual pseudo-modes of the interface inertia loads (one per interface DOF,
         :func:`_residual_modes`): the truncated fixed-interface modes' static share of the
@@ -138,7 +163,8 @@ def reduce_frame(fe: FrameFE, f_cut: float, progress: Callable[[str], None] | No
         say(f'frame modes: {msg}')
 
     modes = solve_modes(k_ii, m_ii, f_max=f_cut, progress=slice_progress,
-                        workers=workers, modes_per_window=MODES_PER_WINDOW, method=method)
+                        workers=FRAME_WORKERS if workers is None else workers,
+                        modes_per_window=MODES_PER_WINDOW, method=method)
     t_modes = time.perf_counter() - t0 - t_static
     say(f'frame: {modes.n_modes} fixed-interface modes in {t_modes:.1f} s; projecting')
     columns, omega2 = [psi, modes.shapes], [modes.omega ** 2]
@@ -154,7 +180,7 @@ def reduce_frame(fe: FrameFE, f_cut: float, progress: Callable[[str], None] | No
     def project(A: sp.csr_matrix) -> Array:
         """T^T A T for the reduced coordinates [u_b; q]."""
         a_ib, a_bb = A[i][:, b], A[b][:, b].toarray()
-        out = basis.T @ (A[i][:, i] @ basis)
+        out = _symmetric_projection(sp.csr_matrix(A[i][:, i]), basis)
         cross = np.asarray(a_ib.T @ basis)
         out[:nb, :] += cross
         out[:, :nb] += cross.T
