@@ -138,7 +138,8 @@ def spin_until(executor, done: Callable[[], bool], timeout: float,
 _awaited: weakref.WeakSet = weakref.WeakSet()
 
 
-def wait_for_acks(node, publishers, timeout: float, bound: str = '') -> None:
+def wait_for_acks(node, publishers, timeout: float, bound: str = '',
+                  remember: bool = True) -> None:
     """
     Wait until every subscriber acknowledged every message of ``publishers`` (reliable QoS).
 
@@ -146,10 +147,11 @@ def wait_for_acks(node, publishers, timeout: float, bound: str = '') -> None:
     subscriber that died), or after ``timeout`` [s] in all (a warning naming ``bound``, the
     limit that set it; ``ack_timeout`` by default). rclpy's ``Publisher.wait_for_all_acked``
     returns at once for a best-effort publisher and holds the GIL while it waits (hence the
-    slices).
+    slices). ``remember``: leave ``publishers`` out of :func:`wait_for_end_acks` from now on.
     """
     publishers = list(publishers)
-    _awaited.update(publishers)
+    if remember:
+        _awaited.update(publishers)
     end = time.monotonic() + timeout
     for pub in publishers:
         while pub.get_subscription_count():
@@ -169,13 +171,18 @@ def wait_for_acks(node, publishers, timeout: float, bound: str = '') -> None:
 #: taken from its socket yet (the subscriber drops the data of a writer it saw leave) and what
 #: it must still repair: a recorder draining a loaded run's last steps missed a separate
 #: source's last 2-3 answers. Repairs and acknowledgements wait for the writer's next
-#: heartbeat, every 3 s with Fast DDS's default: a running subscriber acknowledged a writer's
-#: last message 1.9-3.0 s after it was sent, and with a bound of 1 s the recorder frozen for
-#: 0.45 s around the stop in test_stopping.py still missed 32-60 steps of each source (4 of 4
-#: runs). So: that period and 0.5 s, for a subscriber that runs again within about 0.5 s of the
-#: stop; less than the 5 s the scenario runner grants a node to end after its SIGINT
-#: (:func:`pentapod_sim.scenario.runner.stop`). A subscriber that is gone ends the wait (no
-#: subscriber left); one that hangs holds it this long at most.
+#: heartbeat. The package's local profile (config/dds/loopback.xml) sends one every 0.1 s, so
+#: with a running subscriber the wait takes less than 0.1 s (0.007-0.098 s measured; a source
+#: process exited 0.17-0.32 s after the group's SIGINT instead of 0.25-2.75 s:
+#: docs/recording.md, "Order of stopping"). The bound is for any other profile (a network),
+#: with Fast DDS's default period of 3 s: a running subscriber then acknowledged a writer's
+#: last message 1.9-3.0 s after it was sent in a run (0.6-1.7 s after bursts of 0.5-1.5 s),
+#: and with a bound of 1 s the recorder frozen for 0.45 s around the stop in test_stopping.py
+#: still missed 32-60 steps of each source (4 of 4 runs). So: that period and 0.5 s, for a
+#: subscriber that runs again within about 0.5 s of the stop; less than the 5 s the scenario
+#: runner grants a node to end after its SIGINT (:func:`pentapod_sim.scenario.runner.stop`).
+#: A subscriber that is gone ends the wait (no subscriber left); one that hangs holds it this
+#: long at most.
 END_ACK_WAIT = 3.5
 
 
@@ -187,13 +194,16 @@ def wait_for_end_acks(node) -> None:
     for by :func:`wait_for_acks` (the plant's, with its own ``ack_timeout``) are left out;
     nothing is waited for once the node's context is shut down.
     """
-    end = time.monotonic() + END_ACK_WAIT
+    start = time.monotonic()
+    end = start + END_ACK_WAIT
     for each in getattr(node, 'nodes', [node]):
         if not each.context.ok():
             continue
         pubs = [pub for pub in each.publishers if pub not in _awaited]
         wait_for_acks(each, pubs, max(0.0, end - time.monotonic()),
-                      f'END_ACK_WAIT = {END_ACK_WAIT:g} s')
+                      f'END_ACK_WAIT = {END_ACK_WAIT:g} s', remember=False)
+        each.get_logger().debug(
+            f'end wait for acknowledgements: {time.monotonic() - start:.3f} s')
 
 
 def wants_help(args) -> bool:
