@@ -182,9 +182,9 @@ def test_a_stop_signal_leaves_a_recorder_behind_the_run_every_answer(tmp_path, r
     6 runs. Every source now waits for its subscribers' acknowledgements (``END_ACK_WAIT``,
     :func:`pentapod_sim.nodes.common.wait_for_end_acks`; with 1 s instead of 3.5 s, 4 of 4 runs
     still failed). The plant waits for its own outputs (``ack_timeout``, raised here above Fast
-    DDS's 3 s heartbeat period, which the repair waits for). Checked against the plant's trace:
-    every step it ran has the exciter's and the damper's answer and the exciter's applied force
-    in the bag.
+    DDS's default heartbeat period of 3 s, which the repair waits for; the package's profile
+    sends one every 0.1 s). Checked against the plant's trace: every step it ran has the
+    exciter's and the damper's answer and the exciter's applied force in the bag.
     """
     run = runner_of(scenario(tmp_path, ack_timeout=10.0))
     run.wait_for('lockstep run of')
@@ -284,6 +284,60 @@ def test_the_end_wait_for_acknowledgements_is_bounded(capfd):
             os.kill(reader.pid, signal.SIGCONT)
             reader.kill()
             reader.wait()
+        node.destroy_node()
+        rclpy.try_shutdown(context=ctx)
+
+
+def test_the_end_wait_with_a_running_reader_is_short():
+    """
+    A running reader acknowledges a node's last messages within the profile's heartbeat period.
+
+    A reliable reader acknowledges only when the writer's heartbeat comes. The package's Fast
+    DDS profile (config/dds/loopback.xml) sends one every 0.1 s, so a node's end wait for its
+    subscribers' acknowledgements (``wait_for_end_acks``) takes less than 0.1 s plus the
+    reader's answer after each burst of messages; with Fast DDS's default of 3 s (the
+    profile without its data_writer profile) these waits took 1.95-2.45 s. The bursts (about
+    1 kHz) end at different phases of the heartbeat timer; 0.5 s allows for a loaded machine.
+    """
+    import rclpy
+    from rclpy.node import Node
+    from sensor_msgs.msg import JointState
+
+    from fixtures.processes import sigint_as_in_a_terminal
+    from pentapod_sim.nodes.common import FORCE_QOS, wait_for_end_acks
+    topic = '/pentapod/forces/ack_pace'
+    reader = subprocess.Popen([sys.executable, '-c', READER, topic], stdout=subprocess.PIPE,
+                              text=True, preexec_fn=sigint_as_in_a_terminal)
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=int(os.environ['ROS_DOMAIN_ID']))
+    node = Node('ack_pace_source', context=ctx)
+    try:
+        assert reader.stdout.readline().strip() == 'ready'
+        pub = node.create_publisher(JointState, topic, FORCE_QOS)
+        end = time.monotonic() + 30
+        while not pub.get_subscription_count():
+            assert time.monotonic() < end, 'the reader was not matched'
+            time.sleep(0.05)
+        time.sleep(0.5)
+        waits = []
+        for burst in (0.3, 0.55, 0.8, 1.05):
+            end = time.monotonic() + burst
+            while time.monotonic() < end:
+                pub.publish(JointState(name=['tcp_force_x'], effort=[1.0]))
+                time.sleep(0.001)
+            t0 = time.monotonic()
+            wait_for_end_acks(node)
+            waits.append(time.monotonic() - t0)
+        assert max(waits) < 0.5, waits
+        assert reader.poll() is None        # the reader ran throughout
+    finally:
+        if reader.poll() is None:
+            reader.send_signal(signal.SIGINT)
+            try:
+                reader.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                reader.kill()
+                reader.wait()
         node.destroy_node()
         rclpy.try_shutdown(context=ctx)
 
