@@ -234,7 +234,9 @@ MAX_SHIPPED_RATE = 5000.0
 #: Wall time [s] a recorder may stall (SIGSTOP, swapping, a busy disk) without losing a message.
 RECORDER_STALL = 5.0
 #: Extra wall time [s] the history must cover after a stall until the reader has asked for what
-#: it missed: Fast DDS repairs after the writer's next heartbeat (period 3 s by default).
+#: it missed: Fast DDS repairs after the writer's next heartbeat, every 3 s by default. The
+#: package's local profile (config/dds/loopback.xml) sends one every 0.1 s, so a local run has
+#: this margin to spare; 3 s holds for any other profile (a network) too.
 REPAIR_TIME = 3.0
 #: History depth [messages] of every per-step stream (states, /clock, forces, excitation, PMA
 #: state): (RECORDER_STALL + REPAIR_TIME) s at MAX_SHIPPED_RATE = 40,000 messages. A reliable

@@ -230,19 +230,17 @@ def test_recorder_stalled_past_the_last_message_does_not_close_early(tmp_path):
 
 def fast_repair_profile(folder: Path) -> Path:
     """
-    The package's Fast DDS profile with an 8 MB receive buffer and a 0.1 s writer heartbeat.
+    The package's Fast DDS profile with an 8 MB receive buffer.
 
-    With Fast DDS's 3 s heartbeat a frozen recorder's lost datagrams come back in rounds 3 s
-    apart, so a recorder with a short ``drain_timeout`` would also close between two repair
-    rounds; these settings keep the recorder's own pace the only slow part.
+    The package's profile already has a 0.1 s writer heartbeat (with Fast DDS's 3 s a frozen
+    recorder's lost datagrams come back in rounds 3 s apart, so a recorder with a short
+    ``drain_timeout`` would also close between two repair rounds); with the larger buffer
+    the recorder's own pace is the only slow part.
     """
     text = (ROOT / 'config' / 'dds' / 'loopback.xml').read_text()
+    assert '<heartbeatPeriod><sec>0</sec><nanosec>100000000</nanosec></heartbeatPeriod>' in text
     text = text.replace('<type>UDPv4</type>',
                         '<type>UDPv4</type><receiveBufferSize>8388608</receiveBufferSize>')
-    writer = ('<data_writer profile_name="fast_repair" is_default_profile="true"><times>'
-              '<heartbeatPeriod><sec>0</sec><nanosec>100000000</nanosec></heartbeatPeriod>'
-              '</times></data_writer>')
-    text = text.replace('</profiles>', writer + '</profiles>')
     path = folder / 'fast_repair.xml'
     path.write_text(text)
     return path
@@ -263,7 +261,7 @@ def test_a_recorder_behind_the_run_takes_every_step_after_its_drain_timeout(tmp_
     """
     steps, drain = 5000, 1.0
     # a profile other than the package's is refused unless opened on purpose: this one is the
-    # package's loopback profile with the two settings above
+    # package's loopback profile with the larger buffer
     env = dict(os.environ, FASTRTPS_DEFAULT_PROFILES_FILE=str(fast_repair_profile(tmp_path)),
                PENTAPOD_OPEN_NETWORK='1')
     plant_log, recorder_log, bag, running = run_with_stalls(

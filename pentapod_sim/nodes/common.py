@@ -16,6 +16,7 @@ import os
 import sys
 import time
 from typing import Callable
+import weakref
 
 from builtin_interfaces.msg import Time
 import rclpy
@@ -131,23 +132,78 @@ def spin_until(executor, done: Callable[[], bool], timeout: float,
     return True
 
 
-def wait_for_acks(node, publishers, timeout: float) -> None:
+#: Publishers whose acknowledgements a node already waited for (:func:`wait_for_acks`: the
+#: plant's outputs and status, a composition's sources' outlets), which the end of the process
+#: does not wait for again (:func:`wait_for_end_acks`).
+_awaited: weakref.WeakSet = weakref.WeakSet()
+
+
+def wait_for_acks(node, publishers, timeout: float, bound: str = '',
+                  remember: bool = True) -> None:
     """
     Wait until every subscriber acknowledged every message of ``publishers`` (reliable QoS).
 
-    Waits in slices of 0.1 s and ends early when a topic has no subscriber left (a
-    subscriber that died), or after ``timeout`` [s] in all (warning, parameter ack_timeout).
+    Waits in slices of at most 0.1 s and ends early when a topic has no subscriber left (a
+    subscriber that died), or after ``timeout`` [s] in all (a warning naming ``bound``, the
+    limit that set it; ``ack_timeout`` by default). rclpy's ``Publisher.wait_for_all_acked``
+    returns at once for a best-effort publisher and holds the GIL while it waits (hence the
+    slices). ``remember``: leave ``publishers`` out of :func:`wait_for_end_acks` from now on.
     """
+    publishers = list(publishers)
+    if remember:
+        _awaited.update(publishers)
     end = time.monotonic() + timeout
     for pub in publishers:
         while pub.get_subscription_count():
-            if pub.wait_for_all_acked(Duration(seconds=0.1)):
+            left = end - time.monotonic()
+            if pub.wait_for_all_acked(Duration(seconds=min(0.1, max(left, 0.0)))):
                 break
-            if time.monotonic() > end:
+            if time.monotonic() >= end:
                 node.get_logger().warning(
                     f'{pub.topic_name}: not every message acknowledged within '
-                    f'ack_timeout = {timeout} s')
+                    + (bound or f'ack_timeout = {timeout:g} s'))
                 return
+
+
+#: Wall time [s] a process waits in all, at its end (finished, failed or stopped by a signal),
+#: for its nodes' messages to be acknowledged by their reliable subscribers
+#: (:func:`wait_for_end_acks`). A writer that goes takes with it what a subscriber has not
+#: taken from its socket yet (the subscriber drops the data of a writer it saw leave) and what
+#: it must still repair: a recorder draining a loaded run's last steps missed a separate
+#: source's last 2-3 answers. Repairs and acknowledgements wait for the writer's next
+#: heartbeat. The package's local profile (config/dds/loopback.xml) sends one every 0.1 s, so
+#: with a running subscriber the wait takes less than 0.1 s (0.007-0.098 s measured; a source
+#: process exited 0.17-0.32 s after the group's SIGINT instead of 0.25-2.75 s:
+#: docs/recording.md, "Order of stopping"). The bound is for any other profile (a network),
+#: with Fast DDS's default period of 3 s: a running subscriber then acknowledged a writer's
+#: last message 1.9-3.0 s after it was sent in a run (0.6-1.7 s after bursts of 0.5-1.5 s),
+#: and with a bound of 1 s the recorder frozen for 0.45 s around the stop in test_stopping.py
+#: still missed 32-60 steps of each source (4 of 4 runs). So: that period and 0.5 s, for a
+#: subscriber that runs again within about 0.5 s of the stop; less than the 5 s the scenario
+#: runner grants a node to end after its SIGINT (:func:`pentapod_sim.scenario.runner.stop`).
+#: A subscriber that is gone ends the wait (no subscriber left); one that hangs holds it this
+#: long at most.
+END_ACK_WAIT = 3.5
+
+
+def wait_for_end_acks(node) -> None:
+    """
+    Wait up to :data:`END_ACK_WAIT` s for the acknowledgement of every publisher of ``node``.
+
+    For a composition (a ``nodes`` attribute), of each of its nodes. Publishers already waited
+    for by :func:`wait_for_acks` (the plant's, with its own ``ack_timeout``) are left out;
+    nothing is waited for once the node's context is shut down.
+    """
+    start = time.monotonic()
+    end = start + END_ACK_WAIT
+    for each in getattr(node, 'nodes', [node]):
+        if not each.context.ok():
+            continue
+        pubs = [pub for pub in each.publishers if pub not in _awaited]
+        wait_for_acks(each, pubs, max(0.0, end - time.monotonic()),
+                      f'END_ACK_WAIT = {END_ACK_WAIT:g} s', remember=False)
+        each.get_logger().debug(
+            f'end wait for acknowledgements: {time.monotonic() - start:.3f} s')
 
 
 def wants_help(args) -> bool:
@@ -170,7 +226,9 @@ def run_node(factory: Callable[..., object], argv=None, run: Callable | None = N
     ended before the signal: a source stopped after the run it served is a clean end, 0
     (:class:`pentapod_sim.nodes.run_status.PlantRunWatch`). A process stopped while work it
     gave up on still runs (a truncation check's LAPACK) exits with that code here instead of
-    returning (:func:`pentapod_sim.shutdown.finish`).
+    returning (:func:`pentapod_sim.shutdown.finish`). However it ends, the nodes' messages
+    are acknowledged by their subscribers before the nodes are destroyed, for at most
+    :data:`END_ACK_WAIT` s (:func:`wait_for_end_acks`).
     """
     args = list(sys.argv if argv is None else argv)
     try:
@@ -219,6 +277,7 @@ def run_node(factory: Callable[..., object], argv=None, run: Callable | None = N
         if node is not None:
             after_end = getattr(node, 'stopped_after_run_end', None)
             served = code == 0 and shutdown.requested() and callable(after_end) and after_end()
+            wait_for_end_acks(node)     # a subscriber still draining gets the last messages
             node.destroy_node()
         rclpy.try_shutdown()
         shutdown.ignore_from_now()      # stopped: a late second signal must not kill it
