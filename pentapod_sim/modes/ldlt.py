@@ -13,8 +13,8 @@ The pencil ``K - sigma M`` has the same pattern at every shift, so PARDISO's ana
 (METIS ordering and symbolic factorisation, phase 11) is done once per pattern and process:
 a released factorisation leaves its handle, numerical factor freed and analysis kept, for the
 next matrix of that pattern, which then needs only phase 22. At 763,350 DOF (the paper-scale
-frame's interior) the analysis took 6.3 s and the numerical factorisation 9.3 s
-(``bench/bench_frame.py``, row ``factorisation``). pypardiso's ``factorize`` always runs both
+frame's interior) the analysis took 6.3 s and the numerical factorisation 9.3 s (measured
+by hand, docs/modes.md, 'Factorisation'). pypardiso's ``factorize`` always runs both
 phases; phase 22 alone goes through its ``set_phase`` and ``_call_pardiso`` (the one call that
 is not its public interface). Otherwise ``set_iparm``, ``factorize``, ``solve``,
 ``get_iparm`` and ``free_memory`` are used. Parameters set (1-based iparm, as
