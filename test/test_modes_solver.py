@@ -126,24 +126,30 @@ class TestSharedFactorisation:
 
         monkeypatch.setattr(window_pool._Solver, '__call__', recorded)
         f_max = 0.5 * (exact[59] + exact[60])         # 60 modes: 41 in the first window
-        res = solve_modes(K, M, f_max=f_max, modes_per_window=40, workers=1)
+        res = solve_modes(K, M, f_max=f_max, modes_per_window=40, workers=1,
+                          share_last_windows=True)
         assert res.sturm_count == res.n_modes == 60
         assert_allclose(res.frequencies, exact[:60], rtol=1e-9)
         solving = [k for k in asked if k]
         # one window after the first, for the 20 or so left (with the margin), not a whole
-        # window's 52
+        # window's 52 (as without share_last_windows)
         assert len(solving) == 2 and solving[1] < 0.75 * slicing.WINDOW_PAD * 40
+        asked.clear()
+        solve_modes(K, M, f_max=f_max, modes_per_window=40, workers=1)
+        assert [k for k in asked if k][1] == int(slicing.WINDOW_PAD * 40)
         # the last window takes all that is left when that is up to 1.25 windows
         asked.clear()
         f_max = 0.5 * (exact[99] + exact[100])        # 100 modes: about 39 left
-        res = solve_modes(K, M, f_max=f_max, modes_per_window=60, workers=1)
+        res = solve_modes(K, M, f_max=f_max, modes_per_window=60, workers=1,
+                          share_last_windows=True)
         assert res.sturm_count == res.n_modes == 100
         assert_allclose(res.frequencies, exact[:100], rtol=1e-9)
         assert len([k for k in asked if k]) == 2
         # more than that left: shared by equal windows
         asked.clear()
         f_max = 0.5 * (exact[159] + exact[160])       # 160 modes: about 119 left
-        res = solve_modes(K, M, f_max=f_max, modes_per_window=40, workers=1)
+        res = solve_modes(K, M, f_max=f_max, modes_per_window=40, workers=1,
+                          share_last_windows=True)
         assert res.sturm_count == res.n_modes == 160
         assert_allclose(res.frequencies, exact[:160], rtol=1e-9)
         later = [k for k in asked if k][1:]       # each sized to a share, none a whole 52

@@ -164,7 +164,8 @@ def reduce_frame(fe: FrameFE, f_cut: float, progress: Callable[[str], None] | No
 
     modes = solve_modes(k_ii, m_ii, f_max=f_cut, progress=slice_progress,
                         workers=FRAME_WORKERS if workers is None else workers,
-                        modes_per_window=MODES_PER_WINDOW, method=method)
+                        modes_per_window=MODES_PER_WINDOW, method=method,
+                        share_last_windows=True)
     t_modes = time.perf_counter() - t0 - t_static
     say(f'frame: {modes.n_modes} fixed-interface modes in {t_modes:.1f} s; projecting')
     columns, omega2 = [psi, modes.shapes], [modes.omega ** 2]

@@ -141,6 +141,7 @@ class Slicer:
     per_window: int
     progress: Progress | None
     limit: float = math.inf           # no mode at or above this eigenvalue is kept
+    share_last: bool = False          # the windows below lam_max share its modes
     lam: list[Array] = field(default_factory=list)
     phi: list[Array] = field(default_factory=list)
     residual: list[Array] = field(default_factory=list)
@@ -215,7 +216,7 @@ def _launch(sl: Slicer, prev: Window, below: int, cut: float, wanted: int | None
             if lam_max is not None and edge >= lam_max:
                 return
         target = sl.per_window
-        if lam_max is not None:   # the last windows: sized to the modes left below lam_max
+        if lam_max is not None and sl.share_last:   # sized to the modes left below lam_max
             left = _modes_left(prev.lam, edge, lam_max)
             target = left if left <= LAST_WINDOW_STRETCH * target else \
                 math.ceil(left / math.ceil(left / target))     # the rest in equal windows

@@ -173,7 +173,7 @@ def solve_modes(K: sp.spmatrix, M: sp.spmatrix, *, n_modes: int | None = None,
                 f_max: float | None = None, modes_per_window: int = 30,
                 progress: Progress | None = None, tol_check: float = 1e-6,
                 method: str = DEFAULT_METHOD, workers: int | None = None,
-                factorisation: str = 'auto') -> ModalResult:
+                factorisation: str = 'auto', share_last_windows: bool = False) -> ModalResult:
     """
     Compute the lowest undamped modes of ``K phi = omega^2 M phi``.
 
@@ -208,6 +208,13 @@ def solve_modes(K: sp.spmatrix, M: sp.spmatrix, *, n_modes: int | None = None,
     factorisation : {'auto', 'superlu', 'pardiso'}
         Factorisation of the shifted pencils (:func:`pentapod_sim.modes.sturm.choose_backend`:
         'auto' takes MKL PARDISO's LDL^T from 20,000 DOF where it is installed).
+    share_last_windows : bool
+        With ``f_max``: the windows below it share the modes predicted there instead of the
+        last one being a whole window (:data:`pentapod_sim.modes.slicing.LAST_WINDOW_MARGIN`;
+        the plate frame's reduction). Off by default: the beam models' windows are cheap, and
+        so their modes stay bit for bit those of earlier runs (the damping calibration's mode
+        identification, test/test_damping_calibration.py, dropped a mode when the model's
+        shapes changed by 4e-11 relative).
 
     Returns
     -------
@@ -240,7 +247,7 @@ def solve_modes(K: sp.spmatrix, M: sp.spmatrix, *, n_modes: int | None = None,
         backend = choose_backend(n, factorisation)
         with WindowPool(K, M, method, LANCZOS_TOL, workers, backend) as pool:
             sl = Slicer(pool, max(per_window, 4), progress,
-                        math.inf if lam_max is None else lam_max)
+                        math.inf if lam_max is None else lam_max, share_last_windows)
             slice_spectrum(sl, n_modes, lam_max)
             if lam_max is not None:
                 final = sl.final if sl.final is not None and sl.final.sigma == lam_max \
