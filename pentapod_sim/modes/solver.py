@@ -212,9 +212,9 @@ def solve_modes(K: sp.spmatrix, M: sp.spmatrix, *, n_modes: int | None = None,
         With ``f_max``: the windows below it share the modes predicted there instead of the
         last one being a whole window (:data:`pentapod_sim.modes.slicing.LAST_WINDOW_MARGIN`;
         the plate frame's reduction). Off by default: the beam models' windows are cheap, and
-        so their modes stay bit for bit those of earlier runs (the damping calibration's mode
-        identification, test/test_damping_calibration.py, dropped a mode when the model's
-        shapes changed by 4e-11 relative).
+        with it their shapes changed by 4e-11 relative at P1 (signs aside), enough for the
+        damping calibration's mode identification to drop two modes
+        (test/test_damping_calibration.py).
 
     Returns
     -------
