@@ -4,6 +4,7 @@ Stopping and failing the way a ROS user meets it: signals, dead, duplicate and a
 Every test runs real processes on the session's isolated domain (conftest.py). The signals are
 sent while the plant is mid-run (its log says so); a run long enough that it cannot end first.
 """
+import contextlib
 import os
 from pathlib import Path
 import re
@@ -233,25 +234,25 @@ except KeyboardInterrupt:
 """
 
 
-def test_the_end_wait_for_acknowledgements_is_bounded(capfd):
+@contextlib.contextmanager
+def _publisher_to_a_reader(topic: str, node_name: str):
     """
-    A reader that acknowledges nothing holds a node's end ``END_ACK_WAIT`` s, not longer.
+    A node of this process publishing forces on ``topic`` to a READER process, matched.
 
-    A reader frozen (SIGSTOP) stays matched and acknowledges nothing: the wait ends at its
-    bound with a warning naming it. A reader whose process ends during the wait ends it then.
+    Yields (reader process, node, publisher); at the end a reader still running is stopped
+    (continued first, in case a test froze it) and the node and its context are closed.
     """
     import rclpy
     from rclpy.node import Node
     from sensor_msgs.msg import JointState
 
     from fixtures.processes import sigint_as_in_a_terminal
-    from pentapod_sim.nodes.common import END_ACK_WAIT, FORCE_QOS, wait_for_end_acks
-    topic = '/pentapod/forces/ack_test'
+    from pentapod_sim.nodes.common import FORCE_QOS
     reader = subprocess.Popen([sys.executable, '-c', READER, topic], stdout=subprocess.PIPE,
                               text=True, preexec_fn=sigint_as_in_a_terminal)
     ctx = rclpy.Context()
     rclpy.init(context=ctx, domain_id=int(os.environ['ROS_DOMAIN_ID']))
-    node = Node('ack_source', context=ctx)
+    node = Node(node_name, context=ctx)
     try:
         assert reader.stdout.readline().strip() == 'ready'
         pub = node.create_publisher(JointState, topic, FORCE_QOS)
@@ -260,6 +261,31 @@ def test_the_end_wait_for_acknowledgements_is_bounded(capfd):
             assert time.monotonic() < end, 'the reader was not matched'
             time.sleep(0.05)
         time.sleep(0.5)
+        yield reader, node, pub
+    finally:
+        if reader.poll() is None:
+            os.kill(reader.pid, signal.SIGCONT)
+            reader.send_signal(signal.SIGINT)
+            try:
+                reader.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                reader.kill()
+                reader.wait()
+        node.destroy_node()
+        rclpy.try_shutdown(context=ctx)
+
+
+def test_the_end_wait_for_acknowledgements_is_bounded(capfd):
+    """
+    A reader that acknowledges nothing holds a node's end ``END_ACK_WAIT`` s, not longer.
+
+    A reader frozen (SIGSTOP) stays matched and acknowledges nothing: the wait ends at its
+    bound with a warning naming it. A reader whose process ends during the wait ends it then.
+    """
+    from sensor_msgs.msg import JointState
+
+    from pentapod_sim.nodes.common import END_ACK_WAIT, wait_for_end_acks
+    with _publisher_to_a_reader('/pentapod/forces/ack_test', 'ack_source') as (reader, node, pub):
         for ending in ('frozen', 'gone'):
             os.kill(reader.pid, signal.SIGSTOP)
             for _ in range(5):
@@ -279,13 +305,6 @@ def test_the_end_wait_for_acknowledgements_is_bounded(capfd):
             else:
                 assert reader.wait(timeout=10) == 0
                 assert waited < END_ACK_WAIT - 1.0, waited
-    finally:
-        if reader.poll() is None:
-            os.kill(reader.pid, signal.SIGCONT)
-            reader.kill()
-            reader.wait()
-        node.destroy_node()
-        rclpy.try_shutdown(context=ctx)
 
 
 def test_the_end_wait_with_a_running_reader_is_short():
@@ -300,26 +319,11 @@ def test_the_end_wait_with_a_running_reader_is_short():
     The bursts (about 1 kHz) end at different phases of the heartbeat timer; 0.5 s allows for
     a loaded machine.
     """
-    import rclpy
-    from rclpy.node import Node
     from sensor_msgs.msg import JointState
 
-    from fixtures.processes import sigint_as_in_a_terminal
-    from pentapod_sim.nodes.common import FORCE_QOS, wait_for_end_acks
-    topic = '/pentapod/forces/ack_pace'
-    reader = subprocess.Popen([sys.executable, '-c', READER, topic], stdout=subprocess.PIPE,
-                              text=True, preexec_fn=sigint_as_in_a_terminal)
-    ctx = rclpy.Context()
-    rclpy.init(context=ctx, domain_id=int(os.environ['ROS_DOMAIN_ID']))
-    node = Node('ack_pace_source', context=ctx)
-    try:
-        assert reader.stdout.readline().strip() == 'ready'
-        pub = node.create_publisher(JointState, topic, FORCE_QOS)
-        end = time.monotonic() + 30
-        while not pub.get_subscription_count():
-            assert time.monotonic() < end, 'the reader was not matched'
-            time.sleep(0.05)
-        time.sleep(0.5)
+    from pentapod_sim.nodes.common import wait_for_end_acks
+    with _publisher_to_a_reader('/pentapod/forces/ack_pace', 'ack_pace_source') as (
+            reader, node, pub):
         waits = []
         for burst in (0.3, 0.55, 0.8, 1.05):
             end = time.monotonic() + burst
@@ -331,16 +335,6 @@ def test_the_end_wait_with_a_running_reader_is_short():
             waits.append(time.monotonic() - t0)
         assert max(waits) < 0.5, waits
         assert reader.poll() is None        # the reader ran throughout
-    finally:
-        if reader.poll() is None:
-            reader.send_signal(signal.SIGINT)
-            try:
-                reader.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                reader.kill()
-                reader.wait()
-        node.destroy_node()
-        rclpy.try_shutdown(context=ctx)
 
 
 def test_a_finished_run_reads_as_finished(tmp_path, runner_of):
