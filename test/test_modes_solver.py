@@ -38,6 +38,19 @@ def random_structure(n: int, seed: int = 0):
     return K.tocsr(), M.tocsr()
 
 
+def _record_windows(monkeypatch) -> list[int]:
+    """The modes each window of a serial slicing run asks for (0: a count only), in order."""
+    asked: list[int] = []
+    solve = window_pool._Solver.__call__
+
+    def recorded(self, sigma, k):
+        asked.append(k)
+        return solve(self, sigma, k)
+
+    monkeypatch.setattr(window_pool._Solver, '__call__', recorded)
+    return asked
+
+
 class TestSturmCount:
     def test_matches_dense_eigh_at_many_shifts(self):
         K, M = random_structure(300)
@@ -93,18 +106,12 @@ class TestSharedFactorisation:
         K, M = fixed_free_chain(n)
         exact = chain_frequencies(n)
         real = slicing._next_shift
-        asked = []
 
         def too_far(lam, a, target):
             return a + 3.0 * (real(lam, a, target) - a)
 
-        def recorded(self, sigma, k):
-            asked.append(k)
-            return solve(self, sigma, k)
-
-        solve = window_pool._Solver.__call__
         monkeypatch.setattr(slicing, '_next_shift', too_far)
-        monkeypatch.setattr(window_pool._Solver, '__call__', recorded)
+        asked = _record_windows(monkeypatch)
         res = solve_modes(K, M, n_modes=150, modes_per_window=25, workers=1)
         assert res.stats['gap_windows'] >= 2 and res.stats['retries'] == 0
         assert_allclose(res.frequencies, exact[:150], rtol=1e-9)
@@ -117,14 +124,7 @@ class TestSharedFactorisation:
         n = 3000
         K, M = fixed_free_chain(n)
         exact = chain_frequencies(n)
-        asked = []
-        solve = window_pool._Solver.__call__
-
-        def recorded(self, sigma, k):
-            asked.append(k)
-            return solve(self, sigma, k)
-
-        monkeypatch.setattr(window_pool._Solver, '__call__', recorded)
+        asked = _record_windows(monkeypatch)
         f_max = 0.5 * (exact[59] + exact[60])         # 60 modes: 41 in the first window
         res = solve_modes(K, M, f_max=f_max, modes_per_window=40, workers=1,
                           share_last_windows=True)
