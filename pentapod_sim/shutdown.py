@@ -72,6 +72,22 @@ def requested() -> bool:
     return bool(_received)
 
 
+def deliver() -> None:
+    """
+    Let a stop signal that a thread other than Python's main one took reach :func:`requested`.
+
+    The kernel gives a signal sent to a process to any of its threads, and the SIGINT or
+    SIGTERM that comes with the SIGCONT of a stopped process to whichever thread runs first,
+    often one of DDS's. CPython runs the handler in the main thread only once that thread next
+    takes the GIL, so a main thread busy in Python code does not see the request (for as long
+    as it does not wait; test/test_shutdown.py makes that happen). ``os.sched_yield`` releases
+    and takes the GIL (about 0.2 us). Call this before an error that a stop request would
+    override, such as a timeout that ran out while the process was stopped.
+    """
+    if not _received:
+        os.sched_yield()
+
+
 def signal_name() -> str:
     """Name of the signal that requested the stop ('' if none)."""
     return signal.Signals(_received[0]).name if _received else ''

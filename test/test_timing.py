@@ -197,6 +197,74 @@ def test_lockstep_names_a_source_that_left_the_graph():
         lockstep_run(10, latency={'exciter': 1e-4, 'damper': 1e-4}, leaves={'damper': 3})
 
 
+class FreezingClock(FakeClock):
+    """
+    A clock whose reading ``at`` (counted from :meth:`arm`) takes ``freeze`` s.
+
+    The process was frozen (SIGSTOP) right at that reading; ``on_wake`` runs as it is continued,
+    as the stop signal the scenario runner sends with its SIGCONT is delivered then.
+    """
+
+    def __init__(self, freeze, on_wake):
+        super().__init__()
+        self.freeze, self.on_wake, self.left = freeze, on_wake, None
+
+    def arm(self, at):
+        self.left = at
+
+    def __call__(self):
+        if self.left is not None:
+            self.left -= 1
+            if self.left == 0:
+                self.now += self.freeze
+                self.on_wake()
+        return super().__call__()
+
+
+def test_a_plant_frozen_in_its_wait_and_stopped_on_waking_stops_on_the_request():
+    """
+    The race of test_run_ends' stalled plant (CI, 2026-12-05): SIGINT + SIGCONT after 5.7 s.
+
+    The damper answers no more from step 3 (it saw the plant stall and ended). The plant is
+    frozen at the clock reading right after the first spin of step 3's wait, longer than
+    source_timeout, and the stop request arrives as it wakes. It stops on the request, step 3
+    not advanced; it does not call the damper silent for the frozen time.
+    """
+    core, mixer = plant()
+    requested = []
+    clock = FreezingClock(freeze=100 * WAITS.source_timeout, on_wake=lambda: requested.append(1))
+    exchange = Scripted(core, mixer, clock, True, latency={'exciter': 1e-4, 'damper': 1e-4},
+                        leaves={'damper': 3})
+    exchange.gone = lambda: []              # still in the graph, only silent
+    publish = exchange.publish
+
+    def publish_and_arm(k, y):
+        publish(k, y)
+        if k == 3:
+            clock.arm(2)              # 1: the wait's start, 2: after its first spin
+    exchange.publish = publish_and_arm
+    Lockstep(core, mixer, 10, WAITS, clock, lambda: bool(requested)).run(exchange)
+    assert requested and core.k == 3
+    assert clock.now > dict(exchange.published)[3] + 100 * WAITS.source_timeout  # it froze
+
+
+def test_answers_queued_while_a_lockstep_plant_was_frozen_are_taken_not_called_silent():
+    """
+    A lockstep plant frozen inside a step's wait for longer than source_timeout runs on.
+
+    Frozen 4 source_timeouts inside step 20's wait, both answers queued meanwhile: on waking
+    the plant takes them and runs on; the trace is that of the run without the freeze.
+    """
+    n, k = 40, 20
+    _, frozen = lockstep_run(n, latency={'exciter': 3e-4, 'damper': 3e-4},
+                             stalls={k: 4 * WAITS.source_timeout})
+    published = dict(frozen.published)
+    assert published[k + 1] - published[k] > 4 * WAITS.source_timeout
+    _, lock = lockstep_run(n, latency={'exciter': 3e-4, 'damper': 3e-4})
+    assert np.array_equal(stacked(frozen.u, n), stacked(lock.u, n))
+    assert np.array_equal(stacked(frozen.y, n), stacked(lock.y, n))
+
+
 def test_answers_delivered_while_the_plant_was_stalled_in_its_wait_are_taken():
     """
     The race of a SIGSTOP inside step 40's answer wait (CI, fixed in main's 3a289d5).

@@ -42,6 +42,7 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
+from pentapod_sim import shutdown
 from pentapod_sim.errors import ConfigError, PlantStalledError, RunError
 from pentapod_sim.interface import (
     CLOCK,
@@ -285,6 +286,9 @@ class LockstepSource(TestbedNode):
             self.last_heard = time.monotonic()
         if (limit <= 0 or self.last_heard is None or self.plant_run.ended is not None
                 or self.failure is not None or time.monotonic() - self.last_heard <= limit):
+            return
+        shutdown.deliver()
+        if shutdown.requested():      # frozen and continued with a stop signal: a clean stop
             return
         plant = writers_text(w for t in self.writers.topics
                              for w in map(Writer.of, self.get_publishers_info_by_topic(t)))
