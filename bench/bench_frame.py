@@ -15,10 +15,12 @@ frame's reduction and the modal solver repeat per spectrum window: MKL PARDISO's
 shifted into the spectrum, one thread each. A fourth times one spectrum window of the frame's
 reduction (the fixed-interface modes nearest 500 Hz, as many as the reduction asks a window
 for) with the block shift-invert Lanczos against ARPACK's, on the same factorisation, at 0.2 m
-elements in both modes. ``quick`` uses a coarse frame (0.3 m elements, f_interest 300 Hz); the
-full run uses config/machine.yaml's mesh and f_interest, and adds the reduction at paper scale
-(0.04 m elements, 763,416 DOF; about 13 minutes and 15 GB; ``--paper`` alone) against the
-default mesh's in the same run.
+elements in both modes. A fifth times the reduction's sparse products split into blocks of
+rows on threads (:mod:`pentapod_sim.modes.row_split`, hand-written: scipy's product runs on
+one core) against scipy's (``--row-split`` alone). ``quick`` uses a coarse frame (0.3 m
+elements, f_interest 300 Hz); the full run uses config/machine.yaml's mesh and f_interest,
+and adds the reduction at paper scale (0.04 m elements, 763,416 DOF; about 10 minutes and
+19 GB; ``--paper`` alone) against the default mesh's in the same run.
 """
 from __future__ import annotations
 
@@ -42,8 +44,10 @@ from pentapod_sim.modes.causes import mass_mac  # noqa: E402
 from pentapod_sim.modes.frame_reduction import (  # noqa: E402
     ensure_reduced_frame,
     MODES_PER_WINDOW,
+    PROJECT_BLOCK,
     reduce_frame,
 )
+from pentapod_sim.modes.row_split import RowSplit  # noqa: E402
 from pentapod_sim.modes.slicing import LANCZOS_TOL, WINDOW_PAD  # noqa: E402
 from pentapod_sim.modes.solver import solve_modes  # noqa: E402
 from pentapod_sim.modes.sturm import choose_backend, factor_at  # noqa: E402
@@ -175,7 +179,25 @@ def window_row() -> dict:
                     f'max residual {r_b:.1e} against {r_a:.1e}; load {os.getloadavg()[0]:.1f}'}
 
 
-def paper_row(default_seconds: float, default_mesh: float) -> dict:
+def row_split_row(machine) -> dict:
+    """The reduction's sparse products in row blocks on threads against scipy's one thread."""
+    K, _ = _interior(machine)
+    X = np.random.default_rng(0).standard_normal((K.shape[0], PROJECT_BLOCK))
+    parts = max(2, len(os.sched_getaffinity(0)))
+    split = RowSplit(K, parts)
+    (ours, t_ours), (theirs, t_theirs) = min((_timed(split.__matmul__, X) for _ in range(3)),
+                                             key=lambda r: r[1]), \
+        min((_timed(K.__matmul__, X) for _ in range(3)), key=lambda r: r[1])
+    return {'name': f'plate frame, K_ii times {PROJECT_BLOCK} vectors in {parts} row blocks '
+                    'on threads (row_split)',
+            'value': t_ours, 'unit': 's', 'baseline': "scipy's CSR product (one thread)",
+            'baseline_value': t_theirs, 'ratio': t_theirs / t_ours,
+            'note': f'{K.shape[0]} interior DOF, {K.nnz} non-zeros (mesh '
+                    f'{machine.shell_frame.element_size} m); the same numbers: '
+                    f'{np.array_equal(ours, theirs)}; best of 3; load {os.getloadavg()[0]:.1f}'}
+
+
+def paper_row(default_seconds: float, default_mesh: float, default_threads: int) -> dict:
     """The frame's reduction at paper scale (progress on stderr), against the default mesh's."""
     machine = shell_machine(quick=False, element_size=PAPER_MESH)
     load = os.getloadavg()[0]
@@ -194,7 +216,8 @@ def paper_row(default_seconds: float, default_mesh: float) -> dict:
                     f'constraint modes {meta["static_seconds"]:.0f} s, fixed-interface modes '
                     f'{meta["modes_seconds"]:.0f} s ({stats["windows"]} windows, '
                     f'{stats.get("gap_windows", 0)} in gaps, {stats["retries"]} solved again, '
-                    f'{stats["factorisations"]} factorisations); goal {PAPER_GOAL:.0f} s: '
+                    f'{stats["factorisations"]} factorisations); {meta["threads"]} BLAS and '
+                    f'MKL threads (the default mesh: {default_threads}); goal {PAPER_GOAL:.0f} s: '
                     f'{"met" if seconds < PAPER_GOAL else "NOT met"}; peak RSS of the bench '
                     f'process {peak:.1f} GB; load {load:.1f}'}
 
@@ -238,8 +261,10 @@ def run(quick: bool) -> list[dict]:
                  f'{frame.meta["factorisation"]})'},
         accuracy_row(),
         window_row(),
+        row_split_row(machine),
     ] + [row for row in [factorisation_row(machine)] if row is not None] + (
-        [] if quick else [paper_row(t_reduce, machine.shell_frame.element_size)])
+        [] if quick else [paper_row(t_reduce, machine.shell_frame.element_size,
+                                    frame.meta['threads'])])
 
 
 if __name__ == '__main__':
@@ -247,11 +272,13 @@ if __name__ == '__main__':
         print(accuracy_row())
     elif '--window' in sys.argv:
         print(window_row())
+    elif '--row-split' in sys.argv:
+        print(row_split_row(shell_machine(quick=False)))
     elif '--paper' in sys.argv:
         default = shell_machine(quick=False)
         with tempfile.TemporaryDirectory() as tmp:
-            _, t_default = _timed(ensure_reduced_frame, default, tmp, lambda msg: None)
-        print(paper_row(t_default, default.shell_frame.element_size))
+            small, t_default = _timed(ensure_reduced_frame, default, tmp, lambda msg: None)
+        print(paper_row(t_default, default.shell_frame.element_size, small.meta['threads']))
     else:
         for row in run(quick='--quick' in sys.argv):
             print(row)

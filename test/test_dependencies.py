@@ -40,6 +40,7 @@ IMPORT_KEYS = {
     'sensor_msgs': 'sensor_msgs',
     'std_msgs': 'std_msgs',
     'tqdm': 'python3-tqdm',
+    'threadpoolctl': 'python3-threadpoolctl-pip',
     'yaml': 'python3-yaml',
     'zstandard': 'python3-zstandard-pip',
 }

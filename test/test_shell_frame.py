@@ -1,5 +1,6 @@
 """The shell element against closed forms, and the plate frame's mesh and assembly (coarse)."""
 import dataclasses
+import os
 
 import numpy as np
 import pytest
@@ -319,13 +320,123 @@ def test_the_frame_alone_converges_from_above_with_the_mesh():
     assert np.all(change < 0.05), change
 
 
-def test_the_symmetric_projection_equals_the_whole_product():
+@pytest.mark.parametrize('part', ['whole', 'part'])
+def test_the_symmetric_projection_equals_the_whole_product(monkeypatch, part):
+    """Also for a matrix with entries on some DOFs only (a group), in chunks of rows."""
     from pentapod_sim.modes import frame_reduction
+    monkeypatch.setattr(frame_reduction, 'PROJECT_ROWS', 37)
     rng = np.random.default_rng(4)
     A = sp.random(500, 500, density=0.02, random_state=4, format='csr')
     A = (A + A.T).tocsr()
+    if part == 'part':           # rows and columns of 160 scattered DOFs only
+        mine = np.zeros(500, dtype=bool)
+        mine[rng.choice(500, 160, replace=False)] = True
+        A = sp.csr_matrix(sp.diags(mine.astype(float)) @ A @ sp.diags(mine.astype(float)))
+        A.eliminate_zeros()
+        assert np.count_nonzero(np.diff(A.indptr)) <= 160
     for m in (frame_reduction.PROJECT_BLOCK - 1, 2 * frame_reduction.PROJECT_BLOCK + 37):
         B = rng.standard_normal((500, m))
         P = frame_reduction._symmetric_projection(A, B)
         np.testing.assert_allclose(P, B.T @ (A.toarray() @ B), rtol=0, atol=1e-10)
         assert np.array_equal(P, P.T)
+
+
+def test_the_reduction_runs_with_its_threads_and_gives_them_back(monkeypatch, coarse_frame):
+    """BLAS (and MKL) threads inside reduce_frame are its ``threads``; the process's after."""
+    from threadpoolctl import threadpool_info
+
+    from pentapod_sim.fe.frame_model import frame_fe
+    from pentapod_sim.modes import frame_reduction, ldlt
+
+    def limits():
+        return {i['internal_api']: i['num_threads'] for i in threadpool_info()
+                if i['user_api'] == 'blas'}
+
+    class Enough(Exception):
+        """The modes are not needed: the reduction stops at its modal solve."""
+
+    seen = []
+
+    def spy(*args, **kwargs):
+        seen.append(limits())
+        raise Enough
+
+    fe = frame_fe(shell_machine())
+    monkeypatch.setattr(frame_reduction, 'solve_modes', spy)
+    ldlt.available()                     # MKL loaded (where installed) before the limits
+    before = limits()
+    with pytest.raises(Enough):
+        frame_reduction.reduce_frame(fe, 300.0, lambda msg: None, threads=3)
+    assert limits() == before
+    assert seen[-1]['openblas'] == 3
+    if ldlt.available():
+        assert seen[-1]['mkl'] == 3
+    # the default: one thread below THREADS_MIN_DOF DOF (the coarse frame), one per CPU above
+    assert fe.n_dof < frame_reduction.THREADS_MIN_DOF
+    assert coarse_frame[0].meta['threads'] == 1
+    assert frame_reduction.frame_threads(frame_reduction.THREADS_MIN_DOF) == len(
+        os.sched_getaffinity(0))
+
+
+def test_a_reduction_on_two_threads_gives_the_same_frame(coarse_frame):
+    """Threaded BLAS, MKL and sparse products (row_split): the coarse frame of one thread."""
+    from pentapod_sim.fe.frame_model import frame_fe
+    from pentapod_sim.modes.frame_reduction import reduce_frame
+    one, _ = coarse_frame
+    m = shell_machine()
+    two = reduce_frame(frame_fe(m), m.shell_frame.mode_multiple * m.shell_frame.f_interest,
+                       lambda msg: None, threads=2)
+    assert (one.meta['threads'], two.meta['threads']) == (1, 2)
+    assert two.meta['n_modes'] == one.meta['n_modes'] and two.frequencies.size > 50
+    np.testing.assert_allclose(two.frequencies, one.frequencies, rtol=1e-9)
+    # a mode's sign may differ: compare what does not depend on it
+    for g, A in one.groups.items():
+        np.testing.assert_allclose(np.abs(two.groups[g]), np.abs(A), rtol=0,
+                                   atol=1e-9 * np.abs(A).max())
+    np.testing.assert_allclose(np.abs(two.M), np.abs(one.M), rtol=0, atol=1e-9)
+
+
+ANALYSED_WITH_OTHER_THREADS = r"""
+import sys
+from test_shell_frame import shell_machine
+from pentapod_sim.fe.frame_model import frame_fe
+from pentapod_sim.modes import frame_reduction
+
+
+class Enough(Exception):
+    pass
+
+
+def stop(*args, **kwargs):
+    raise Enough
+
+
+fe = frame_fe(shell_machine())
+real, frame_reduction.solve_modes = frame_reduction.solve_modes, stop
+try:         # K_ii factorised on 3 MKL threads and released: its analysis is kept
+    frame_reduction.reduce_frame(fe, 300.0, lambda msg: None, threads=3)
+except Enough:
+    pass
+frame_reduction.solve_modes = real
+frame = frame_reduction.reduce_frame(fe, 300.0, lambda msg: None, threads=2)
+print(frame.meta['n_modes'])
+"""
+
+
+def test_a_reduction_on_other_threads_than_a_kept_analysis_ends():
+    """
+    PARDISO's kept analysis is for one MKL thread count (pentapod_sim.modes.ldlt).
+
+    Reused by a numerical factorisation on another count, it crashed (SIGSEGV) or hung the
+    process (2 of 2 runs); in a process of its own, so that such an end fails this test.
+    """
+    from pathlib import Path
+    import subprocess
+    import sys
+    root = Path(__file__).resolve().parents[1]
+    env = {**os.environ, 'PYTHONPATH': os.pathsep.join(
+        [str(root), str(root / 'test'), *filter(None, [os.environ.get('PYTHONPATH')])])}
+    out = subprocess.run([sys.executable, '-c', ANALYSED_WITH_OTHER_THREADS], env=env,
+                         capture_output=True, text=True, timeout=240)
+    assert out.returncode == 0, (out.returncode, out.stderr[-2000:])
+    assert int(out.stdout.split()[-1]) > 20, out.stdout

@@ -24,6 +24,7 @@ from typing import Callable, Sequence
 import numpy as np
 import numpy.typing as npt
 import scipy.sparse as sp
+from threadpoolctl import threadpool_limits
 
 from pentapod_sim.fe.assembly import build_model as build_fe_model
 from pentapod_sim.fe.frame_model import (
@@ -37,6 +38,7 @@ from pentapod_sim.fe.frame_model import (
 )
 from pentapod_sim.fe.machine_data import load_machine, MachineParams
 from pentapod_sim.fe.model import FEModel
+from pentapod_sim.modes import row_split
 from pentapod_sim.modes.solver import solve_modes
 from pentapod_sim.modes.sturm import choose_backend, Factorisation, factorize_shifted
 from pentapod_sim.modes.windows import METHODS
@@ -50,8 +52,9 @@ RHS_BLOCK = 66
 #: of 104 modes (80 of them delivered) took 113 s (factorisation and normalisation included)
 #: and one of 300 took 218 s: 1.4 against 0.95 s per delivered mode (docs/modes.md).
 MODES_PER_WINDOW = 230
-#: Window processes of the reduction: one, the windows in this process one after the other.
-#: Their solves and Gram-Schmidt passes are bound by memory bandwidth (one core reads 15 GB/s
+#: Window processes of the reduction: one, the windows in this process one after the other,
+#: the cores used by its BLAS and MKL threads instead (:func:`frame_threads`): two windows side
+#: by side each ran 2-3 times slower, sharing the memory bandwidth (one core reads 15 GB/s
 #: here, two together 19 GB/s), and a paper-scale window holds 6-8 GB.
 FRAME_WORKERS = 1
 #: Window eigensolver of the fixed-interface modes: block shift-invert Lanczos; the same 652
@@ -64,6 +67,15 @@ RESIDUAL_RANK_TOL = 1e-10
 #: Basis columns per block of the projections T^T A T (bounds ``A @ basis`` to this many
 #: columns: 0.8 GB at 763k DOF).
 PROJECT_BLOCK = 128
+#: Rows of the basis copied at a time where a projected matrix has entries on a part of the
+#: frame's DOFs only (at most 0.5 GB at 931 columns).
+PROJECT_ROWS = 65536
+#: BLAS and MKL threads of a reduction from this many frame DOF on: one per CPU the process
+#: may use (below it one, env.sh's choice for small dense work: in the tests two processes
+#: share the cores). At 763k DOF on this 2-core machine, idle, two threads against one: a
+#: block solve of 16 vectors 0.77 against 0.96 s, a Gram-Schmidt pass against 800 vectors
+#: 1.18 against 1.94 s, the numerical factorisation 5.3 against 8.7 s (docs/modes.md).
+THREADS_MIN_DOF = 200_000
 
 
 def _block_solve(lu: Factorisation, rhs: Array) -> Array:
@@ -92,25 +104,39 @@ def _residual_modes(k_ii: sp.spmatrix, m_ii: sp.spmatrix, static: Array, load: A
     return resid @ (base @ vec), lam
 
 
-def _symmetric_projection(A: sp.spmatrix, basis: Array) -> Array:
+def _symmetric_projection(A: sp.csr_matrix, basis: Array) -> Array:
     """
     ``basis^T A basis`` of a symmetric ``A``, exactly symmetric.
 
     Only the blocks on and above the diagonal are multiplied (:data:`PROJECT_BLOCK` columns
     at a time), half the dense products of the whole: at the paper-scale frame (763k DOF,
-    about 900 columns) each of those is about 1.2e12 flops.
+    about 900 columns) each of those is about 1.2e12 flops. Only the rows where ``A`` has
+    entries take part (:data:`PROJECT_ROWS` at a time, so no copy of the whole basis): a
+    group of the frame costs its share of the dense products (the walls a fifth, the rest
+    four fifths), not the whole frame's each.
     """
     m = basis.shape[1]
+    rows = np.flatnonzero(np.diff(A.indptr))
+    chunks = ([slice(None)] if rows.size == A.shape[0] else
+              [rows[lo:lo + PROJECT_ROWS] for lo in range(0, rows.size, PROJECT_ROWS)])
     out = np.zeros((m, m))
+    A_rows = row_split.split(A)          # the sparse products on the reduction's threads
     for lo in range(0, m, PROJECT_BLOCK):
         hi = min(lo + PROJECT_BLOCK, m)
-        out[:hi, lo:hi] = basis[:, :hi].T @ (A @ basis[:, lo:hi])
+        product = A_rows @ basis[:, lo:hi]
+        for r in chunks:
+            out[:hi, lo:hi] += basis[r, :hi].T @ product[r]
     return np.triu(out) + np.triu(out, 1).T
+
+
+def frame_threads(n_dof: int) -> int:
+    """BLAS and MKL threads of a frame reduction of ``n_dof`` DOF (:data:`THREADS_MIN_DOF`)."""
+    return len(os.sched_getaffinity(0)) if n_dof >= THREADS_MIN_DOF else 1
 
 
 def reduce_frame(fe: FrameFE, f_cut: float, progress: Callable[[str], None] | None = None,
                  workers: int | None = None, residual: bool = True,
-                 method: str = FRAME_METHOD) -> ReducedFrame:
+                 method: str = FRAME_METHOD, threads: int | None = None) -> ReducedFrame:
     """
     Craig-Bampton reduction of the frame with the fixed-interface modes below ``f_cut`` [Hz].
 
@@ -132,6 +158,10 @@ def reduce_frame(fe: FrameFE, f_cut: float, progress: Callable[[str], None] | No
     method : str
         Window eigensolver of the fixed-interface modes
         (:data:`pentapod_sim.modes.windows.METHODS`; default :data:`FRAME_METHOD`).
+    threads : int, optional
+        BLAS and MKL threads while it runs, and those of its sparse products
+        (:mod:`pentapod_sim.modes.row_split`; default :func:`frame_threads`); the process's
+        settings are restored after it.
 
     Returns
     -------
@@ -139,6 +169,20 @@ def reduce_frame(fe: FrameFE, f_cut: float, progress: Callable[[str], None] | No
         Reduced coordinates ``[u_b; q]``: the interface DOFs, then the modal coordinates
         (fixed-interface modes, then the residual pseudo-modes).
     """
+    n = fe.n_dof
+    threads = frame_threads(n) if threads is None else threads
+    if threads < 1:
+        raise ValueError(f'threads={threads} must be at least 1')
+    # chosen first: that loads MKL where PARDISO is used, so that its threads are limited too
+    backend = choose_backend(n - 6 * len(fe.interface))
+    with threadpool_limits(limits=threads), row_split.threads(threads):
+        return _reduce(fe, f_cut, progress, workers, residual, method, backend, threads)
+
+
+def _reduce(fe: FrameFE, f_cut: float, progress: Callable[[str], None] | None,
+            workers: int | None, residual: bool, method: str, backend: str,
+            threads: int) -> ReducedFrame:
+    """Body of :func:`reduce_frame`, within its thread limits."""
     say = progress or (lambda msg: LOG.info('%s', msg))
     t0 = time.perf_counter()
     n, nb = fe.n_dof, 6 * len(fe.interface)
@@ -146,9 +190,8 @@ def reduce_frame(fe: FrameFE, f_cut: float, progress: Callable[[str], None] | No
     K = fe.K
     k_ii = sp.csr_matrix(K[i][:, i])
     m_ii = sp.csr_matrix(fe.M[i][:, i])
-    backend = choose_backend(k_ii.shape[0])
     say(f'frame: {n} DOF ({nb} at {len(fe.interface)} interface points); factorising K_ii '
-        f'({backend})')
+        f'({backend}, {threads} thread{"s" if threads > 1 else ""})')
     lu = factorize_shifted(k_ii, m_ii, 0.0, backend)
     psi = -_block_solve(lu, K[i][:, b].toarray())
     # the interior's inertia load per unit interface acceleration, and its static response
@@ -194,6 +237,7 @@ def reduce_frame(fe: FrameFE, f_cut: float, progress: Callable[[str], None] | No
     n_resid = basis.shape[1] - nb - modes.n_modes
     meta = {'n_dof': n, 'n_nodes': fe.n_nodes, 'n_boundary': nb, 'n_modes': modes.n_modes,
             'n_residual': n_resid, 'factorisation': backend, 'method': method,
+            'threads': threads,
             'f_cut_hz': float(f_cut), 'static_seconds': t_static, 'modes_seconds': t_modes,
             'reduction_seconds': t_all, 'sturm_count': modes.sturm_count,
             'modes_stats': {k: v for k, v in modes.stats.items()
@@ -206,13 +250,15 @@ def reduce_frame(fe: FrameFE, f_cut: float, progress: Callable[[str], None] | No
 
 def ensure_reduced_frame(machine: MachineParams, cache: str | os.PathLike[str] | None = None,
                          progress: Callable[[str], None] | None = None,
-                         method: str | None = None) -> ReducedFrame | None:
+                         method: str | None = None,
+                         threads: int | None = None) -> ReducedFrame | None:
     """
     The cached reduced frame of ``machine``, reduced and saved first if needed.
 
     Returns None for the beam frame (``frame.model: beams``). ``cache``: folder of reduced
-    frames (default ``$PENTAPOD_FRAME_CACHE`` or ``out/frames``). ``method``: the window
-    eigensolver of a reduction (default :data:`FRAME_METHOD`; not part of the cache key).
+    frames (default ``$PENTAPOD_FRAME_CACHE`` or ``out/frames``). ``method`` and ``threads``:
+    the window eigensolver and the BLAS and MKL threads of a reduction (defaults
+    :data:`FRAME_METHOD` and :func:`frame_threads`; neither is part of the cache key).
     """
     if machine.frame.model != 'shells':
         return None
@@ -233,7 +279,7 @@ def ensure_reduced_frame(machine: MachineParams, cache: str | os.PathLike[str] |
     say(f'frame: meshed and assembled {fe.n_dof} DOF ({fe.n_nodes} nodes) in '
         f'{time.perf_counter() - t0:.1f} s')
     frame = reduce_frame(fe, sh.mode_multiple * sh.f_interest, say,
-                         method=method or FRAME_METHOD)
+                         method=method or FRAME_METHOD, threads=threads)
     frame.meta.update(element_size=sh.element_size, build_seconds=time.perf_counter() - t0,
                       key=path.stem)
     save_reduced(frame, path)
@@ -261,8 +307,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument('--cache', help='folder of reduced frames (default: out/frames)')
     parser.add_argument('--method', choices=sorted(METHODS), default=FRAME_METHOD,
                         help=f'window eigensolver (default: {FRAME_METHOD})')
+    parser.add_argument('--threads', type=int,
+                        help='BLAS and MKL threads of the reduction (default: one per CPU from '
+                             f'{THREADS_MIN_DOF} frame DOF, else one)')
     args = parser.parse_args(argv)
+    if args.threads is not None and args.threads < 1:
+        parser.error(f'--threads {args.threads}: must be at least 1')
     logging.basicConfig(level=logging.INFO, format='%(asctime)s %(message)s')
+    # scikit-fem logs every basis it builds at INFO: hundreds of lines per frame
+    logging.getLogger('skfem').setLevel(logging.WARNING)
     import dataclasses
     machine = load_machine(args.machine)
     if machine.shell_frame is None:
@@ -274,7 +327,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     machine = dataclasses.replace(machine, shell_frame=sh,
                                   frame=dataclasses.replace(machine.frame, model='shells'))
     frame = ensure_reduced_frame(machine, args.cache, lambda m: print(m, file=sys.stderr),
-                                 args.method)
+                                 args.method, args.threads)
     assert frame is not None
     meta = frame.meta
     print(f'{meta["n_dof"]} DOF -> {frame.n_boundary} interface + {meta["n_modes"]} modes (below '

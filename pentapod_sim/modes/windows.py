@@ -38,6 +38,8 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from pentapod_sim.errors import ModalError
+from pentapod_sim.modes import row_split
+from pentapod_sim.modes.row_split import RowSplit
 from pentapod_sim.modes.sturm import ShiftedFactor
 
 _LOG = logging.getLogger(__name__)
@@ -139,7 +141,8 @@ def _primme(K: sp.spmatrix, M: sp.spmatrix, factor: ShiftedFactor, k: int, tol: 
 
 
 def _m_orthonormal(W: Array, MW: Array, rng: np.random.Generator,
-                   basis: Array | None, M: sp.spmatrix) -> tuple[Array, Array, Array]:
+                   basis: Array | None, M: sp.spmatrix | RowSplit
+                   ) -> tuple[Array, Array, Array]:
     """
     An M-orthonormal block ``V`` (and ``M V``) spanning ``W``, and ``R`` with ``W = V R``.
 
@@ -199,6 +202,7 @@ def block_lanczos(K: sp.spmatrix, M: sp.spmatrix, factor: ShiftedFactor, k: int,
     Raises ModalError naming the window after ``restarts`` restarts without convergence.
     """
     n, sigma = K.shape[0], factor.sigma
+    M = row_split.split(M)                  # the M products on the caller's threads
     if max_dim is None:
         bound = max(int(BLOCK_MAX_DIM * k), k + 12 * block)
         bound = max(min(bound, BLOCK_MAX_BYTES // (8 * n)), k + 3 * block)
@@ -339,6 +343,7 @@ def mass_normalise(K: sp.spmatrix, M: sp.spmatrix, lam: Array, phi: Array,
     the products ``M phi`` and ``K phi`` small.
     """
     resid = np.empty(lam.size)
+    K, M = row_split.split(K), row_split.split(M)      # on the caller's threads
     for lo in range(0, lam.size, chunk):
         cols = slice(lo, lo + chunk)
         Mphi = M @ phi[:, cols]
