@@ -64,7 +64,8 @@ def _pattern_key(upper: sp.csr_matrix) -> tuple[Any, ...]:
     What identifies a sparsity pattern, and the process and MKL thread count that analysed it.
 
     An analysis made with another number of MKL threads crashed the numerical factorisation
-    (SIGSEGV; the frame reduction sets its own threads, test_modes_ldlt.py).
+    (SIGSEGV or a hang; the frame reduction sets its own threads: test_shell_frame.py,
+    test_a_reduction_on_other_threads_than_a_kept_analysis_ends).
     """
     return (os.getpid(), int(_mkl().MKL_Get_Max_Threads()), upper.shape,
             hashlib.sha1(upper.indptr).hexdigest(), hashlib.sha1(upper.indices).hexdigest())
