@@ -413,12 +413,12 @@ def stop(*args, **kwargs):
 
 fe = frame_fe(shell_machine())
 real, frame_reduction.solve_modes = frame_reduction.solve_modes, stop
-try:         # K_ii factorised on 3 MKL threads and released: its analysis is kept
-    frame_reduction.reduce_frame(fe, 300.0, lambda msg: None, threads=3)
+try:         # K_ii factorised on 2 MKL threads and released: its analysis is kept
+    frame_reduction.reduce_frame(fe, 300.0, lambda msg: None, threads=2)
 except Enough:
     pass
 frame_reduction.solve_modes = real
-frame = frame_reduction.reduce_frame(fe, 300.0, lambda msg: None, threads=2)
+frame = frame_reduction.reduce_frame(fe, 100.0, lambda msg: None, threads=1)
 print(frame.meta['n_modes'])
 """
 
@@ -427,8 +427,9 @@ def test_a_reduction_on_other_threads_than_a_kept_analysis_ends():
     """
     PARDISO's kept analysis is for one MKL thread count (pentapod_sim.modes.ldlt).
 
-    Reused by a numerical factorisation on another count, it crashed (SIGSEGV) or hung the
-    process (2 of 2 runs); in a process of its own, so that such an end fails this test.
+    Reused by a numerical factorisation on another count (2 then 1, 3 then 2), it crashed
+    (SIGSEGV) or hung the process (4 of 4 runs); in a process of its own, so that such an end
+    fails this test.
     """
     from pathlib import Path
     import subprocess
@@ -439,4 +440,4 @@ def test_a_reduction_on_other_threads_than_a_kept_analysis_ends():
     out = subprocess.run([sys.executable, '-c', ANALYSED_WITH_OTHER_THREADS], env=env,
                          capture_output=True, text=True, timeout=240)
     assert out.returncode == 0, (out.returncode, out.stderr[-2000:])
-    assert int(out.stdout.split()[-1]) > 20, out.stdout
+    assert int(out.stdout.split()[-1]) > 5, out.stdout
