@@ -185,9 +185,11 @@ def row_split_row(machine) -> dict:
     X = np.random.default_rng(0).standard_normal((K.shape[0], PROJECT_BLOCK))
     parts = max(2, len(os.sched_getaffinity(0)))
     split = RowSplit(K, parts)
-    (ours, t_ours), (theirs, t_theirs) = min((_timed(split.__matmul__, X) for _ in range(3)),
-                                             key=lambda r: r[1]), \
-        min((_timed(K.__matmul__, X) for _ in range(3)), key=lambda r: r[1])
+
+    def best_of_3(product):
+        return min((_timed(product, X) for _ in range(3)), key=lambda timed: timed[1])
+
+    (ours, t_ours), (theirs, t_theirs) = best_of_3(split.__matmul__), best_of_3(K.__matmul__)
     return {'name': f'plate frame, K_ii times {PROJECT_BLOCK} vectors in {parts} row blocks '
                     'on threads (row_split)',
             'value': t_ours, 'unit': 's', 'baseline': "scipy's CSR product (one thread)",

@@ -22,6 +22,7 @@ from fixtures.demo_model import demo_model
 from fixtures.stopping import stop_handlers  # noqa: F401  (a fixture)
 from pentapod_sim.analysis.bag.reader import open_bag
 from pentapod_sim.scenario.files import dump_params
+from pentapod_sim.scenario.runner import stop
 from pentapod_sim.sim.stepping import ForceMixer, ForceSource
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
@@ -240,7 +241,7 @@ def _publisher_to_a_reader(topic: str, node_name: str):
     A node of this process publishing forces on ``topic`` to a READER process, matched.
 
     Yields (reader process, node, publisher); at the end a reader still running is stopped
-    (continued first, in case a test froze it) and the node and its context are closed.
+    (continued too, in case a test froze it) and the node and its context are closed.
     """
     import rclpy
     from rclpy.node import Node
@@ -263,14 +264,7 @@ def _publisher_to_a_reader(topic: str, node_name: str):
         time.sleep(0.5)
         yield reader, node, pub
     finally:
-        if reader.poll() is None:
-            os.kill(reader.pid, signal.SIGCONT)
-            reader.send_signal(signal.SIGINT)
-            try:
-                reader.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                reader.kill()
-                reader.wait()
+        stop({'reader': reader}, grace=10.0)       # SIGINT and SIGCONT, SIGKILL after 10 s
         node.destroy_node()
         rclpy.try_shutdown(context=ctx)
 
